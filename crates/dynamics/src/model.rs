@@ -1,0 +1,311 @@
+//! The kinematic tree of a serial chain, built from a URDF.
+//!
+//! Fixed joints are folded away: a link attached through fixed joints becomes a [`Frame`] of the moving
+//! body it rides on, and its inertia is added to that body. What remains is one [`Joint`] per degree of
+//! freedom, each with a constant placement in its parent joint's frame, an axis and a body inertia.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+
+use crate::Error;
+
+/// Standard gravity, pointing down the world z axis (world z is up).
+pub const STANDARD_GRAVITY: Vector3<f64> = Vector3::new(0.0, 0.0, -9.81);
+
+/// Index of a frame in [`Model::frames`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct FrameId(pub usize);
+
+/// Limits of one joint as the URDF states them (SI units; ±∞ for a continuous joint's position).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointLimits {
+    pub lower: f64,
+    pub upper: f64,
+    pub velocity: f64,
+    pub effort: f64,
+}
+
+/// Mass properties of a rigid body about its own frame origin: mass m, first moment h = m·c and the
+/// rotational inertia about the origin. Origin-based so that the recursions need no COM shifts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BodyInertia {
+    pub mass: f64,
+    pub first_moment: Vector3<f64>,
+    pub inertia_origin: Matrix3<f64>,
+}
+
+impl BodyInertia {
+    pub const ZERO: Self = Self {
+        mass: 0.0,
+        first_moment: Vector3::new(0.0, 0.0, 0.0),
+        inertia_origin: Matrix3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    };
+
+    /// From mass, centre of mass and inertia about the centre of mass, all in the body frame.
+    pub fn from_com(mass: f64, com: Vector3<f64>, inertia_com: Matrix3<f64>) -> Self {
+        let c = com.cross_matrix();
+        Self { mass, first_moment: mass * com, inertia_origin: inertia_com - mass * c * c }
+    }
+
+    /// Centre of mass in the body frame (origin for a massless body).
+    pub fn com(&self) -> Vector3<f64> {
+        if self.mass > 0.0 { self.first_moment / self.mass } else { Vector3::zeros() }
+    }
+
+    /// The same body described in a parent frame, where `placement` maps body coordinates to parent ones.
+    pub fn expressed_in_parent(&self, rotation: &Matrix3<f64>, translation: &Vector3<f64>) -> Self {
+        let h = rotation * self.first_moment;
+        let p = translation.cross_matrix();
+        let hx = h.cross_matrix();
+        Self {
+            mass: self.mass,
+            first_moment: h + self.mass * translation,
+            inertia_origin: rotation * self.inertia_origin * rotation.transpose()
+                - self.mass * p * p
+                - p * hx
+                - hx * p,
+        }
+    }
+
+    pub fn add(&self, other: &Self) -> Self {
+        Self {
+            mass: self.mass + other.mass,
+            first_moment: self.first_moment + other.first_moment,
+            inertia_origin: self.inertia_origin + other.inertia_origin,
+        }
+    }
+}
+
+/// One degree of freedom: a revolute joint and the rigid body it moves.
+#[derive(Debug, Clone)]
+pub struct Joint {
+    pub name: String,
+    pub limits: JointLimits,
+    /// Rotation of the joint frame (at q = 0) in the parent joint's frame (world for the first joint).
+    pub(crate) rotation: Matrix3<f64>,
+    /// Origin of the joint frame in the parent joint's frame.
+    pub(crate) translation: Vector3<f64>,
+    /// Unit rotation axis in the joint frame.
+    pub(crate) axis: Vector3<f64>,
+    /// Everything rigidly attached to this joint's child link, in the joint frame.
+    pub(crate) body: BodyInertia,
+}
+
+impl Joint {
+    pub fn axis(&self) -> Vector3<f64> {
+        self.axis
+    }
+    pub fn body(&self) -> &BodyInertia {
+        &self.body
+    }
+}
+
+/// A named frame (one per URDF link) rigidly attached to a joint's body, or to the world.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub name: String,
+    /// The joint whose body carries the frame; `None` for frames fixed to the world.
+    pub joint: Option<usize>,
+    /// Pose of the frame in that joint's frame (or in the world).
+    pub placement: Isometry3<f64>,
+}
+
+/// A serial chain of revolute joints with named frames: the robot as the dynamics sees it.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub name: String,
+    pub joints: Vec<Joint>,
+    pub frames: Vec<Frame>,
+    /// Gravity acceleration in world coordinates.
+    pub gravity: Vector3<f64>,
+    frame_ids: HashMap<String, FrameId>,
+}
+
+fn pose_to_isometry(pose: &urdf_rs::Pose) -> Isometry3<f64> {
+    let [x, y, z] = pose.xyz.0;
+    let [roll, pitch, yaw] = pose.rpy.0;
+    // URDF rpy: fixed-axis roll about x, then pitch about y, then yaw about z.
+    Isometry3::from_parts(
+        Translation3::new(x, y, z),
+        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
+    )
+}
+
+fn link_inertia(link: &urdf_rs::Link) -> Result<BodyInertia, Error> {
+    let inertial = &link.inertial;
+    let i = &inertial.inertia;
+    let inertia_com = Matrix3::new(i.ixx, i.ixy, i.ixz, i.ixy, i.iyy, i.iyz, i.ixz, i.iyz, i.izz);
+    let mass = inertial.mass.value;
+    let finite = mass.is_finite() && inertia_com.iter().all(|v| v.is_finite());
+    let eig = inertia_com.symmetric_eigenvalues();
+    // A physical inertia tensor is positive semi-definite and its principal moments obey the triangle
+    // inequality; a tolerance admits rounding in the file.
+    let tol = 1e-9 * eig.amax().max(1e-12);
+    let physical = finite
+        && mass >= 0.0
+        && eig.iter().all(|&e| e >= -tol)
+        && eig[0] + eig[1] + tol >= eig[2]
+        && eig[1] + eig[2] + tol >= eig[0]
+        && eig[0] + eig[2] + tol >= eig[1];
+    if !physical {
+        return Err(Error::NonPhysicalInertia { link: link.name.clone() });
+    }
+    let origin = pose_to_isometry(&inertial.origin);
+    let rot = origin.rotation.to_rotation_matrix().into_inner();
+    Ok(BodyInertia::from_com(mass, origin.translation.vector, rot * inertia_com * rot.transpose()))
+}
+
+impl Model {
+    /// Reads and builds the model from a URDF file.
+    pub fn from_urdf_file(path: impl AsRef<Path>) -> Result<Self, Error> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| Error::Read { path: path.display().to_string(), message: e.to_string() })?;
+        Self::from_urdf_str(&text)
+            .map_err(|e| if let Error::Parse(m) = e { Error::Read { path: path.display().to_string(), message: m } } else { e })
+    }
+
+    /// Builds the model from URDF text.
+    pub fn from_urdf_str(text: &str) -> Result<Self, Error> {
+        let robot = urdf_rs::read_from_string(text).map_err(|e| Error::Parse(e.to_string()))?;
+        Self::from_urdf(&robot)
+    }
+
+    /// Builds the model from a parsed URDF. The tree must be a single serial chain of revolute (or
+    /// continuous) joints; fixed joints may branch off anywhere and become frames.
+    pub fn from_urdf(robot: &urdf_rs::Robot) -> Result<Self, Error> {
+        let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+        let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
+        let mut is_child: HashMap<&str, bool> = HashMap::new();
+        for joint in &robot.joints {
+            for link in [&joint.parent.link, &joint.child.link] {
+                if !links.contains_key(link.as_str()) {
+                    return Err(Error::MissingLink { joint: joint.name.clone(), link: link.clone() });
+                }
+            }
+            if is_child.insert(joint.child.link.as_str(), true).is_some() {
+                return Err(Error::NotATree { link: joint.child.link.clone() });
+            }
+            children.entry(joint.parent.link.as_str()).or_default().push(joint);
+        }
+        let roots: Vec<&str> =
+            robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child.contains_key(n)).collect();
+        let root = match roots.as_slice() {
+            [root] => *root,
+            [] => return Err(Error::NotATree { link: robot.links.first().map(|l| l.name.clone()).unwrap_or_default() }),
+            _ => return Err(Error::ManyRoots(roots.iter().map(|s| s.to_string()).collect())),
+        };
+
+        // Which links have a movable joint somewhere below them: decides the one branch the chain follows.
+        fn movable_below(link: &str, children: &HashMap<&str, Vec<&urdf_rs::Joint>>) -> bool {
+            children.get(link).is_some_and(|js| {
+                js.iter().any(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, children))
+            })
+        }
+
+        let mut model = Model {
+            name: robot.name.clone(),
+            joints: Vec::new(),
+            frames: Vec::new(),
+            gravity: STANDARD_GRAVITY,
+            frame_ids: HashMap::new(),
+        };
+        // Depth-first walk. `owner` is the joint whose body carries the current link, and `placement`
+        // the link's pose in that joint's frame (world when there is no owner yet).
+        let mut stack = vec![(root, None::<usize>, Isometry3::identity())];
+        while let Some((link_name, owner, placement)) = stack.pop() {
+            let link = links[link_name];
+            model.add_frame(link_name, owner, placement);
+            if let Some(j) = owner {
+                let inertia = link_inertia(link)?;
+                let rot = placement.rotation.to_rotation_matrix().into_inner();
+                model.joints[j].body =
+                    model.joints[j].body.add(&inertia.expressed_in_parent(&rot, &placement.translation.vector));
+            }
+            let kids = children.get(link_name).map(Vec::as_slice).unwrap_or(&[]);
+            let moving: Vec<&str> = kids
+                .iter()
+                .filter(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, &children))
+                .map(|j| j.name.as_str())
+                .collect();
+            if moving.len() > 1 {
+                return Err(Error::NotASerialChain {
+                    link: link_name.to_string(),
+                    branches: moving.iter().map(|s| s.to_string()).collect(),
+                });
+            }
+            for joint in kids.iter().rev() {
+                let origin = pose_to_isometry(&joint.origin);
+                match joint.joint_type {
+                    urdf_rs::JointType::Fixed => stack.push((joint.child.link.as_str(), owner, placement * origin)),
+                    urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                        if joint.mimic.is_some() {
+                            return Err(Error::UnsupportedJoint { joint: joint.name.clone(), kind: "mimic".into() });
+                        }
+                        let axis = Vector3::from(joint.axis.xyz.0);
+                        let norm = axis.norm();
+                        if !(norm.is_finite() && norm > 1e-12) {
+                            return Err(Error::ZeroAxis { joint: joint.name.clone() });
+                        }
+                        let in_parent = placement * origin;
+                        let continuous = matches!(joint.joint_type, urdf_rs::JointType::Continuous);
+                        let l = &joint.limit;
+                        model.joints.push(Joint {
+                            name: joint.name.clone(),
+                            limits: JointLimits {
+                                lower: if continuous { f64::NEG_INFINITY } else { l.lower },
+                                upper: if continuous { f64::INFINITY } else { l.upper },
+                                velocity: l.velocity,
+                                effort: l.effort,
+                            },
+                            rotation: in_parent.rotation.to_rotation_matrix().into_inner(),
+                            translation: in_parent.translation.vector,
+                            axis: axis / norm,
+                            body: BodyInertia::ZERO,
+                        });
+                        stack.push((joint.child.link.as_str(), Some(model.joints.len() - 1), Isometry3::identity()));
+                    }
+                    ref other => {
+                        return Err(Error::UnsupportedJoint { joint: joint.name.clone(), kind: format!("{other:?}").to_lowercase() });
+                    }
+                }
+            }
+        }
+        if model.joints.is_empty() {
+            return Err(Error::NoMovableJoint);
+        }
+        if let Some(j) = model.joints.iter().find(|j| j.body.mass <= 0.0) {
+            return Err(Error::NoInertial { joint: j.name.clone() });
+        }
+        Ok(model)
+    }
+
+    fn add_frame(&mut self, name: &str, joint: Option<usize>, placement: Isometry3<f64>) {
+        self.frame_ids.insert(name.to_string(), FrameId(self.frames.len()));
+        self.frames.push(Frame { name: name.to_string(), joint, placement });
+    }
+
+    /// Number of degrees of freedom.
+    pub fn dof(&self) -> usize {
+        self.joints.len()
+    }
+
+    /// The frame of a URDF link, by name.
+    pub fn frame_id(&self, name: &str) -> Result<FrameId, Error> {
+        self.frame_ids.get(name).copied().ok_or_else(|| Error::UnknownFrame {
+            name: name.to_string(),
+            known: self.frames.iter().map(|f| f.name.as_str()).collect::<Vec<_>>().join(", "),
+        })
+    }
+
+    pub fn frame(&self, id: FrameId) -> &Frame {
+        &self.frames[id.0]
+    }
+
+    /// Total mass of the moving bodies.
+    pub fn moving_mass(&self) -> f64 {
+        self.joints.iter().map(|j| j.body.mass).sum()
+    }
+}
