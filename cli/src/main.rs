@@ -1,1 +1,112 @@
-fn main(){}
+//! `softcontact`: the product's command line (design.md section 6).
+
+mod bench;
+mod model_cmd;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "softcontact", version, about = "Compliant normal-force control of a torque-controlled arm on soft surfaces")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The main job without hardware: the simulated LWR pushes a simulated sponge and dice, runs seed
+    /// 001's identification and control experiments, prints its tables and writes recording and figures.
+    Demo {
+        /// Output folder for the recording, figures and tables.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+        /// Also write every table as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Run the real node processes over DDS in real time instead of in-process lockstep.
+        #[arg(long)]
+        graph: bool,
+    },
+    /// Fit every contact model to a recording (5-fold cross-validated fitness) and choose one.
+    Identify {
+        file: PathBuf,
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Contact direction in world, the way the hand moves to compress the surface.
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
+        normal: Vec<f64>,
+    },
+    /// Find where simulation and measurement disagree, name the missing effect, add it, show the gap.
+    Discrepancy {
+        file: PathBuf,
+        #[arg(long)]
+        model: Option<PathBuf>,
+        #[arg(long)]
+        json: Option<PathBuf>,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Record ROS 2 topics to MCAP (like `ros2 bag record`).
+    Record {
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        topics: Vec<String>,
+    },
+    /// Publish a recording with its recorded timing (like `ros2 bag play`).
+    Replay {
+        file: PathBuf,
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        #[arg(long = "loop")]
+        looping: bool,
+    },
+    /// The robot description as the code sees it: joints, limits, masses, frames, and at a state the
+    /// frame poses, the tool Jacobian, M, g and the RNEA torque.
+    Model(model_cmd::ModelArgs),
+    /// Benchmarks of the product's hot paths.
+    Bench {
+        #[command(subcommand)]
+        what: bench::BenchCommand,
+    },
+}
+
+fn not_built(command: &str, plan: &str) -> anyhow::Result<()> {
+    anyhow::bail!("`softcontact {command}` is not built yet: {plan}")
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Demo { out, json, graph } => {
+            println!("softcontact demo: the simulated LWR IV and soft surfaces are not built yet.");
+            println!("When they are, this command will, for a simulated sponge and dice:");
+            println!("  1. run seed 001's identification (approach ramp, 1 Hz sine pushes, retreat; 10 runs),");
+            println!("     fit Kelvin-Voigt, Hunt-Crossley and Azad-Featherstone with 5-fold CV (Table I);");
+            println!("  2. run its 30-command force control experiment with online re-estimation (Tables II, III);");
+            println!("  3. write the MCAP recording and figures to {}{}.", out.display(), json.map(|j| format!(" and the tables to {}", j.display())).unwrap_or_default());
+            if graph {
+                println!("  (--graph: as the real node processes over DDS, in real time)");
+            }
+            println!("Available now: `softcontact model` (the robot as the dynamics sees it) and `softcontact bench dynamics`.");
+            Ok(())
+        }
+        Command::Identify { .. } => not_built("identify", "it needs the contact-model estimator and the MCAP reader"),
+        Command::Discrepancy { .. } => not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader"),
+        Command::Record { .. } => not_built("record", "it needs the ROS 2 nodes and the MCAP writer"),
+        Command::Replay { .. } => not_built("replay", "it needs the ROS 2 nodes and the MCAP reader"),
+        Command::Model(args) => model_cmd::run(args),
+        Command::Bench { what } => bench::run(what),
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -160,6 +160,24 @@ impl Model {
         data.cholesky.as_ref().map(|_| ()).ok_or(Error::NotPositiveDefinite)
     }
 
+    /// M⁻¹ from the factor of `data.mass_matrix`, into `data.mass_matrix_inverse`.
+    fn invert_mass_matrix(&self, data: &mut Data) -> Result<(), Error> {
+        self.factor_mass_matrix(data)?;
+        data.mass_matrix_inverse.fill_with_identity();
+        if let Some(chol) = data.cholesky.as_ref() {
+            chol.solve_mut(&mut data.mass_matrix_inverse);
+        }
+        Ok(())
+    }
+
+    /// Inverse of the joint-space inertia matrix, M(q)⁻¹, in `data.mass_matrix_inverse`.
+    pub fn mass_matrix_inverse<'d>(&self, data: &'d mut Data, q: &[f64]) -> Result<&'d nalgebra::DMatrix<f64>, Error> {
+        self.forward_kinematics(data, q);
+        self.crba_on_kinematics(data);
+        self.invert_mass_matrix(data)?;
+        Ok(&data.mass_matrix_inverse)
+    }
+
     /// Forward dynamics: q̈ = M⁻¹ (τ + Jᵀ w − h), by CRBA and a Cholesky solve. Result in `data.ddq`.
     pub fn forward_dynamics<'d>(
         &self,
@@ -230,11 +248,7 @@ impl Model {
         let bias_acceleration = self.frame_acceleration_from_pass(data, frame, base);
         self.backward_pass(data, None);
         self.crba_on_kinematics(data);
-        self.factor_mass_matrix(data)?;
-        data.mass_matrix_inverse.fill_with_identity();
-        if let Some(chol) = data.cholesky.as_ref() {
-            chol.solve_mut(&mut data.mass_matrix_inverse);
-        }
+        self.invert_mass_matrix(data)?;
         Ok(ControlTerms {
             jacobian: &data.jacobian,
             bias_acceleration,

@@ -54,3 +54,19 @@ pub enum Error {
     #[error("the mass matrix is not positive definite at this state")]
     NotPositiveDefinite,
 }
+
+/// The KUKA LWR IV of this project (urdf/lwr4.urdf, compiled in so every tool has the same robot).
+pub mod lwr4 {
+    /// The URDF text of urdf/lwr4.urdf.
+    pub const URDF: &str = include_str!("../../../urdf/lwr4.urdf");
+    /// The hand's sole centre, where contact forces act.
+    pub const TOOL_FRAME: &str = "lwr_tool";
+    /// The sensing frame of the F/T sensor.
+    pub const FT_SENSOR_FRAME: &str = "ft_sensor";
+    pub const FLANGE_FRAME: &str = "lwr_flange";
+
+    /// The model of urdf/lwr4.urdf.
+    pub fn model() -> super::Model {
+        super::Model::from_urdf_str(URDF).expect("urdf/lwr4.urdf is a valid serial chain")
+    }
+}

@@ -57,15 +57,16 @@ impl BodyInertia {
     /// The same body described in a parent frame, where `placement` maps body coordinates to parent ones.
     pub fn expressed_in_parent(&self, rotation: &Matrix3<f64>, translation: &Vector3<f64>) -> Self {
         let h = rotation * self.first_moment;
-        let p = translation.cross_matrix();
-        let hx = h.cross_matrix();
+        let p = translation;
+        // Parallel-axis shift of an origin-based inertia: −m[p]×² − [p]×[h]× − [h]×[p]×, written with
+        // [a]×[b]× = b aᵀ − (a·b) 1 as rank-one terms (a third of the work of the matrix products).
+        let shift = Matrix3::from_diagonal_element(self.mass * p.norm_squared() + 2.0 * p.dot(&h))
+            - (self.mass * p + h) * p.transpose()
+            - p * h.transpose();
         Self {
             mass: self.mass,
-            first_moment: h + self.mass * translation,
-            inertia_origin: rotation * self.inertia_origin * rotation.transpose()
-                - self.mass * p * p
-                - p * hx
-                - hx * p,
+            first_moment: h + self.mass * p,
+            inertia_origin: rotation * self.inertia_origin * rotation.transpose() + shift,
         }
     }
 
@@ -85,6 +86,7 @@ pub struct Joint {
     pub limits: JointLimits,
     /// Rotation of the joint frame (at q = 0) in the parent joint's frame (world for the first joint).
     pub(crate) rotation: Matrix3<f64>,
+    pub(crate) rotation_is_identity: bool,
     /// Origin of the joint frame in the parent joint's frame.
     pub(crate) translation: Vector3<f64>,
     /// Unit rotation axis in the joint frame.
@@ -261,6 +263,7 @@ impl Model {
                                 effort: l.effort,
                             },
                             rotation: in_parent.rotation.to_rotation_matrix().into_inner(),
+                            rotation_is_identity: in_parent.rotation.to_rotation_matrix().into_inner() == Matrix3::identity(),
                             translation: in_parent.translation.vector,
                             axis: axis / norm,
                             body: BodyInertia::ZERO,

@@ -1,0 +1,152 @@
+//! `softcontact bench`: ns per call of the hot paths, timed the way the Pinocchio reference program is
+//! (pre-drawn random states, many calls cycling through them, best of several repetitions), so that the
+//! two can be compared in one run. Pin the process to one core for stable numbers: `taskset -c 1 …`.
+
+use std::hint::black_box;
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use nalgebra::Matrix6xX;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use softcontact_dynamics::{Axes, Model, lwr4};
+
+#[derive(clap::Subcommand)]
+pub enum BenchCommand {
+    /// Rigid-body dynamics: FK + Jacobian, RNEA, CRBA, g, h, forward dynamics and a whole control tick.
+    Dynamics {
+        /// Calls per repetition.
+        #[arg(long, default_value_t = 1_000_000)]
+        calls: usize,
+        /// Repetitions; the best is kept.
+        #[arg(long, default_value_t = 5)]
+        reps: usize,
+        /// Also time Pinocchio's C++ on the same URDF (builds it once: needs `pip install pin
+        /// cmeel-eigen cmeel-urdfdom-headers` and g++) and print our/Pinocchio ratios.
+        #[arg(long)]
+        pinocchio: bool,
+        /// Write the table as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+}
+
+/// Name, what Pinocchio calls it, and the goal ratio (ours / Pinocchio) where the project set one.
+const TERMS: [(&str, &str, Option<f64>); 8] = [
+    ("fk_jacobian", "computeFrameJacobian (FK + J of lwr_tool)", None),
+    ("rnea", "rnea", Some(0.5)),
+    ("crba", "crba", Some(1.0)),
+    ("gravity", "computeGeneralizedGravity", None),
+    ("nonlinear_effects", "nonLinearEffects", None),
+    ("aba", "aba (ours: CRBA + Cholesky)", None),
+    ("minverse", "computeMinverse (ours: CRBA + Cholesky + inverse)", None),
+    ("control_tick", "computeAllTerms (ours: FK, J, J̇q̇, M, M⁻¹, h)", Some(1.0)),
+];
+
+fn best_ns(calls: usize, reps: usize, mut f: impl FnMut(usize)) -> f64 {
+    (0..reps)
+        .map(|_| {
+            let start = Instant::now();
+            for i in 0..calls {
+                f(i);
+            }
+            start.elapsed().as_nanos() as f64 / calls as f64
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn time_ours(model: &Model, calls: usize, reps: usize) -> anyhow::Result<Vec<f64>> {
+    const STATES: usize = 1000;
+    let n = model.dof();
+    let mut rng = SmallRng::seed_from_u64(7);
+    let mut draw = |lo: f64, hi: f64| -> Vec<Vec<f64>> { (0..STATES).map(|_| (0..n).map(|_| rng.random_range(lo..hi)).collect()).collect() };
+    let q: Vec<Vec<f64>> = {
+        let mut rng = SmallRng::seed_from_u64(8);
+        (0..STATES).map(|_| model.joints.iter().map(|j| rng.random_range(j.limits.lower.max(-3.14)..j.limits.upper.min(3.14))).collect()).collect()
+    };
+    let (dq, ddq, tau) = (draw(-1.0, 1.0), draw(-1.0, 1.0), draw(-10.0, 10.0));
+    let tool = model.frame_id(lwr4::TOOL_FRAME)?;
+    let mut data = model.data();
+    let mut jac = Matrix6xX::zeros(n);
+    let k = |i: usize| i % STATES;
+    // Check once that every term succeeds before timing it.
+    model.forward_dynamics(&mut data, &q[0], &dq[0], &tau[0], None)?;
+    Ok(vec![
+        best_ns(calls, reps, |i| {
+            model.forward_kinematics(&mut data, &q[k(i)]);
+            model.frame_jacobian(&data, tool, Axes::World, &mut jac);
+            black_box(jac[(0, 0)]);
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.rnea(&mut data, &q[k(i)], &dq[k(i)], &ddq[k(i)], None)[0]);
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.mass_matrix(&mut data, &q[k(i)])[(0, 0)]);
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.gravity_torques(&mut data, &q[k(i)])[0]);
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.nonlinear_effects(&mut data, &q[k(i)], &dq[k(i)])[0]);
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.forward_dynamics(&mut data, &q[k(i)], &dq[k(i)], &tau[k(i)], None).map(|a| a[0]).ok());
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.mass_matrix_inverse(&mut data, &q[k(i)]).map(|m| m[(0, 0)]).ok());
+        }),
+        best_ns(calls, reps, |i| {
+            black_box(model.control_terms(&mut data, &q[k(i)], &dq[k(i)], tool).map(|t| t.mass_matrix_inverse[(0, 0)]).ok());
+        }),
+    ])
+}
+
+fn time_pinocchio(calls: usize, reps: usize) -> anyhow::Result<serde_json::Value> {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/dynamics/benches/pinocchio/run.sh");
+    let urdf = std::env::temp_dir().join(format!("softcontact-bench-{}.urdf", std::process::id()));
+    std::fs::write(&urdf, lwr4::URDF)?;
+    eprintln!("timing Pinocchio's C++ ({})", script.display());
+    let out = Command::new("bash").arg(&script).arg(&urdf).arg(calls.to_string()).arg(reps.to_string()).output();
+    let _ = std::fs::remove_file(&urdf);
+    let out = out.with_context(|| format!("cannot run {}", script.display()))?;
+    if !out.status.success() {
+        bail!("the Pinocchio benchmark failed:\n{}", String::from_utf8_lossy(&out.stderr));
+    }
+    serde_json::from_slice(&out.stdout).context("the Pinocchio benchmark printed no JSON")
+}
+
+pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
+    let BenchCommand::Dynamics { calls, reps, pinocchio, json } = cmd;
+    if calls == 0 || reps == 0 {
+        bail!("--calls and --reps must be positive");
+    }
+    let model = lwr4::model();
+    eprintln!("timing softcontact-dynamics on the LWR IV ({calls} calls × {reps} repetitions per term)");
+    let ours = time_ours(&model, calls, reps)?;
+    let reference = if pinocchio { Some(time_pinocchio(calls, reps)?) } else { None };
+
+    println!("{:<18} {:>10} {:>12} {:>8} {:>6}  Pinocchio term", "term", "ours [ns]", "Pinocchio", "ratio", "goal");
+    let mut rows = Vec::new();
+    for ((name, pin_name, goal), ours_ns) in TERMS.iter().zip(&ours) {
+        let pin_ns = reference.as_ref().and_then(|r| r[name].as_f64());
+        let ratio = pin_ns.map(|p| ours_ns / p);
+        let verdict = match (ratio, goal) {
+            (Some(r), Some(g)) => format!("{}{g}", if r <= *g { "≤" } else { "✗>" }),
+            (_, Some(g)) => format!("≤{g}"),
+            _ => String::new(),
+        };
+        println!(
+            "{name:<18} {ours_ns:>10.1} {:>12} {:>8} {verdict:>6}  {pin_name}",
+            pin_ns.map(|p| format!("{p:.1}")).unwrap_or_else(|| "-".into()),
+            ratio.map(|r| format!("{r:.2}")).unwrap_or_else(|| "-".into())
+        );
+        rows.push(serde_json::json!({"term": name, "ours_ns": ours_ns, "pinocchio_ns": pin_ns, "ratio": ratio, "goal": goal}));
+    }
+    if let Some(path) = json {
+        std::fs::write(&path, serde_json::to_string_pretty(&serde_json::json!({"calls": calls, "reps": reps, "terms": rows}))?)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
