@@ -61,10 +61,24 @@ fn time_ours(model: &Model, calls: usize, reps: usize) -> anyhow::Result<Vec<f64
     const STATES: usize = 1000;
     let n = model.dof();
     let mut rng = SmallRng::seed_from_u64(7);
-    let mut draw = |lo: f64, hi: f64| -> Vec<Vec<f64>> { (0..STATES).map(|_| (0..n).map(|_| rng.random_range(lo..hi)).collect()).collect() };
+    let mut draw = |lo: f64, hi: f64| -> Vec<Vec<f64>> {
+        (0..STATES).map(|_| (0..n).map(|_| rng.random_range(lo..hi)).collect()).collect()
+    };
     let q: Vec<Vec<f64>> = {
         let mut rng = SmallRng::seed_from_u64(8);
-        (0..STATES).map(|_| model.joints.iter().map(|j| rng.random_range(j.limits.lower.max(-3.14)..j.limits.upper.min(3.14))).collect()).collect()
+        (0..STATES)
+            .map(|_| {
+                model
+                    .joints
+                    .iter()
+                    .map(|j| {
+                        rng.random_range(
+                            j.limits.lower.max(-std::f64::consts::PI)..j.limits.upper.min(std::f64::consts::PI),
+                        )
+                    })
+                    .collect()
+            })
+            .collect()
     };
     let (dq, ddq, tau) = (draw(-1.0, 1.0), draw(-1.0, 1.0), draw(-10.0, 10.0));
     let tool = model.frame_id(lwr4::TOOL_FRAME)?;
@@ -98,7 +112,9 @@ fn time_ours(model: &Model, calls: usize, reps: usize) -> anyhow::Result<Vec<f64
             black_box(model.mass_matrix_inverse(&mut data, &q[k(i)]).map(|m| m[(0, 0)]).ok());
         }),
         best_ns(calls, reps, |i| {
-            black_box(model.control_terms(&mut data, &q[k(i)], &dq[k(i)], tool).map(|t| t.mass_matrix_inverse[(0, 0)]).ok());
+            black_box(
+                model.control_terms(&mut data, &q[k(i)], &dq[k(i)], tool).map(|t| t.mass_matrix_inverse[(0, 0)]).ok(),
+            );
         }),
     ])
 }
@@ -142,10 +158,15 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             pin_ns.map(|p| format!("{p:.1}")).unwrap_or_else(|| "-".into()),
             ratio.map(|r| format!("{r:.2}")).unwrap_or_else(|| "-".into())
         );
-        rows.push(serde_json::json!({"term": name, "ours_ns": ours_ns, "pinocchio_ns": pin_ns, "ratio": ratio, "goal": goal}));
+        rows.push(
+            serde_json::json!({"term": name, "ours_ns": ours_ns, "pinocchio_ns": pin_ns, "ratio": ratio, "goal": goal}),
+        );
     }
     if let Some(path) = json {
-        std::fs::write(&path, serde_json::to_string_pretty(&serde_json::json!({"calls": calls, "reps": reps, "terms": rows}))?)?;
+        std::fs::write(
+            &path,
+            serde_json::to_string_pretty(&serde_json::json!({"calls": calls, "reps": reps, "terms": rows}))?,
+        )?;
         println!("wrote {}", path.display());
     }
     Ok(())

@@ -9,7 +9,11 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "softcontact", version, about = "Compliant normal-force control of a torque-controlled arm on soft surfaces")]
+#[command(
+    name = "softcontact",
+    version,
+    about = "Compliant normal-force control of a torque-controlled arm on soft surfaces"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -85,15 +89,23 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             println!("  1. run seed 001's identification (approach ramp, 1 Hz sine pushes, retreat; 10 runs),");
             println!("     fit Kelvin-Voigt, Hunt-Crossley and Azad-Featherstone with 5-fold CV (Table I);");
             println!("  2. run its 30-command force control experiment with online re-estimation (Tables II, III);");
-            println!("  3. write the MCAP recording and figures to {}{}.", out.display(), json.map(|j| format!(" and the tables to {}", j.display())).unwrap_or_default());
+            println!(
+                "  3. write the MCAP recording and figures to {}{}.",
+                out.display(),
+                json.map(|j| format!(" and the tables to {}", j.display())).unwrap_or_default()
+            );
             if graph {
                 println!("  (--graph: as the real node processes over DDS, in real time)");
             }
-            println!("Available now: `softcontact model` (the robot as the dynamics sees it) and `softcontact bench dynamics`.");
+            println!(
+                "Available now: `softcontact model` (the robot as the dynamics sees it) and `softcontact bench dynamics`."
+            );
             Ok(())
         }
         Command::Identify { .. } => not_built("identify", "it needs the contact-model estimator and the MCAP reader"),
-        Command::Discrepancy { .. } => not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader"),
+        Command::Discrepancy { .. } => {
+            not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader")
+        }
         Command::Record { .. } => not_built("record", "it needs the ROS 2 nodes and the MCAP writer"),
         Command::Replay { .. } => not_built("replay", "it needs the ROS 2 nodes and the MCAP reader"),
         Command::Model(args) => model_cmd::run(args),

@@ -104,7 +104,13 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
     let frame_name = match args.frame {
         Some(f) => f,
         None if model.frame_id(lwr4::TOOL_FRAME).is_ok() => lwr4::TOOL_FRAME.to_string(),
-        None => model.frames.iter().rev().find(|f| f.joint == Some(n - 1)).map(|f| f.name.clone()).context("no frame on the last joint")?,
+        None => model
+            .frames
+            .iter()
+            .rev()
+            .find(|f| f.joint == Some(n - 1))
+            .map(|f| f.name.clone())
+            .context("no frame on the last joint")?,
     };
     let frame = model.frame_id(&frame_name)?;
 
@@ -118,7 +124,13 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
             let pose = model.frame_pose(&data, softcontact_dynamics::FrameId(i));
             let r = pose.rotation.to_rotation_matrix().into_inner();
             let t = pose.translation.vector;
-            (f.name.clone(), FrameJson { translation: [t.x, t.y, t.z], rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])) })
+            (
+                f.name.clone(),
+                FrameJson {
+                    translation: [t.x, t.y, t.z],
+                    rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
+                },
+            )
         })
         .collect();
     let mut jac = Matrix6xX::zeros(n);
@@ -128,13 +140,30 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
     let gravity = model.gravity_torques(&mut data, &q).as_slice().to_vec();
     let rnea = model.rnea(&mut data, &q, &dq, &ddq, None).as_slice().to_vec();
 
-    println!("robot `{}`: {n} joints, moving mass {:.4} kg, {} frames", model.name, model.moving_mass(), model.frames.len());
-    println!("{:<16} {:>9} {:>9} {:>10} {:>9} {:>9} {:>8}  body COM [m] in joint frame", "joint", "lower°", "upper°", "vel [r/s]", "eff [Nm]", "q [rad]", "mass kg");
+    println!(
+        "robot `{}`: {n} joints, moving mass {:.4} kg, {} frames",
+        model.name,
+        model.moving_mass(),
+        model.frames.len()
+    );
+    println!(
+        "{:<16} {:>9} {:>9} {:>10} {:>9} {:>9} {:>8}  body COM [m] in joint frame",
+        "joint", "lower°", "upper°", "vel [r/s]", "eff [Nm]", "q [rad]", "mass kg"
+    );
     for (i, j) in model.joints.iter().enumerate() {
         let c = j.body().com();
         println!(
             "{:<16} {:>9.2} {:>9.2} {:>10.4} {:>9.1} {:>9.4} {:>8.4}  ({:.4}, {:.4}, {:.4})",
-            j.name, j.limits.lower.to_degrees(), j.limits.upper.to_degrees(), j.limits.velocity, j.limits.effort, q[i], j.body().mass, c.x, c.y, c.z
+            j.name,
+            j.limits.lower.to_degrees(),
+            j.limits.upper.to_degrees(),
+            j.limits.velocity,
+            j.limits.effort,
+            q[i],
+            j.body().mass,
+            c.x,
+            c.y,
+            c.z
         );
         if q[i] < j.limits.lower || q[i] > j.limits.upper {
             println!("  warning: q of {} is outside its limits", j.name);
@@ -146,7 +175,16 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
         let (r, p, y) = pose.rotation.euler_angles();
         let t = pose.translation.vector;
         let carrier = f.joint.map(|j| model.joints[j].name.as_str()).unwrap_or("world");
-        println!("  {:<16} ({:>8.4}, {:>8.4}, {:>8.4})  ({:>8.2}, {:>8.2}, {:>8.2})  on {carrier}", f.name, t.x, t.y, t.z, r.to_degrees(), p.to_degrees(), y.to_degrees());
+        println!(
+            "  {:<16} ({:>8.4}, {:>8.4}, {:>8.4})  ({:>8.2}, {:>8.2}, {:>8.2})  on {carrier}",
+            f.name,
+            t.x,
+            t.y,
+            t.z,
+            r.to_degrees(),
+            p.to_degrees(),
+            y.to_degrees()
+        );
     }
     print_matrix(&format!("Jacobian of {frame_name} (rows: vx vy vz wx wy wz, world axes)"), &jacobian);
     print_matrix("mass matrix M [kg m²]", &mass_matrix);
@@ -159,9 +197,19 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
             joints: model
                 .joints
                 .iter()
-                .map(|j| JointJson { name: j.name.clone(), lower: j.limits.lower, upper: j.limits.upper, velocity: j.limits.velocity, effort: j.limits.effort })
+                .map(|j| JointJson {
+                    name: j.name.clone(),
+                    lower: j.limits.lower,
+                    upper: j.limits.upper,
+                    velocity: j.limits.velocity,
+                    effort: j.limits.effort,
+                })
                 .collect(),
-            bodies: model.joints.iter().map(|j| BodyJson { joint: j.name.clone(), mass: j.body().mass, com: j.body().com().into() }).collect(),
+            bodies: model
+                .joints
+                .iter()
+                .map(|j| BodyJson { joint: j.name.clone(), mass: j.body().mass, com: j.body().com().into() })
+                .collect(),
             q,
             dq,
             ddq,
@@ -172,7 +220,8 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
             gravity,
             rnea,
         };
-        std::fs::write(&path, serde_json::to_string_pretty(&out)?).with_context(|| format!("cannot write {}", path.display()))?;
+        std::fs::write(&path, serde_json::to_string_pretty(&out)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         println!("wrote {}", path.display());
     }
     Ok(())

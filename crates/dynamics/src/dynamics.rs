@@ -7,9 +7,9 @@
 
 use nalgebra::{DVector, Vector3, Vector6};
 
+use crate::Error;
 use crate::kinematics::{Axes, Data};
 use crate::model::{FrameId, Model};
-use crate::Error;
 
 /// A wrench acting on the robot at a frame's origin, in world axes (e.g. a contact force on the hand).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -117,7 +117,8 @@ impl Model {
         for i in (0..n).rev() {
             let mut c = self.joints[i].body;
             if i + 1 < n {
-                let child = data.composite[i + 1].expressed_in_parent(&data.rel_rotation[i + 1], &self.joints[i + 1].translation);
+                let child = data.composite[i + 1]
+                    .expressed_in_parent(&data.rel_rotation[i + 1], &self.joints[i + 1].translation);
                 c = c.add(&child);
             }
             data.composite[i] = c;
@@ -194,8 +195,8 @@ impl Model {
         self.backward_pass(data, external);
         self.crba_on_kinematics(data);
         self.factor_mass_matrix(data)?;
-        for i in 0..self.dof() {
-            data.ddq[i] = tau[i] - data.tau[i];
+        for ((ddq, tau), h) in data.ddq.iter_mut().zip(tau).zip(data.tau.iter()) {
+            *ddq = tau - h;
         }
         if let Some(chol) = data.cholesky.as_ref() {
             chol.solve_mut(&mut data.ddq);
@@ -214,7 +215,8 @@ impl Model {
             v = rt * (v + w.cross(&joint.translation));
             w = rt * w + joint.axis * dq[i];
             let b = &joint.body;
-            energy += 0.5 * (b.mass * v.dot(&v) + 2.0 * v.dot(&w.cross(&b.first_moment)) + w.dot(&(b.inertia_origin * w)));
+            energy +=
+                0.5 * (b.mass * v.dot(&v) + 2.0 * v.dot(&w.cross(&b.first_moment)) + w.dot(&(b.inertia_origin * w)));
         }
         energy
     }

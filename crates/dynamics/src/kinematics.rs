@@ -4,7 +4,9 @@
 //! and the world pose of each joint frame. Work stays in 3-vectors and 3×3 matrices; `Data` is
 //! allocated once, so none of this allocates.
 
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Matrix6xX, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{
+    DMatrix, DVector, Isometry3, Matrix3, Matrix6xX, Rotation3, Translation3, UnitQuaternion, Vector3, Vector6,
+};
 
 use crate::model::{FrameId, Model};
 
@@ -193,7 +195,12 @@ impl Model {
 
     /// Classical acceleration of a frame's origin (world axes, linear then angular) after a
     /// [`Model::velocity_pass`] whose base acceleration was `base_accel`, with that offset removed.
-    pub(crate) fn frame_acceleration_from_pass(&self, data: &Data, frame: FrameId, base_accel: Vector3<f64>) -> Vector6<f64> {
+    pub(crate) fn frame_acceleration_from_pass(
+        &self,
+        data: &Data,
+        frame: FrameId,
+        base_accel: Vector3<f64>,
+    ) -> Vector6<f64> {
         let f = self.frame(frame);
         let Some(j) = f.joint else { return Vector6::zeros() };
         let r = f.placement.translation.vector;
@@ -221,8 +228,8 @@ impl Model {
         let (_, p) = self.frame_rotation_position(data, frame);
         let (mut lin, mut ang) = (Vector3::zeros(), Vector3::zeros());
         if let Some(last) = self.frame(frame).joint {
-            for j in 0..=last {
-                let z = data.rotation[j] * self.joints[j].axis * dq[j];
+            for (j, joint) in self.joints.iter().enumerate().take(last + 1) {
+                let z = data.rotation[j] * joint.axis * dq[j];
                 lin += z.cross(&(p - data.origin[j]));
                 ang += z;
             }

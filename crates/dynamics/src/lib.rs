@@ -47,7 +47,9 @@ pub enum Error {
     NoMovableJoint,
     #[error("the body moved by joint `{joint}` has no inertial (zero mass): its dynamics would be singular")]
     NoInertial { joint: String },
-    #[error("link `{link}` has a non-physical inertial (negative or non-finite mass, or an inertia tensor that is not positive semi-definite or breaks the triangle inequality)")]
+    #[error(
+        "link `{link}` has a non-physical inertial (negative or non-finite mass, or an inertia tensor that is not positive semi-definite or breaks the triangle inequality)"
+    )]
     NonPhysicalInertia { link: String },
     #[error("no frame named `{name}`; the model's frames are: {known}")]
     UnknownFrame { name: String, known: String },

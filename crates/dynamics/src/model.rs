@@ -129,10 +129,7 @@ fn pose_to_isometry(pose: &urdf_rs::Pose) -> Isometry3<f64> {
     let [x, y, z] = pose.xyz.0;
     let [roll, pitch, yaw] = pose.rpy.0;
     // URDF rpy: fixed-axis roll about x, then pitch about y, then yaw about z.
-    Isometry3::from_parts(
-        Translation3::new(x, y, z),
-        UnitQuaternion::from_euler_angles(roll, pitch, yaw),
-    )
+    Isometry3::from_parts(Translation3::new(x, y, z), UnitQuaternion::from_euler_angles(roll, pitch, yaw))
 }
 
 fn link_inertia(link: &urdf_rs::Link) -> Result<BodyInertia, Error> {
@@ -165,8 +162,9 @@ impl Model {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path)
             .map_err(|e| Error::Read { path: path.display().to_string(), message: e.to_string() })?;
-        Self::from_urdf_str(&text)
-            .map_err(|e| if let Error::Parse(m) = e { Error::Read { path: path.display().to_string(), message: m } } else { e })
+        Self::from_urdf_str(&text).map_err(|e| {
+            if let Error::Parse(m) = e { Error::Read { path: path.display().to_string(), message: m } } else { e }
+        })
     }
 
     /// Builds the model from URDF text.
@@ -196,14 +194,18 @@ impl Model {
             robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child.contains_key(n)).collect();
         let root = match roots.as_slice() {
             [root] => *root,
-            [] => return Err(Error::NotATree { link: robot.links.first().map(|l| l.name.clone()).unwrap_or_default() }),
+            [] => {
+                return Err(Error::NotATree { link: robot.links.first().map(|l| l.name.clone()).unwrap_or_default() });
+            }
             _ => return Err(Error::ManyRoots(roots.iter().map(|s| s.to_string()).collect())),
         };
 
         // Which links have a movable joint somewhere below them: decides the one branch the chain follows.
         fn movable_below(link: &str, children: &HashMap<&str, Vec<&urdf_rs::Joint>>) -> bool {
             children.get(link).is_some_and(|js| {
-                js.iter().any(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, children))
+                js.iter().any(|j| {
+                    !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, children)
+                })
             })
         }
 
@@ -229,7 +231,9 @@ impl Model {
             let kids = children.get(link_name).map(Vec::as_slice).unwrap_or(&[]);
             let moving: Vec<&str> = kids
                 .iter()
-                .filter(|j| !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, &children))
+                .filter(|j| {
+                    !matches!(j.joint_type, urdf_rs::JointType::Fixed) || movable_below(&j.child.link, &children)
+                })
                 .map(|j| j.name.as_str())
                 .collect();
             if moving.len() > 1 {
@@ -263,7 +267,8 @@ impl Model {
                                 effort: l.effort,
                             },
                             rotation: in_parent.rotation.to_rotation_matrix().into_inner(),
-                            rotation_is_identity: in_parent.rotation.to_rotation_matrix().into_inner() == Matrix3::identity(),
+                            rotation_is_identity: in_parent.rotation.to_rotation_matrix().into_inner()
+                                == Matrix3::identity(),
                             translation: in_parent.translation.vector,
                             axis: axis / norm,
                             body: BodyInertia::ZERO,
@@ -271,7 +276,10 @@ impl Model {
                         stack.push((joint.child.link.as_str(), Some(model.joints.len() - 1), Isometry3::identity()));
                     }
                     ref other => {
-                        return Err(Error::UnsupportedJoint { joint: joint.name.clone(), kind: format!("{other:?}").to_lowercase() });
+                        return Err(Error::UnsupportedJoint {
+                            joint: joint.name.clone(),
+                            kind: format!("{other:?}").to_lowercase(),
+                        });
                     }
                 }
             }

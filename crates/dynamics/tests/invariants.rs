@@ -109,7 +109,11 @@ fn inverse_dynamics_inverts_forward_dynamics() {
         let tau: Vec<f64> = (0..model.dof()).map(|_| rng.random_range(-50.0..50.0)).collect();
         let w = ExternalWrench {
             frame: tool,
-            force: Vector3::new(rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0), rng.random_range(-50.0..50.0)),
+            force: Vector3::new(
+                rng.random_range(-50.0..50.0),
+                rng.random_range(-50.0..50.0),
+                rng.random_range(-50.0..50.0),
+            ),
             torque: Vector3::new(rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0)),
         };
         for external in [None, Some(&w)] {
@@ -131,7 +135,8 @@ fn external_wrench_enters_as_jacobian_transpose() {
     for _ in 0..100 {
         let (q, dq) = random_state(&model, &mut rng);
         let ddq = vec![0.3; model.dof()];
-        let w = ExternalWrench { frame: tool, force: Vector3::new(3.0, -20.0, 40.0), torque: Vector3::new(0.5, 1.0, -2.0) };
+        let w =
+            ExternalWrench { frame: tool, force: Vector3::new(3.0, -20.0, 40.0), torque: Vector3::new(0.5, 1.0, -2.0) };
         let free = model.rnea(&mut data, &q, &dq, &ddq, None).clone();
         let pushed = model.rnea(&mut data, &q, &dq, &ddq, Some(&w)).clone();
         model.forward_kinematics(&mut data, &q);

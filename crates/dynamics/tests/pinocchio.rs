@@ -105,15 +105,27 @@ fn fixtures_cover_enough_states() {
 
 #[test]
 fn frame_placements_match() {
-    let (model, mut data) = { let m = model(); let d = m.data(); (m, d) };
+    let (model, mut data) = {
+        let m = model();
+        let d = m.data();
+        (m, d)
+    };
     for (k, s) in fixtures().states.iter().enumerate() {
         model.forward_kinematics(&mut data, &s.q);
-        assert_eq!(s.frames.len(), model.frames.len() - usize::from(model.frame_id("world").is_ok() && !s.frames.contains_key("world")));
+        assert_eq!(
+            s.frames.len(),
+            model.frames.len() - usize::from(model.frame_id("world").is_ok() && !s.frames.contains_key("world"))
+        );
         for (name, p) in &s.frames {
             let pose = model.frame_pose(&data, model.frame_id(name).unwrap());
             assert_close(&format!("{name} translation"), k, pose.translation.vector.as_slice(), &p.translation);
             let r = pose.rotation.to_rotation_matrix().into_inner();
-            assert_close(&format!("{name} rotation"), k, &row_major(&DMatrix::from_column_slice(3, 3, r.as_slice())), &rows(&p.rotation));
+            assert_close(
+                &format!("{name} rotation"),
+                k,
+                &row_major(&DMatrix::from_column_slice(3, 3, r.as_slice())),
+                &rows(&p.rotation),
+            );
         }
     }
 }
@@ -153,10 +165,24 @@ fn inverse_dynamics_matches() {
     let tool = model.frame_id(&fixtures().tool).unwrap();
     for (k, s) in fixtures().states.iter().enumerate() {
         assert_close("rnea", k, model.rnea(&mut data, &s.q, &s.dq, &s.ddq, None).as_slice(), &s.rnea);
-        let w = ExternalWrench { frame: tool, force: Vector3::from_column_slice(&s.force), torque: Vector3::from_column_slice(&s.torque) };
-        assert_close("rnea with external wrench", k, model.rnea(&mut data, &s.q, &s.dq, &s.ddq, Some(&w)).as_slice(), &s.rnea_external);
+        let w = ExternalWrench {
+            frame: tool,
+            force: Vector3::from_column_slice(&s.force),
+            torque: Vector3::from_column_slice(&s.torque),
+        };
+        assert_close(
+            "rnea with external wrench",
+            k,
+            model.rnea(&mut data, &s.q, &s.dq, &s.ddq, Some(&w)).as_slice(),
+            &s.rnea_external,
+        );
         assert_close("gravity", k, model.gravity_torques(&mut data, &s.q).as_slice(), &s.gravity);
-        assert_close("nonlinear effects", k, model.nonlinear_effects(&mut data, &s.q, &s.dq).as_slice(), &s.nonlinear_effects);
+        assert_close(
+            "nonlinear effects",
+            k,
+            model.nonlinear_effects(&mut data, &s.q, &s.dq).as_slice(),
+            &s.nonlinear_effects,
+        );
     }
 }
 
@@ -167,9 +193,23 @@ fn mass_matrix_and_forward_dynamics_match() {
     let tool = model.frame_id(&fixtures().tool).unwrap();
     for (k, s) in fixtures().states.iter().enumerate() {
         assert_close("mass matrix", k, &row_major(model.mass_matrix(&mut data, &s.q)), &rows(&s.mass_matrix));
-        assert_close("aba", k, model.forward_dynamics(&mut data, &s.q, &s.dq, &s.tau, None).unwrap().as_slice(), &s.aba);
-        let w = ExternalWrench { frame: tool, force: Vector3::from_column_slice(&s.force), torque: Vector3::from_column_slice(&s.torque) };
-        assert_close("aba with external wrench", k, model.forward_dynamics(&mut data, &s.q, &s.dq, &s.tau, Some(&w)).unwrap().as_slice(), &s.aba_external);
+        assert_close(
+            "aba",
+            k,
+            model.forward_dynamics(&mut data, &s.q, &s.dq, &s.tau, None).unwrap().as_slice(),
+            &s.aba,
+        );
+        let w = ExternalWrench {
+            frame: tool,
+            force: Vector3::from_column_slice(&s.force),
+            torque: Vector3::from_column_slice(&s.torque),
+        };
+        assert_close(
+            "aba with external wrench",
+            k,
+            model.forward_dynamics(&mut data, &s.q, &s.dq, &s.tau, Some(&w)).unwrap().as_slice(),
+            &s.aba_external,
+        );
     }
 }
 

@@ -1,0 +1,91 @@
+//! The `softcontact` command as a user meets it.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn softcontact(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_softcontact")).args(args).output().expect("softcontact runs")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn help_lists_every_contract_command() {
+    let o = softcontact(&["--help"]);
+    assert!(o.status.success());
+    for cmd in ["demo", "identify", "discrepancy", "record", "replay", "model", "bench"] {
+        assert!(text(&o).contains(cmd), "--help should list `{cmd}`");
+    }
+    let o = softcontact(&["--version"]);
+    assert!(o.status.success() && text(&o).contains(env!("CARGO_PKG_VERSION")));
+}
+
+#[test]
+fn commands_not_built_yet_say_so_and_fail() {
+    for args in [&["identify", "x.mcap"][..], &["discrepancy", "x.mcap"], &["record"], &["replay", "x.mcap"]] {
+        let o = softcontact(args);
+        assert!(!o.status.success(), "{args:?} must exit non-zero");
+        assert!(text(&o).contains("not built yet"), "{args:?}: {}", text(&o));
+    }
+}
+
+#[test]
+fn demo_runs() {
+    let o = softcontact(&["demo"]);
+    assert!(o.status.success(), "{}", text(&o));
+}
+
+#[test]
+fn model_rejects_bad_input() {
+    for (args, words) in [
+        (&["model", "--q", "0,1"][..], "has 2 values, the robot has 7 joints"),
+        (&["model", "--q", "0,0,0,0,0,0,NaN"], "non-finite"),
+        (&["model", "--frame", "nowhere"], "no frame named `nowhere`"),
+        (&["model", "--urdf", "/nonexistent.urdf"], "cannot read URDF"),
+        (&["model", "--q", "0,a,0,0,0,0,0"], "invalid"),
+    ] {
+        let o = softcontact(args);
+        assert!(!o.status.success(), "{args:?} must fail");
+        assert!(text(&o).contains(words), "{args:?}: expected `{words}` in:\n{}", text(&o));
+    }
+}
+
+/// What `softcontact model` prints as JSON is what Pinocchio computes on the same URDF and state.
+#[test]
+fn model_json_agrees_with_pinocchio() {
+    let json = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("model.json");
+    let urdf = root().join("urdf/lwr4.urdf");
+    let o = softcontact(&[
+        "model",
+        "--urdf",
+        urdf.to_str().unwrap(),
+        "--q",
+        "0.3,-1.1,0.5,1.7,-0.4,0.9,2.1",
+        "--dq",
+        "-0.5,0.2,1.0,-1.3,0.7,0.1,-2.0",
+        "--ddq",
+        "1,-2,3,-1,0.5,2,-3",
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let value: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for key in ["joints", "frames", "jacobian", "mass_matrix", "gravity", "rnea"] {
+        assert!(value.get(key).is_some(), "JSON key `{key}` missing");
+    }
+    assert_eq!(value["jacobian"].as_array().unwrap().len(), 6);
+    let python = std::env::var("SOFTCONTACT_PYTHON").unwrap_or_else(|_| "python3".into());
+    let check = Command::new(&python)
+        .arg(root().join("cli/tests/model_vs_pinocchio.py"))
+        .arg(&urdf)
+        .arg(&json)
+        .output()
+        .expect("python runs");
+    assert!(check.status.success(), "Pinocchio disagrees (pip install pin):\n{}", text(&check));
+}
