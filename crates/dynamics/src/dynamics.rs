@@ -110,32 +110,29 @@ impl Model {
         &data.tau
     }
 
-    /// CRBA on the kinematics already in `data`: composite inertias from the tip down, then each
-    /// column as the momentum of a unit joint rate carried back up the chain.
+    /// CRBA on the kinematics already in `data`, in world axes: composite inertias (about the world
+    /// origin) are plain sums from the tip down, and entry (j, i) is the moment about joint j's axis of
+    /// the momentum (P, L) that a unit rate of joint i gives its composite: z_j·L − P·(z_j × o_j).
     fn crba_on_kinematics(&self, data: &mut Data) {
         let n = self.dof();
+        let mut composite = crate::model::BodyInertia::ZERO;
         for i in (0..n).rev() {
-            let mut c = self.joints[i].body;
-            if i + 1 < n {
-                let child = data.composite[i + 1]
-                    .expressed_in_parent(&data.rel_rotation[i + 1], &self.joints[i + 1].translation);
-                c = c.add(&child);
-            }
-            data.composite[i] = c;
+            composite = composite.add(&self.joints[i].body.expressed_in_parent(&data.rotation[i], &data.origin[i]));
+            data.composite[i] = composite;
+            let z = data.rotation[i] * self.joints[i].axis;
+            data.axis_world[i] = z;
+            data.axis_moment[i] = z.cross(&data.origin[i]);
         }
+        let m = data.mass_matrix.as_mut_slice();
         for i in 0..n {
-            let s = self.joints[i].axis;
             let c = &data.composite[i];
-            let mut f = s.cross(&c.first_moment);
-            let mut m = c.inertia_origin * s;
-            data.mass_matrix[(i, i)] = s.dot(&m);
-            for j in (0..i).rev() {
-                let e = &data.rel_rotation[j + 1];
-                f = e * f;
-                m = e * m + self.joints[j + 1].translation.cross(&f);
-                let mji = self.joints[j].axis.dot(&m);
-                data.mass_matrix[(j, i)] = mji;
-                data.mass_matrix[(i, j)] = mji;
+            let (z, o) = (data.axis_world[i], data.origin[i]);
+            let p = z.cross(&(c.first_moment - c.mass * o));
+            let l = c.inertia_origin * z - c.first_moment.cross(&z.cross(&o));
+            for j in 0..=i {
+                let mji = data.axis_world[j].dot(&l) - p.dot(&data.axis_moment[j]);
+                m[j + i * n] = mji;
+                m[i + j * n] = mji;
             }
         }
     }

@@ -33,6 +33,9 @@ pub struct Data {
     pub(crate) omega_dot: Vec<Vector3<f64>>,
     pub(crate) accel: Vec<Vector3<f64>>,
     pub(crate) composite: Vec<crate::model::BodyInertia>,
+    /// World axis z of each joint and its moment z × o about the world origin (CRBA).
+    pub(crate) axis_world: Vec<Vector3<f64>>,
+    pub(crate) axis_moment: Vec<Vector3<f64>>,
     /// Joint torques of the last RNEA-family call (rnea, gravity, nonlinear effects).
     pub tau: DVector<f64>,
     /// Joint-space inertia matrix (full, symmetric) of the last CRBA.
@@ -55,7 +58,9 @@ impl Data {
             origin: v.clone(),
             omega: v.clone(),
             omega_dot: v.clone(),
-            accel: v,
+            accel: v.clone(),
+            axis_world: v.clone(),
+            axis_moment: v,
             composite: vec![crate::model::BodyInertia::ZERO; n],
             tau: DVector::zeros(n),
             mass_matrix: DMatrix::zeros(n, n),
