@@ -1,0 +1,74 @@
+//! Contact models of soft surfaces and their estimation from noisy data. Pure library code: no I/O,
+//! no clocks; the estimator node, the controller, the simulator and the offline tools all use it.
+//!
+//! # Models
+//!
+//! [`ContactModel`] is the one description of a contact, read from and written to YAML:
+//! - normal force f = k zᵃ + λ zᵇ żᶜ for z > 0, 0 otherwise (seed 001 eq. 2), never negative, with
+//!   named [`Kind`]s Kelvin-Voigt (a = c = 1, b = 0), Hunt-Crossley (a = b = 3/2, c = 1),
+//!   Azad-Featherstone (a = 3/2, b = 1/2, c = 1), Hertz-Walton's normal part, or general exponents;
+//!   żᶜ keeps the sign of ż (sgn(ż)|ż|ᶜ);
+//! - optionally the Walton tangential law of seed 000, f_t = k_t √z δ_t inside the friction cone;
+//! - optionally named [`Effect`]s (viscoelastic relaxation, hysteresis, contact-offset drift, sensor
+//!   bias and drift) with their own state, advanced by [`ContactModel::step`].
+//!
+//! Each model gives the force, ∂f/∂z and ∂f/∂ż, and the inverse the controller uses: the deformation
+//! that holds a force at rest, z = (f/k)^{1/a} (seed 001 eq. 19).
+//!
+//! # Sign conventions (design.md section 4)
+//!
+//! n is the unit vector along which the hand moves to compress the surface (default [0, 0, −1] in
+//! `world`); d is where the tool was when contact began. Deformation z = (r − d)·n, rate ż = ṙ·n, normal
+//! force f = −F·n ≥ 0 with F the force the surface exerts on the hand. So z > 0 and f > 0 in contact, and
+//! ż > 0 while pressing in.
+//!
+//! # Which estimator when
+//!
+//! - Online, every sample: [`WindowEstimator`] keeps the last N samples (default 1200, 12 s at 10 ms)
+//!   with running least-squares moments of every candidate kind, O(1) per sample;
+//!   [`WindowEstimator::current`] reads the current (k, λ) of a kind at once.
+//! - Online, when a model is adopted (e.g. once per command cycle, as in seed 001):
+//!   [`WindowEstimator::refit`] refits every kind with 5-fold cross-validated fitness (seed 001 eq. 18),
+//!   chooses the best, and applies the excitation guard: a parameter the window does not determine
+//!   (λ during a long hold, where ż ≈ 0) stays at its prior and is flagged, instead of following noise.
+//! - Offline, a whole recording: [`estimate`] on all samples; [`estimate_contact_offset`] when the
+//!   onset threshold misplaces the surface (it always does on a soft sponge: 1 N is reached only after
+//!   some deformation); [`estimate_exponent`] when none of the named laws fits; [`robust_least_squares`]
+//!   when the data has outliers (Huber-weighted, QR-solved).
+//! - Feed estimators in-contact samples only: where the hand withdraws faster than the surface recovers,
+//!   the surface separates and the force is 0 rather than the law's negative value, so such samples
+//!   (f below the onset threshold) say nothing about the law and bias it.
+//! - Contact onset: [`OnsetDetector`] (threshold 1 N, confirmed by 3 consecutive readings).
+//! - Reporting as seed 000 does: [`fit_statistics`] and [`dispersion`].
+
+mod exponent;
+mod fit;
+mod model;
+mod onset;
+mod stats;
+mod window;
+
+pub use exponent::{DampingExponent, estimate_contact_offset, estimate_exponent, minimize_scalar};
+pub use fit::{
+    Fit, FitConfig, Moments, Prior, Sample, fit, fit_folds, fitness, fold_moments, fold_of, least_squares_qr,
+    regressors, robust_least_squares,
+};
+pub use model::{ContactModel, Effect, EffectState, Exponents, Kind, Tangential};
+pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
+pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
+pub use window::{Estimate, WindowEstimator, estimate};
+
+/// Why a contact computation was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ContactError {
+    #[error("{name} is not a finite number ({value})")]
+    NonFinite { name: &'static str, value: f64 },
+    #[error("a contact force cannot be negative (got {0} N)")]
+    NegativeForce(f64),
+    #[error("invalid contact model: {0}")]
+    InvalidModel(String),
+    #[error("invalid configuration: {0}")]
+    InvalidConfig(String),
+    #[error("not enough informative samples to fit {kind}")]
+    NotEnoughData { kind: &'static str },
+}

@@ -1,0 +1,401 @@
+//! The contact model: one serde type that the simulator, the estimator, the controller and the
+//! discrepancy workflow all read and write.
+
+use serde::{Deserialize, Serialize};
+
+use crate::ContactError;
+
+/// The named normal-force laws f = k zᵃ + λ zᵇ żᶜ (seed 001 eq. 2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// Linear spring and damper: a = c = 1, b = 0.
+    KelvinVoigt,
+    /// Hertzian spring with deformation-scaled damping: a = b = 3/2, c = 1.
+    HuntCrossley,
+    /// Hertzian spring, damping scaled by √z: a = 3/2, b = 1/2, c = 1.
+    AzadFeatherstone,
+    /// Seed 000's sphere on a plane: f_n = k_n z^{3/2} (a = b = 3/2, c = 1; λ normally 0), with the Walton
+    /// tangential law in [`Tangential`].
+    HertzWalton,
+    /// Any exponents, e.g. an estimated a.
+    General,
+}
+
+impl Kind {
+    /// The kinds an estimator compares (seed 001).
+    pub const CANDIDATES: [Kind; 3] = [Kind::KelvinVoigt, Kind::HuntCrossley, Kind::AzadFeatherstone];
+
+    /// Fixed exponents of a named kind; `None` for [`Kind::General`].
+    pub fn exponents(self) -> Option<Exponents> {
+        match self {
+            Kind::KelvinVoigt => Some(Exponents { a: 1.0, b: 0.0, c: 1.0 }),
+            Kind::HuntCrossley | Kind::HertzWalton => Some(Exponents { a: 1.5, b: 1.5, c: 1.0 }),
+            Kind::AzadFeatherstone => Some(Exponents { a: 1.5, b: 0.5, c: 1.0 }),
+            Kind::General => None,
+        }
+    }
+
+    /// The name used in files and JSON (`kelvin_voigt`, …).
+    pub fn id(self) -> &'static str {
+        match self {
+            Kind::KelvinVoigt => "kelvin_voigt",
+            Kind::HuntCrossley => "hunt_crossley",
+            Kind::AzadFeatherstone => "azad_featherstone",
+            Kind::HertzWalton => "hertz_walton",
+            Kind::General => "general",
+        }
+    }
+
+    /// The name people use (`Kelvin-Voigt`, …).
+    pub fn label(self) -> &'static str {
+        match self {
+            Kind::KelvinVoigt => "Kelvin-Voigt",
+            Kind::HuntCrossley => "Hunt-Crossley",
+            Kind::AzadFeatherstone => "Azad-Featherstone",
+            Kind::HertzWalton => "Hertz-Walton",
+            Kind::General => "general",
+        }
+    }
+}
+
+/// Exponents of f = k zᵃ + λ zᵇ żᶜ.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Exponents {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+}
+
+/// Walton-form tangential law of seed 000 (eq. 3–4): f_t = k_t √z δ_t inside the friction cone
+/// |f_t| ≤ μ f_n; beyond it the contact slides and |f_t| = μ f_n.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tangential {
+    /// k_t [N/m^{3/2}].
+    pub stiffness: f64,
+    /// Coulomb friction coefficient μ.
+    pub friction: f64,
+}
+
+/// A named augmentation of the base law (design.md section 7 ids). Surface effects change the force the
+/// surface exerts; sensor effects change what the F/T sensor reports of it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "id", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Effect {
+    /// A Maxwell branch (spring k_m in series with a damper of time constant τ) in parallel with the base
+    /// law: force relaxes under held deformation. Branch force s: ṡ = k_m ż − s/τ.
+    ViscoelasticRelaxation { stiffness: f64, time_constant: f64 },
+    /// Loading and unloading paths differ: the elastic force is scaled by 1 + h·tanh(ż / v₀).
+    Hysteresis { fraction: f64, velocity_scale: f64 },
+    /// The surface zero moves at a constant rate [m/s] along the contact normal (seed 000's creep).
+    ContactOffsetDrift { rate: f64 },
+    /// Constant offset [N] of the measured normal force.
+    SensorBias { offset: f64 },
+    /// Offset of the measured normal force growing at a constant rate [N/s].
+    SensorDrift { rate: f64 },
+}
+
+impl Effect {
+    pub fn id(&self) -> &'static str {
+        match self {
+            Effect::ViscoelasticRelaxation { .. } => "viscoelastic_relaxation",
+            Effect::Hysteresis { .. } => "hysteresis",
+            Effect::ContactOffsetDrift { .. } => "contact_offset_drift",
+            Effect::SensorBias { .. } => "sensor_bias",
+            Effect::SensorDrift { .. } => "sensor_drift",
+        }
+    }
+
+    fn parameters(&self) -> [f64; 2] {
+        match *self {
+            Effect::ViscoelasticRelaxation { stiffness, time_constant } => [stiffness, time_constant],
+            Effect::Hysteresis { fraction, velocity_scale } => [fraction, velocity_scale],
+            Effect::ContactOffsetDrift { rate } | Effect::SensorDrift { rate } => [rate, 0.0],
+            Effect::SensorBias { offset } => [offset, 0.0],
+        }
+    }
+
+    fn validate(&self) -> Result<(), ContactError> {
+        let bad = |why: &str| Err(ContactError::InvalidModel(format!("effect `{}`: {why}", self.id())));
+        if self.parameters().iter().any(|p| !p.is_finite()) {
+            return bad("parameters must be finite");
+        }
+        match *self {
+            Effect::ViscoelasticRelaxation { stiffness, time_constant } if stiffness < 0.0 || time_constant <= 0.0 => {
+                bad("stiffness must be ≥ 0 and time_constant > 0")
+            }
+            Effect::Hysteresis { fraction, velocity_scale }
+                if !(0.0..1.0).contains(&fraction) || velocity_scale <= 0.0 =>
+            {
+                bad("fraction must be in [0, 1) and velocity_scale > 0")
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Everything known about a soft contact: the normal law, optionally the tangential law, and added
+/// effects. `kind`, `stiffness`, `damping`, `exponents` read like the JSON of `softcontact identify`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ModelFile")]
+pub struct ContactModel {
+    pub kind: Kind,
+    /// k.
+    pub stiffness: f64,
+    /// λ.
+    pub damping: f64,
+    pub exponents: Exponents,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tangential: Option<Tangential>,
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub effects: Vec<Effect>,
+}
+
+/// The file form: exponents may be left out for a named kind.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ModelFile {
+    kind: Kind,
+    stiffness: f64,
+    #[serde(default)]
+    damping: f64,
+    exponents: Option<Exponents>,
+    tangential: Option<Tangential>,
+    #[serde(default)]
+    effects: Vec<Effect>,
+}
+
+impl TryFrom<ModelFile> for ContactModel {
+    type Error = ContactError;
+    fn try_from(f: ModelFile) -> Result<Self, ContactError> {
+        let exponents = match (f.kind.exponents(), f.exponents) {
+            (Some(named), Some(given)) if named != given => {
+                return Err(ContactError::InvalidModel(format!(
+                    "kind {} has exponents a={}, b={}, c={}; the file gives a={}, b={}, c={} (use kind general)",
+                    f.kind.id(),
+                    named.a,
+                    named.b,
+                    named.c,
+                    given.a,
+                    given.b,
+                    given.c
+                )));
+            }
+            (Some(named), _) => named,
+            (None, Some(given)) => given,
+            (None, None) => return Err(ContactError::InvalidModel("kind general needs exponents {a, b, c}".into())),
+        };
+        let model = ContactModel {
+            kind: f.kind,
+            stiffness: f.stiffness,
+            damping: f.damping,
+            exponents,
+            tangential: f.tangential,
+            effects: f.effects,
+        };
+        model.validate()?;
+        Ok(model)
+    }
+}
+
+/// sgn(x)·|x|ᶜ: the rate term keeps its sign when the surface is released.
+#[inline]
+fn signed_pow(x: f64, c: f64) -> f64 {
+    if c == 1.0 { x } else { x.signum() * x.abs().powf(c) }
+}
+
+/// zᵉ, with the exponents of the named kinds computed without `powf`.
+#[inline]
+pub(crate) fn pow(z: f64, e: f64) -> f64 {
+    if e == 0.0 {
+        1.0
+    } else if e == 1.0 {
+        z
+    } else if e == 0.5 {
+        z.sqrt()
+    } else if e == 1.5 {
+        z * z.sqrt()
+    } else {
+        z.powf(e)
+    }
+}
+
+fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
+    if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
+}
+
+/// State of the effects that have memory (see [`ContactModel::step`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EffectState {
+    /// Time since the model was applied [s].
+    pub time: f64,
+    /// Force of each viscoelastic branch, in the order of `effects`.
+    pub branch_force: Vec<f64>,
+}
+
+impl ContactModel {
+    /// A model of a named kind.
+    pub fn new(kind: Kind, stiffness: f64, damping: f64) -> Result<Self, ContactError> {
+        let exponents = kind.exponents().ok_or_else(|| {
+            ContactError::InvalidModel("kind general needs exponents: use ContactModel::general".into())
+        })?;
+        let model = ContactModel { kind, stiffness, damping, exponents, tangential: None, effects: Vec::new() };
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// A model with any exponents.
+    pub fn general(stiffness: f64, damping: f64, exponents: Exponents) -> Result<Self, ContactError> {
+        let model =
+            ContactModel { kind: Kind::General, stiffness, damping, exponents, tangential: None, effects: Vec::new() };
+        model.validate()?;
+        Ok(model)
+    }
+
+    /// Checks what the force law needs: finite numbers, k > 0, λ ≥ 0, a > 0, b ≥ 0, c > 0.
+    pub fn validate(&self) -> Result<(), ContactError> {
+        let Exponents { a, b, c } = self.exponents;
+        let numbers = [self.stiffness, self.damping, a, b, c];
+        if numbers.iter().any(|v| !v.is_finite()) {
+            return Err(ContactError::InvalidModel("stiffness, damping and exponents must be finite".into()));
+        }
+        if self.stiffness <= 0.0 || self.damping < 0.0 {
+            return Err(ContactError::InvalidModel(format!(
+                "stiffness must be > 0 and damping ≥ 0 (got k = {}, λ = {})",
+                self.stiffness, self.damping
+            )));
+        }
+        if a <= 0.0 || b < 0.0 || c <= 0.0 {
+            return Err(ContactError::InvalidModel(format!("exponents need a > 0, b ≥ 0, c > 0 (got {a}, {b}, {c})")));
+        }
+        if let Some(t) = self.tangential
+            && !(t.stiffness.is_finite() && t.stiffness >= 0.0 && t.friction.is_finite() && t.friction >= 0.0)
+        {
+            return Err(ContactError::InvalidModel("tangential stiffness and friction must be finite and ≥ 0".into()));
+        }
+        self.effects.iter().try_for_each(Effect::validate)
+    }
+
+    pub fn from_yaml(text: &str) -> Result<Self, ContactError> {
+        serde_yaml_ng::from_str(text).map_err(|e| ContactError::InvalidModel(e.to_string()))
+    }
+
+    pub fn to_yaml(&self) -> String {
+        serde_yaml_ng::to_string(self).expect("a contact model always serialises")
+    }
+
+    /// The elastic part k zᵃ and the rate part λ zᵇ żᶜ, for z > 0.
+    #[inline]
+    fn parts(&self, z: f64, zdot: f64) -> (f64, f64) {
+        let e = &self.exponents;
+        (self.stiffness * pow(z, e.a), self.damping * pow(z, e.b) * signed_pow(zdot, e.c))
+    }
+
+    /// Normal force of the base law at deformation z [m] and rate ż [m/s]: k zᵃ + λ zᵇ żᶜ for z > 0,
+    /// 0 out of contact, and never negative (a soft surface pushes, it does not pull).
+    pub fn force(&self, z: f64, zdot: f64) -> Result<f64, ContactError> {
+        let (z, zdot) = (finite("z", z)?, finite("ż", zdot)?);
+        if z <= 0.0 {
+            return Ok(0.0);
+        }
+        let (elastic, rate) = self.parts(z, zdot);
+        Ok((elastic + rate).max(0.0))
+    }
+
+    /// ∂f/∂z and ∂f/∂ż of [`ContactModel::force`] (zero where the force is zero).
+    pub fn derivatives(&self, z: f64, zdot: f64) -> Result<(f64, f64), ContactError> {
+        let (z, zdot) = (finite("z", z)?, finite("ż", zdot)?);
+        if z <= 0.0 || self.force(z, zdot)? == 0.0 {
+            return Ok((0.0, 0.0));
+        }
+        let Exponents { a, b, c } = self.exponents;
+        let rate = signed_pow(zdot, c);
+        let df_dz = self.stiffness * a * pow(z, a - 1.0) + self.damping * b * pow(z, b - 1.0) * rate;
+        let df_dzdot = if zdot == 0.0 && c < 1.0 {
+            f64::INFINITY
+        } else {
+            self.damping * pow(z, b) * c * zdot.abs().powf(c - 1.0)
+        };
+        Ok((df_dz, df_dzdot))
+    }
+
+    /// The deformation that holds force f at rest (ż = 0): z = (f/k)^{1/a} (seed 001 eq. 19).
+    pub fn deformation_for_force(&self, f: f64) -> Result<f64, ContactError> {
+        let f = finite("force", f)?;
+        if f < 0.0 {
+            return Err(ContactError::NegativeForce(f));
+        }
+        Ok((f / self.stiffness).powf(1.0 / self.exponents.a))
+    }
+
+    /// Tangential force [N] of the Walton law at normal deformation z and tangential displacement δ_t
+    /// [m], limited to the friction cone of the given normal force; `None` without a tangential law.
+    /// Returns the force and whether the contact slides.
+    pub fn tangential_force(
+        &self,
+        z: f64,
+        delta_t: f64,
+        normal_force: f64,
+    ) -> Result<Option<(f64, bool)>, ContactError> {
+        let Some(t) = self.tangential else { return Ok(None) };
+        let (z, delta_t, normal_force) =
+            (finite("z", z)?, finite("δ_t", delta_t)?, finite("normal force", normal_force)?);
+        if z <= 0.0 {
+            return Ok(Some((0.0, false)));
+        }
+        let stick = t.stiffness * z.sqrt() * delta_t;
+        let limit = t.friction * normal_force.max(0.0);
+        Ok(Some(if stick.abs() <= limit { (stick, false) } else { (limit.copysign(stick), true) }))
+    }
+
+    /// A fresh state for [`ContactModel::step`].
+    pub fn effect_state(&self) -> EffectState {
+        EffectState { time: 0.0, branch_force: vec![0.0; self.effects.len()] }
+    }
+
+    /// Advances the effects with memory by dt and returns (surface force, measured force): the force
+    /// the surface exerts with its surface effects, and what a sensor with the sensor effects reads.
+    pub fn step(&self, state: &mut EffectState, z: f64, zdot: f64, dt: f64) -> Result<(f64, f64), ContactError> {
+        let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
+        state.time += dt;
+        let mut z_eff = z;
+        let mut scale = 1.0;
+        for e in &self.effects {
+            match *e {
+                Effect::ContactOffsetDrift { rate } => z_eff -= rate * state.time,
+                Effect::Hysteresis { fraction, velocity_scale } => {
+                    scale *= 1.0 + fraction * (zdot / velocity_scale).tanh()
+                }
+                _ => {}
+            }
+        }
+        let mut surface = 0.0;
+        if z_eff > 0.0 {
+            let (elastic, rate) = self.parts(z_eff, zdot);
+            surface = elastic * scale + rate;
+        }
+        let mut offset = 0.0;
+        for (i, e) in self.effects.iter().enumerate() {
+            match *e {
+                Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
+                    // Exact update of ṡ = k_m ż − s/τ over dt with ż held; the branch only acts in contact.
+                    let s = &mut state.branch_force[i];
+                    let decay = (-dt / time_constant).exp();
+                    let drive = if z_eff > 0.0 { stiffness * zdot * time_constant } else { 0.0 };
+                    *s = *s * decay + drive * (1.0 - decay);
+                    if z_eff <= 0.0 {
+                        *s = 0.0;
+                    }
+                    surface += *s;
+                }
+                Effect::SensorBias { offset: b } => offset += b,
+                Effect::SensorDrift { rate } => offset += rate * state.time,
+                _ => {}
+            }
+        }
+        let surface = surface.max(0.0);
+        Ok((surface, surface + offset))
+    }
+}

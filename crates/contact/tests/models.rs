@@ -1,0 +1,197 @@
+//! The contact model type: forces against hand-written laws, derivatives against finite differences,
+//! the inverse, YAML, the tangential law and the effects.
+
+mod common;
+
+use proptest::prelude::*;
+use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, Tangential};
+
+#[test]
+fn forces_match_the_laws_of_the_paper() {
+    for kind in Kind::CANDIDATES {
+        let model = ContactModel::new(kind, 2.5e4, 700.0).unwrap();
+        for (z, zd) in [(0.01, 0.1), (0.03, -0.05), (0.05, 0.0), (-0.01, 0.3), (0.0, 1.0), (0.02, -3.0)] {
+            let ours = model.force(z, zd).unwrap();
+            let law = common::closed_form(kind, 2.5e4, 700.0, z, zd);
+            assert!((ours - law).abs() <= 1e-12 * law.abs().max(1.0), "{kind:?} at ({z}, {zd}): {ours} vs {law}");
+        }
+    }
+    let general = ContactModel::general(100.0, 3.0, Exponents { a: 1.3, b: 0.7, c: 0.8 }).unwrap();
+    let (z, zd): (f64, f64) = (0.04, -0.2);
+    let law = 100.0 * z.powf(1.3) - 3.0 * z.powf(0.7) * 0.2f64.powf(0.8);
+    assert!((general.force(z, zd).unwrap() - law).abs() < 1e-12);
+}
+
+#[test]
+fn derivatives_are_those_of_the_force() {
+    let models = [
+        ContactModel::new(Kind::KelvinVoigt, 1800.0, 60.0).unwrap(),
+        ContactModel::new(Kind::HuntCrossley, 2.5e4, 3000.0).unwrap(),
+        ContactModel::new(Kind::AzadFeatherstone, 2.5e4, 1100.0).unwrap(),
+        ContactModel::general(900.0, 40.0, Exponents { a: 1.2, b: 0.3, c: 1.4 }).unwrap(),
+    ];
+    let h = 1e-7;
+    for m in &models {
+        for (z, zd) in [(0.01, 0.1), (0.03, -0.02), (0.05, 0.2)] {
+            let (dz, dzd) = m.derivatives(z, zd).unwrap();
+            let fdz = (m.force(z + h, zd).unwrap() - m.force(z - h, zd).unwrap()) / (2.0 * h);
+            let fdzd = (m.force(z, zd + h).unwrap() - m.force(z, zd - h).unwrap()) / (2.0 * h);
+            assert!((dz - fdz).abs() <= 1e-5 * fdz.abs().max(1.0), "{:?} ∂f/∂z {dz} vs {fdz}", m.kind);
+            assert!((dzd - fdzd).abs() <= 1e-5 * fdzd.abs().max(1.0), "{:?} ∂f/∂ż {dzd} vs {fdzd}", m.kind);
+        }
+        assert_eq!(m.derivatives(-0.01, 0.5).unwrap(), (0.0, 0.0), "no contact, no slope");
+    }
+}
+
+#[test]
+fn bad_input_is_refused() {
+    let m = ContactModel::new(Kind::KelvinVoigt, 1800.0, 60.0).unwrap();
+    assert!(matches!(m.deformation_for_force(-1.0), Err(ContactError::NegativeForce(_))));
+    assert!(matches!(m.deformation_for_force(f64::NAN), Err(ContactError::NonFinite { .. })));
+    assert!(matches!(m.force(f64::INFINITY, 0.0), Err(ContactError::NonFinite { .. })));
+    assert!(matches!(m.force(0.01, f64::NAN), Err(ContactError::NonFinite { .. })));
+    assert!(ContactModel::new(Kind::KelvinVoigt, -5.0, 1.0).is_err());
+    assert!(ContactModel::new(Kind::KelvinVoigt, 5.0, -1.0).is_err());
+    assert!(ContactModel::new(Kind::General, 5.0, 1.0).is_err());
+    assert!(ContactModel::general(5.0, 1.0, Exponents { a: 0.0, b: 1.0, c: 1.0 }).is_err());
+}
+
+#[test]
+fn inverse_at_rest_is_seed_001_eq_19() {
+    let sponge = ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1100.0).unwrap();
+    let z = sponge.deformation_for_force(224.0).unwrap();
+    assert!((z - (224.0f64 / 25_044.0).powf(2.0 / 3.0)).abs() < 1e-15);
+    let dice = ContactModel::new(Kind::KelvinVoigt, 1857.0, 60.0).unwrap();
+    assert!((dice.deformation_for_force(104.0).unwrap() - 104.0 / 1857.0).abs() < 1e-15);
+    assert_eq!(dice.deformation_for_force(0.0).unwrap(), 0.0);
+}
+
+fn any_model() -> impl Strategy<Value = ContactModel> {
+    (0usize..4, 1.0f64..1e5, 0.0f64..5e3, 0.5f64..2.5).prop_map(|(i, k, l, a)| match i {
+        3 => ContactModel::general(k, l, Exponents { a, b: 0.5, c: 1.0 }).unwrap(),
+        i => ContactModel::new(Kind::CANDIDATES[i], k, l).unwrap(),
+    })
+}
+
+proptest! {
+    #[test]
+    fn inverse_inverts_the_forward_model(model in any_model(), f in 0.0f64..500.0) {
+        let z = model.deformation_for_force(f).unwrap();
+        let back = model.force(z, 0.0).unwrap();
+        prop_assert!((back - f).abs() <= 1e-9 * f.max(1.0), "f {} → z {} → f {}", f, z, back);
+    }
+
+    #[test]
+    fn forward_model_inverts_the_inverse(model in any_model(), z in 0.0f64..0.1) {
+        let f = model.force(z, 0.0).unwrap();
+        let back = model.deformation_for_force(f).unwrap();
+        prop_assert!((back - z).abs() <= 1e-9 * z.max(1e-3), "z {} → f {} → z {}", z, f, back);
+    }
+
+    #[test]
+    fn force_is_never_negative(model in any_model(), z in -0.05f64..0.1, zd in -5.0f64..5.0) {
+        prop_assert!(model.force(z, zd).unwrap() >= 0.0);
+    }
+}
+
+#[test]
+fn yaml_round_trip_keeps_everything() {
+    let model = ContactModel {
+        tangential: Some(Tangential { stiffness: 3.7482, friction: 0.9 }),
+        effects: vec![
+            Effect::ViscoelasticRelaxation { stiffness: 800.0, time_constant: 1.5 },
+            Effect::Hysteresis { fraction: 0.05, velocity_scale: 0.01 },
+            Effect::SensorBias { offset: -0.4 },
+        ],
+        ..ContactModel::new(Kind::HertzWalton, 8.28, 0.0).unwrap()
+    };
+    let yaml = model.to_yaml();
+    assert!(yaml.contains("kind: hertz_walton") && yaml.contains("id: viscoelastic_relaxation"), "{yaml}");
+    assert_eq!(ContactModel::from_yaml(&yaml).unwrap(), model);
+    // A named kind may leave its exponents out.
+    let short = ContactModel::from_yaml("kind: azad_featherstone\nstiffness: 25000\ndamping: 1100\n").unwrap();
+    assert_eq!(short.exponents, Exponents { a: 1.5, b: 0.5, c: 1.0 });
+}
+
+#[test]
+fn yaml_mistakes_are_named() {
+    for (yaml, words) in [
+        ("kind: kelvin_voigt\nstiffness: 10\nexponents: {a: 1.5, b: 0, c: 1}\n", "kind kelvin_voigt has exponents"),
+        ("kind: general\nstiffness: 10\n", "needs exponents"),
+        ("kind: kelvin_voigt\nstiffness: -10\n", "stiffness must be > 0"),
+        ("kind: springy\nstiffness: 10\n", "unknown variant `springy`"),
+        ("kind: kelvin_voigt\nstiffness: 10\neffects: [{id: gremlins}]\n", "unknown variant `gremlins`"),
+        ("kind: kelvin_voigt\nstiffness: 10\nstifness: 3\n", "unknown field `stifness`"),
+        (
+            "kind: kelvin_voigt\nstiffness: 10\neffects: [{id: viscoelastic_relaxation, stiffness: 1, time_constant: 0}]\n",
+            "time_constant > 0",
+        ),
+    ] {
+        let err = ContactModel::from_yaml(yaml).unwrap_err().to_string();
+        assert!(err.contains(words), "`{yaml}`: expected `{words}` in `{err}`");
+    }
+}
+
+#[test]
+fn walton_tangential_law_sticks_inside_the_cone_and_slides_outside() {
+    let model = ContactModel {
+        tangential: Some(Tangential { stiffness: 3.7482, friction: 0.5 }),
+        ..ContactModel::new(Kind::HertzWalton, 8.28, 0.0).unwrap()
+    };
+    let z: f64 = 2.0; // seed 000 works in millimetre-scale units; the law is unit-agnostic
+    let fn_ = model.force(z, 0.0).unwrap();
+    assert!((fn_ - 8.28 * z.powf(1.5)).abs() < 1e-12);
+    let (ft, slides) = model.tangential_force(z, 0.5, fn_).unwrap().unwrap();
+    assert!(!slides && (ft - 3.7482 * z.sqrt() * 0.5).abs() < 1e-12);
+    let (ft, slides) = model.tangential_force(z, -20.0, fn_).unwrap().unwrap();
+    assert!(slides && (ft + 0.5 * fn_).abs() < 1e-12, "{ft}");
+    assert!(ContactModel::new(Kind::KelvinVoigt, 1.0, 0.0).unwrap().tangential_force(1.0, 1.0, 1.0).unwrap().is_none());
+}
+
+#[test]
+fn relaxation_decays_with_its_time_constant_under_held_deformation() {
+    let (km, tau, rate, dt) = (2000.0, 0.8, 0.05, 1e-3);
+    let model = ContactModel {
+        effects: vec![Effect::ViscoelasticRelaxation { stiffness: km, time_constant: tau }],
+        ..ContactModel::new(Kind::KelvinVoigt, 1800.0, 0.0).unwrap()
+    };
+    let mut state = model.effect_state();
+    // Press at constant rate for 0.4 s (from 1 mm deep), then hold for 3 s.
+    let mut z = 0.001;
+    for _ in 0..400 {
+        z += rate * dt;
+        model.step(&mut state, z, rate, dt).unwrap();
+    }
+    let branch_at_hold = km * rate * tau * (1.0 - (-0.4f64 / tau).exp());
+    assert!(
+        (state.branch_force[0] - branch_at_hold).abs() < 1e-9 * branch_at_hold,
+        "{} vs {}",
+        state.branch_force[0],
+        branch_at_hold
+    );
+    let mut last = 0.0;
+    for _ in 0..3000 {
+        last = model.step(&mut state, z, 0.0, dt).unwrap().0;
+    }
+    let expected = 1800.0 * z + branch_at_hold * (-3.0f64 / tau).exp();
+    assert!((last - expected).abs() < 1e-9 * expected, "held force {last} vs {expected}");
+}
+
+#[test]
+fn hysteresis_and_sensor_effects_change_what_they_should() {
+    let base = ContactModel::new(Kind::KelvinVoigt, 1800.0, 0.0).unwrap();
+    let model = ContactModel {
+        effects: vec![
+            Effect::Hysteresis { fraction: 0.1, velocity_scale: 1e-3 },
+            Effect::SensorBias { offset: 0.7 },
+            Effect::SensorDrift { rate: 0.01 },
+        ],
+        ..base.clone()
+    };
+    let mut state = model.effect_state();
+    let (loading, _) = model.step(&mut state, 0.03, 0.05, 0.0).unwrap();
+    let (unloading, measured) = model.step(&mut state, 0.03, -0.05, 2.0).unwrap();
+    assert!(loading > unloading, "loading path above unloading");
+    assert!((loading - unloading - 2.0 * 0.1 * 54.0 * (50.0f64).tanh()).abs() < 1e-9);
+    assert!((measured - unloading - (0.7 + 0.01 * 2.0)).abs() < 1e-12, "bias + drift after 2 s");
+}
