@@ -45,7 +45,7 @@ fn golden_measurement() -> Vec<u8> {
     put_f32(&mut b, 500 + 3 * 4, 0.3); // estExtTcpFT Tz
     put_f32(&mut b, 524 + 41 * 4, 0.2); // jacobian[5][6]
     put_f32(&mut b, 692 + 48 * 4, 0.0008); // massMatrix[6][6]
-    put_f32(&mut b, 888 + 1 * 4, -48.9); // gravity A2
+    put_f32(&mut b, 888 + 4, -48.9); // gravity A2 (index 1)
     b
 }
 
