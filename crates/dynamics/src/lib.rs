@@ -22,7 +22,7 @@ pub mod model;
 
 pub use dynamics::{ControlTerms, ExternalWrench};
 pub use kinematics::{Axes, Data};
-pub use model::{BodyInertia, Frame, FrameId, Joint, JointLimits, Model};
+pub use model::{BodyInertia, Frame, FrameId, Joint, JointLimits, Model, fixed_subtree_inertia};
 
 /// Why a robot description could not be used, or a dynamics query failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -70,5 +70,11 @@ pub mod lwr4 {
     /// The model of urdf/lwr4.urdf.
     pub fn model() -> super::Model {
         super::Model::from_urdf_str(URDF).expect("urdf/lwr4.urdf is a valid serial chain")
+    }
+
+    /// The hand beyond the F/T sensor's sensing frame: mass properties in the `ft_sensor` frame.
+    pub fn tool_load() -> super::BodyInertia {
+        let robot = urdf_rs::read_from_string(URDF).expect("urdf/lwr4.urdf parses");
+        super::fixed_subtree_inertia(&robot, FT_SENSOR_FRAME).expect("urdf/lwr4.urdf has the ft_sensor subtree")
     }
 }

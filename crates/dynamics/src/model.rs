@@ -156,6 +156,36 @@ fn link_inertia(link: &urdf_rs::Link) -> Result<BodyInertia, Error> {
     Ok(BodyInertia::from_com(mass, origin.translation.vector, rot * inertia_com * rot.transpose()))
 }
 
+/// Mass properties of a link and everything attached below it through fixed joints, in that link's
+/// frame: e.g. the tool beyond an F/T sensor, whose weight the sensor reads.
+pub fn fixed_subtree_inertia(robot: &urdf_rs::Robot, link: &str) -> Result<BodyInertia, Error> {
+    let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    let root = links.get(link).ok_or_else(|| Error::UnknownFrame {
+        name: link.to_string(),
+        known: robot.links.iter().map(|l| l.name.as_str()).collect::<Vec<_>>().join(", "),
+    })?;
+    let mut total = link_inertia(root)?;
+    let mut stack = vec![(link.to_string(), Isometry3::identity())];
+    while let Some((name, pose)) = stack.pop() {
+        for joint in robot.joints.iter().filter(|j| j.parent.link == name) {
+            if !matches!(joint.joint_type, urdf_rs::JointType::Fixed) {
+                return Err(Error::UnsupportedJoint {
+                    joint: joint.name.clone(),
+                    kind: "movable inside a fixed tool".into(),
+                });
+            }
+            let child_pose = pose * pose_to_isometry(&joint.origin);
+            let child = links
+                .get(joint.child.link.as_str())
+                .ok_or_else(|| Error::MissingLink { joint: joint.name.clone(), link: joint.child.link.clone() })?;
+            let rot = child_pose.rotation.to_rotation_matrix().into_inner();
+            total = total.add(&link_inertia(child)?.expressed_in_parent(&rot, &child_pose.translation.vector));
+            stack.push((joint.child.link.clone(), child_pose));
+        }
+    }
+    Ok(total)
+}
+
 impl Model {
     /// Reads and builds the model from a URDF file.
     pub fn from_urdf_file(path: impl AsRef<Path>) -> Result<Self, Error> {

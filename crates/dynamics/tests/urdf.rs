@@ -169,3 +169,11 @@ fn unknown_frames_and_unreadable_files_are_reported() {
     let err = Model::from_urdf_file("/nonexistent/robot.urdf").unwrap_err();
     assert!(matches!(err, Error::Read { .. }) && err.to_string().contains("/nonexistent/robot.urdf"), "{err}");
 }
+
+#[test]
+fn the_tool_load_is_the_hand_of_the_urdf() {
+    // lwr_hand: 0.20 kg, centre 0.03 m along the sensing frame's z (the hand's box is 0.06 m tall).
+    let load = softcontact_dynamics::lwr4::tool_load();
+    assert!((load.mass - 0.20).abs() < 1e-12, "{}", load.mass);
+    assert!((load.com() - nalgebra::Vector3::new(0.0, 0.0, 0.03)).norm() < 1e-12, "{}", load.com());
+}

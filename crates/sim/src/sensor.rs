@@ -1,0 +1,116 @@
+//! The ATI Gamma on the flange: the wrench the hand puts on the sensing frame (contact force and the
+//! hand's weight), plus bias, drift and white noise, quantised to RDT counts.
+
+use nalgebra::{Isometry3, Vector3};
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+use softcontact_dynamics::BodyInertia;
+use softcontact_wire::rdt::{self, Calibration, Record, Status};
+
+/// Sensor imperfections.
+#[derive(Debug, Clone)]
+pub struct FtSensorConfig {
+    pub calibration: Calibration,
+    /// Standard deviation of white noise per axis (Fx Fy Fz [N], Tx Ty Tz [N·m]).
+    pub noise: [f64; 6],
+    /// Constant offset per axis.
+    pub bias: [f64; 6],
+    /// Offset growth per axis per second (temperature drift).
+    pub drift: [f64; 6],
+}
+
+impl FtSensorConfig {
+    /// A Gamma SI-130-10 as it behaves on a bench: noise near its resolution, a small bias.
+    pub fn gamma() -> Self {
+        Self {
+            calibration: Calibration::gamma_si_130_10(),
+            noise: [0.03, 0.03, 0.05, 0.0015, 0.0015, 0.0012],
+            bias: [0.4, -0.3, 0.8, 0.01, -0.02, 0.005],
+            drift: [0.0; 6],
+        }
+    }
+
+    /// No noise, bias or drift: for tests that compare against exact physics.
+    pub fn ideal() -> Self {
+        Self { calibration: Calibration::gamma_si_130_10(), noise: [0.0; 6], bias: [0.0; 6], drift: [0.0; 6] }
+    }
+}
+
+/// The sensor's state: stream counters and the box's own tare.
+#[derive(Debug, Clone)]
+pub struct FtSensor {
+    config: FtSensorConfig,
+    /// The hand beyond the sensing frame, in the sensing frame.
+    load: BodyInertia,
+    rdt_sequence: u32,
+    ft_sequence: u32,
+    tare: [i32; 6],
+    last_raw: [i32; 6],
+}
+
+impl FtSensor {
+    pub fn new(config: FtSensorConfig, load: BodyInertia) -> Self {
+        Self { config, load, rdt_sequence: 0, ft_sequence: 0, tare: [0; 6], last_raw: [0; 6] }
+    }
+
+    /// A new stream starts (RDT start request): the stream counter restarts.
+    pub fn start_stream(&mut self) {
+        self.rdt_sequence = 0;
+    }
+
+    /// RDT 0x0042: the box subtracts the current reading from now on.
+    pub fn set_bias(&mut self) {
+        self.tare = self.last_raw;
+    }
+
+    /// The exact wrench on the sensing frame, in it: contact force at the tool plus the hand's weight.
+    pub fn true_wrench(
+        &self,
+        sensor: &Isometry3<f64>,
+        tool: &Isometry3<f64>,
+        contact_force: &Vector3<f64>,
+        gravity: Vector3<f64>,
+    ) -> [f64; 6] {
+        let r = sensor.rotation.to_rotation_matrix();
+        let weight = r.inverse() * (self.load.mass * gravity);
+        let contact = r.inverse() * contact_force;
+        let lever = r.inverse() * (tool.translation.vector - sensor.translation.vector);
+        let force = contact + weight;
+        let torque = lever.cross(&contact) + self.load.com().cross(&weight);
+        [force.x, force.y, force.z, torque.x, torque.y, torque.z]
+    }
+
+    /// The next record of the stream.
+    pub fn record(
+        &mut self,
+        sensor: &Isometry3<f64>,
+        tool: &Isometry3<f64>,
+        contact_force: &Vector3<f64>,
+        gravity: Vector3<f64>,
+        time: f64,
+        rng: &mut impl Rng,
+    ) -> Record {
+        let exact = self.true_wrench(sensor, tool, contact_force, gravity);
+        let c = &self.config;
+        let reading: [f64; 6] = std::array::from_fn(|i| {
+            let noise =
+                if c.noise[i] > 0.0 { Normal::new(0.0, c.noise[i]).expect("finite σ").sample(rng) } else { 0.0 };
+            exact[i] + c.bias[i] + c.drift[i] * time + noise
+        });
+        let (raw, saturated) = c.calibration.to_counts(&reading);
+        self.last_raw = raw;
+        self.ft_sequence = self.ft_sequence.wrapping_add(1);
+        let record = Record {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            status: Status(if saturated { Status::ERROR_SUMMARY | Status::SATURATION } else { 0 }),
+            counts: std::array::from_fn(|i| raw[i].wrapping_sub(self.tare[i])),
+        };
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        record
+    }
+
+    pub fn calibration(&self) -> &rdt::Calibration {
+        &self.config.calibration
+    }
+}

@@ -1,0 +1,102 @@
+//! A flat soft surface: any contact model of crates/contact along its normal, the Walton tangential law
+//! with a friction cone and slip across it.
+
+use nalgebra::Vector3;
+use softcontact_contact::{ContactModel, EffectState};
+
+use crate::SimError;
+
+/// Where the surface is and what it is made of.
+#[derive(Debug, Clone)]
+pub struct SurfaceConfig {
+    /// A point of the undeformed top of the surface, in the world.
+    pub point: Vector3<f64>,
+    /// The contact direction n: the way the hand moves to compress the surface (unit, world).
+    pub normal: Vector3<f64>,
+    pub model: ContactModel,
+}
+
+/// The contact of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Contact {
+    /// z = (r − surface point)·n [m]; positive in contact.
+    pub deformation: f64,
+    /// ż [m/s].
+    pub rate: f64,
+    /// The normal force the surface exerts, f ≥ 0 [N].
+    pub normal_force: f64,
+    /// What a sensor reads of the normal force with the model's sensor effects (bias, drift) [N].
+    pub measured_normal_force: f64,
+    /// Total force on the hand, world [N].
+    pub force: Vector3<f64>,
+    /// The force a sensor reads, with the model's sensor effects, world [N].
+    pub sensed_force: Vector3<f64>,
+    pub sliding: bool,
+}
+
+/// A surface with its contact state (effects with memory, the stick anchor of the tangential law).
+#[derive(Debug, Clone)]
+pub struct Surface {
+    config: SurfaceConfig,
+    normal: Vector3<f64>,
+    effects: EffectState,
+    anchor: Option<Vector3<f64>>,
+}
+
+impl Surface {
+    pub fn new(config: SurfaceConfig) -> Result<Self, SimError> {
+        let norm = config.normal.norm();
+        if !(norm.is_finite() && norm > 0.0 && config.point.iter().all(|v| v.is_finite())) {
+            return Err(SimError::Config("the surface needs a finite point and a non-zero normal".into()));
+        }
+        config.model.validate()?;
+        let effects = config.model.effect_state();
+        Ok(Self { normal: config.normal / norm, effects, anchor: None, config })
+    }
+
+    pub fn config(&self) -> &SurfaceConfig {
+        &self.config
+    }
+
+    /// Contact of a tool at `position` moving at `velocity`, advancing the surface's memory by dt.
+    pub fn contact(&mut self, position: &Vector3<f64>, velocity: &Vector3<f64>, dt: f64) -> Result<Contact, SimError> {
+        let n = self.normal;
+        let z = (position - self.config.point).dot(&n);
+        let zd = velocity.dot(&n);
+        let (f, measured) = self.config.model.step(&mut self.effects, z, zd, dt)?;
+        let mut force = -f * n;
+        let mut sliding = false;
+        if z > 0.0 {
+            if let Some(t) = self.config.model.tangential {
+                let anchor = *self.anchor.get_or_insert(*position);
+                let offset = position - anchor;
+                let delta = offset - offset.dot(&n) * n;
+                let magnitude = delta.norm();
+                if magnitude > 0.0 {
+                    let (ft, slides) =
+                        self.config.model.tangential_force(z, magnitude, f)?.expect("tangential law present");
+                    let direction = delta / magnitude;
+                    force -= ft.abs() * direction;
+                    sliding = slides;
+                    if slides && t.stiffness > 0.0 {
+                        // Slip: the anchor follows so that the spring holds exactly the friction limit.
+                        let stretch = t.friction * f / (t.stiffness * z.sqrt());
+                        self.anchor = Some(position - offset.dot(&n) * n - stretch * direction);
+                    }
+                }
+            }
+        } else {
+            self.anchor = None;
+        }
+        let sensed_force = force - (measured - f) * n;
+        Ok(Contact {
+            deformation: z,
+            rate: zd,
+            normal_force: f,
+            measured_normal_force: measured,
+            force,
+            sensed_force,
+            sliding,
+        })
+    }
+}

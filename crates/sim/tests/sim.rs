@@ -1,0 +1,237 @@
+//! The simulator against the dynamics it integrates, the FRI rules the KRC enforces, and the physics of
+//! the surface and the sensor.
+
+use nalgebra::Vector3;
+use softcontact_contact::{ContactModel, Kind};
+use softcontact_dynamics::lwr4;
+use softcontact_sim::{FtSensorConfig, KrcEvent, SimConfig, Simulator};
+use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
+use softcontact_wire::rdt::Calibration;
+
+/// The remote's answer to a measurement: joint impedance with zero stiffness, mirroring the measured
+/// position, with an additional torque.
+fn answer(m: &fri::Measurement, seq: u16, start: bool, torque: [f64; 7]) -> fri::Command {
+    let mut c = fri::Command::default();
+    c.header.send_seq = seq;
+    c.header.refl_seq = m.header.send_seq;
+    c.krl.int[0] = 30;
+    c.krl.int[1] = i32::from(start);
+    c.flags = flags::JOINT_IMPEDANCE;
+    c.jnt_pos = m.data.msr_jnt_pos;
+    c.jnt_damping = [0.7; 7];
+    c.add_jnt_trq = torque.map(|t| t as f32);
+    c
+}
+
+/// Answers every cycle in monitor mode until quality is perfect, then asks to start.
+fn enter_command(sim: &mut Simulator) -> u16 {
+    let mut seq = 0u16;
+    for _ in 0..200 {
+        let m = sim.measurement();
+        seq = seq.wrapping_add(1);
+        let start = m.intf.quality == Quality::Perfect;
+        if let Some(KrcEvent::EnteredCommand) = sim.command(&answer(&m, seq, start, [0.0; 7])) {
+            sim.step_cycle().unwrap();
+            return seq;
+        }
+        sim.step_cycle().unwrap();
+    }
+    panic!("the KRC never entered command mode");
+}
+
+fn free_config() -> SimConfig {
+    SimConfig {
+        surface: None,
+        sensor: FtSensorConfig::ideal(),
+        ..SimConfig::above_surface(ContactModel::new(Kind::KelvinVoigt, 1.0, 0.0).unwrap(), 1)
+    }
+}
+
+#[test]
+fn command_mode_needs_perfect_quality_and_a_mirrored_position() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let m = sim.measurement();
+    assert_eq!(m.intf.state, InterfaceState::Monitor);
+    assert_eq!(m.intf.quality, Quality::Unacceptable, "no history yet");
+    assert_eq!(sim.command(&answer(&m, 1, true, [0.0; 7])), None, "start refused before the timing is proven");
+    sim.step_cycle().unwrap();
+    // Perfect timing, but a command that does not mirror the current position.
+    let mut seq = 1;
+    for _ in 0..100 {
+        let m = sim.measurement();
+        seq += 1;
+        sim.command(&answer(&m, seq, false, [0.0; 7]));
+        sim.step_cycle().unwrap();
+    }
+    let m = sim.measurement();
+    let mut off = answer(&m, seq + 1, true, [0.0; 7]);
+    off.jnt_pos[3] += 0.01;
+    assert_eq!(sim.command(&off), Some(KrcEvent::InterpolationError));
+    sim.step_cycle().unwrap();
+    let seq = enter_command(&mut sim);
+    assert_eq!(sim.krc.state(), InterfaceState::Command);
+    // Changing the flags in command mode is fatal.
+    let m = sim.measurement();
+    let mut changed = answer(&m, seq + 1, true, [0.0; 7]);
+    changed.flags = flags::JNT_POS;
+    assert!(matches!(sim.command(&changed), Some(KrcEvent::FellBack(r)) if r.contains("cmdFlags")));
+}
+
+#[test]
+fn missing_answers_bring_the_krc_back_to_monitor() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    enter_command(&mut sim);
+    let mut event = None;
+    for _ in 0..6 {
+        sim.measurement();
+        event = sim.step_cycle().unwrap().or(event);
+    }
+    assert!(matches!(&event, Some(KrcEvent::FellBack(r)) if r.contains("consecutive")), "{event:?}");
+    assert_eq!(sim.krc.state(), InterfaceState::Monitor);
+    let q = *sim.q();
+    for _ in 0..100 {
+        sim.measurement();
+        sim.step_cycle().unwrap();
+    }
+    assert_eq!(*sim.q(), q, "the brakes hold the arm");
+}
+
+#[test]
+fn zero_additional_torque_holds_the_arm_still() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let mut seq = enter_command(&mut sim);
+    let q0 = *sim.q();
+    for _ in 0..2000 {
+        let m = sim.measurement();
+        seq = seq.wrapping_add(1);
+        sim.command(&answer(&m, seq, true, [0.0; 7]));
+        sim.step_cycle().unwrap();
+    }
+    let drift = sim.q().iter().zip(&q0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(drift < 1e-9, "the KRC's gravity compensation holds the arm: drift {drift} rad after 2 s");
+    assert_eq!(sim.krc.state(), InterfaceState::Command);
+}
+
+/// A constant additional torque moves the arm as forward dynamics says (independent RK4 reference).
+#[test]
+fn constant_torque_produces_the_predicted_motion() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let mut seq = enter_command(&mut sim);
+    // Small enough that no joint reaches its velocity limit (the KRC would brake).
+    let torque = [0.0, 0.0, 0.0, 0.0, 0.02, 0.03, 0.005];
+    let (q0, dq0) = (*sim.q(), *sim.dq());
+    for _ in 0..200 {
+        let m = sim.measurement();
+        seq = seq.wrapping_add(1);
+        sim.command(&answer(&m, seq, true, torque));
+        sim.step_cycle().unwrap();
+    }
+    // Reference: τ_motor = g(q) + τ, so q̈ = M⁻¹ τ exactly (h − g = C q̇ remains); RK4 at 0.1 ms.
+    let model = lwr4::model();
+    let mut data = model.data();
+    let accel = |q: &[f64; 7], dq: &[f64; 7], data: &mut softcontact_dynamics::Data| -> [f64; 7] {
+        let g = model.gravity_torques(data, q).clone();
+        let tau: Vec<f64> = (0..7).map(|i| g[i] + torque[i]).collect();
+        model.forward_dynamics(data, q, dq, &tau, None).unwrap().as_slice().try_into().unwrap()
+    };
+    let (mut q, mut dq) = (q0, dq0);
+    let h = 1e-4;
+    for _ in 0..2000 {
+        let add = |a: &[f64; 7], b: &[f64; 7], s: f64| -> [f64; 7] { std::array::from_fn(|i| a[i] + s * b[i]) };
+        let k1v = accel(&q, &dq, &mut data);
+        let k1q = dq;
+        let k2v = accel(&add(&q, &k1q, h / 2.0), &add(&dq, &k1v, h / 2.0), &mut data);
+        let k2q = add(&dq, &k1v, h / 2.0);
+        let k3v = accel(&add(&q, &k2q, h / 2.0), &add(&dq, &k2v, h / 2.0), &mut data);
+        let k3q = add(&dq, &k2v, h / 2.0);
+        let k4v = accel(&add(&q, &k3q, h), &add(&dq, &k3v, h), &mut data);
+        let k4q = add(&dq, &k3v, h);
+        for i in 0..7 {
+            q[i] += h / 6.0 * (k1q[i] + 2.0 * k2q[i] + 2.0 * k3q[i] + k4q[i]);
+            dq[i] += h / 6.0 * (k1v[i] + 2.0 * k2v[i] + 2.0 * k3v[i] + k4v[i]);
+        }
+    }
+    assert_eq!(sim.krc.state(), InterfaceState::Command, "{:?}", sim.krc.last_fault());
+    let moved = q.iter().zip(&q0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let err = sim.q().iter().zip(&q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(moved > 0.05, "the wrist should move noticeably: {moved} rad");
+    assert!(err < 0.01 * moved, "simulated {:?} vs predicted {q:?}: error {err} of {moved}", sim.q());
+}
+
+#[test]
+fn pressing_a_surface_gives_the_model_force_and_the_sensor_reads_it() {
+    let model = ContactModel::new(Kind::KelvinVoigt, 1857.0, 60.0).unwrap();
+    let mut config = SimConfig::above_surface(model, 2);
+    config.sensor = FtSensorConfig::ideal();
+    let mut sim = Simulator::new(config).unwrap();
+    let mut seq = enter_command(&mut sim);
+    // Push down with 30 N at the hand through Jᵀ and let it settle on the dice (k = 1857 N/m).
+    let arm = lwr4::model();
+    let mut data = arm.data();
+    let tool = arm.frame_id(lwr4::TOOL_FRAME).unwrap();
+    let mut jac = nalgebra::Matrix6xX::zeros(7);
+    for i in 0..6000 {
+        let m = sim.measurement();
+        let q: [f64; 7] = std::array::from_fn(|k| m.data.msr_jnt_pos[k] as f64);
+        arm.forward_kinematics(&mut data, &q);
+        arm.frame_jacobian(&data, tool, softcontact_dynamics::Axes::World, &mut jac);
+        // Joint damping keeps the push quasi-static: τ = Jᵀ(0, 0, −30, 0, 0, 0) − 2 q̇.
+        let push = jac.transpose() * nalgebra::Vector6::new(0.0, 0.0, -30.0, 0.0, 0.0, 0.0);
+        let torque: [f64; 7] = std::array::from_fn(|k| push[k] - 2.0 * sim.dq()[k]);
+        seq = seq.wrapping_add(1);
+        sim.command(&answer(&m, seq, true, torque));
+        sim.step_cycle().unwrap();
+        if i == 5999 {
+            let c = *sim.contact();
+            assert!((c.normal_force - 30.0).abs() < 0.3, "settled normal force {} N", c.normal_force);
+            assert!((c.normal_force - (1857.0 * c.deformation + 60.0 * c.rate)).abs() < 1e-9);
+            assert!((c.force - Vector3::new(0.0, 0.0, c.normal_force)).norm() < 1e-9, "the surface pushes up");
+        }
+    }
+    // Ideal sensor: reads the contact force and the hand's weight in its own frame (z down: Fz < 0).
+    let record = sim.ft_record();
+    let si = Calibration::gamma_si_130_10().to_si(&record.counts);
+    let f = sim.contact().normal_force;
+    let weight = 0.20 * 9.81;
+    let sensor_z_down = -1.0;
+    assert!((si[2] - sensor_z_down * f - weight).abs() < 0.05, "Fz {} vs −{f} + {weight}", si[2]);
+    assert!(si[0].abs() < 0.6 && si[1].abs() < 0.6, "little lateral force: {si:?}");
+}
+
+#[test]
+fn runs_are_deterministic_for_a_seed() {
+    let run = |seed| {
+        let mut sim =
+            Simulator::new(SimConfig::above_surface(ContactModel::new(Kind::HuntCrossley, 2e4, 500.0).unwrap(), seed))
+                .unwrap();
+        enter_command(&mut sim);
+        (sim.measurement().encode().to_vec(), sim.ft_record())
+    };
+    assert_eq!(run(5), run(5));
+    assert_ne!(run(5).1, run(6).1, "the noise depends on the seed");
+}
+
+#[test]
+fn bad_configurations_are_refused() {
+    let mut c = free_config();
+    c.step = 3e-4; // 1 ms is not a whole number of 0.3 ms steps
+    assert!(Simulator::new(c).is_err());
+    let mut c = free_config();
+    c.initial_q[1] = 3.0;
+    assert!(Simulator::new(c).is_err());
+}
+
+#[test]
+fn exceeding_a_joint_velocity_limit_trips_the_krc() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let mut seq = enter_command(&mut sim);
+    for _ in 0..300 {
+        let m = sim.measurement();
+        seq = seq.wrapping_add(1);
+        sim.command(&answer(&m, seq, true, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5]));
+        sim.step_cycle().unwrap();
+    }
+    assert_eq!(sim.krc.state(), InterfaceState::Monitor);
+    assert!(sim.krc.last_fault().unwrap().contains("lwr_a6_joint exceeded its velocity limit"));
+    assert!(sim.dq().iter().all(|v| *v == 0.0), "braked");
+}
