@@ -114,6 +114,10 @@ impl Model {
     /// origin) are plain sums from the tip down, and entry (j, i) is the moment about joint j's axis of
     /// the momentum (P, L) that a unit rate of joint i gives its composite: z_j·L − P·(z_j × o_j).
     fn crba_on_kinematics(&self, data: &mut Data) {
+        if data.mass_matrix_fresh {
+            return;
+        }
+        data.mass_matrix_fresh = true;
         let n = self.dof();
         let mut composite = crate::model::BodyInertia::ZERO;
         for i in (0..n).rev() {
@@ -146,6 +150,9 @@ impl Model {
 
     /// Cholesky factorisation of `data.mass_matrix`, reusing the factor's storage (no allocation).
     fn factor_mass_matrix(&self, data: &mut Data) -> Result<(), Error> {
+        if data.factor_fresh && data.cholesky.is_some() {
+            return Ok(());
+        }
         let storage = match data.cholesky.take() {
             Some(chol) => {
                 let mut m = chol.unpack_dirty();
@@ -155,6 +162,7 @@ impl Model {
             None => data.mass_matrix.clone(),
         };
         data.cholesky = nalgebra::Cholesky::new(storage);
+        data.factor_fresh = data.cholesky.is_some();
         data.cholesky.as_ref().map(|_| ()).ok_or(Error::NotPositiveDefinite)
     }
 

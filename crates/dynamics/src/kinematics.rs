@@ -37,16 +37,22 @@ pub struct Data {
     pub(crate) axis_world: Vec<Vector3<f64>>,
     pub(crate) axis_moment: Vec<Vector3<f64>>,
     /// Joint torques of the last RNEA-family call (rnea, gravity, nonlinear effects).
-    pub tau: DVector<f64>,
+    pub(crate) tau: DVector<f64>,
     /// Joint-space inertia matrix (full, symmetric) of the last CRBA.
-    pub mass_matrix: DMatrix<f64>,
+    pub(crate) mass_matrix: DMatrix<f64>,
     /// Inverse of the mass matrix of the last [`Model::control_terms`] call.
-    pub mass_matrix_inverse: DMatrix<f64>,
+    pub(crate) mass_matrix_inverse: DMatrix<f64>,
     /// Joint accelerations of the last forward dynamics.
-    pub ddq: DVector<f64>,
+    pub(crate) ddq: DVector<f64>,
     /// Frame Jacobian of the last [`Model::control_terms`] call.
-    pub jacobian: Matrix6xX<f64>,
+    pub(crate) jacobian: Matrix6xX<f64>,
     pub(crate) cholesky: Option<nalgebra::Cholesky<f64, nalgebra::Dyn>>,
+    /// The joint positions the kinematics above were computed for: algorithms called again at the same
+    /// q (bit for bit) reuse them instead of recomputing sines and rotations.
+    kinematics_q: Vec<f64>,
+    /// `mass_matrix` and `cholesky` belong to the current kinematics (reset whenever FK recomputes).
+    pub(crate) mass_matrix_fresh: bool,
+    pub(crate) factor_fresh: bool,
 }
 
 impl Data {
@@ -68,6 +74,9 @@ impl Data {
             ddq: DVector::zeros(n),
             jacobian: Matrix6xX::zeros(n),
             cholesky: nalgebra::Cholesky::new(DMatrix::identity(n, n)),
+            kinematics_q: vec![f64::NAN; n],
+            mass_matrix_fresh: false,
+            factor_fresh: false,
         }
     }
 }
@@ -116,6 +125,12 @@ impl Model {
     /// Places every joint frame for joint positions `q`.
     pub fn forward_kinematics(&self, data: &mut Data, q: &[f64]) {
         self.check_len("q", q);
+        if data.kinematics_q.iter().zip(q).all(|(a, b)| a.to_bits() == b.to_bits()) {
+            return;
+        }
+        data.kinematics_q.copy_from_slice(q);
+        data.mass_matrix_fresh = false;
+        data.factor_fresh = false;
         let mut parent_rot = Matrix3::identity();
         let mut parent_origin = Vector3::zeros();
         for (i, joint) in self.joints.iter().enumerate() {

@@ -10,7 +10,7 @@ use std::collections::VecDeque;
 
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
-use softcontact_dynamics::{Axes, Data, Model, lwr4};
+use softcontact_dynamics::{Axes, Data, FrameId, Model};
 use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
 /// The grade the KRC gives the remote's answers over a sliding window of cycles (the real thresholds
@@ -84,6 +84,7 @@ pub struct Krc {
     pub missed_cycles: u64,
     ack: i32,
     fault: Option<String>,
+    jacobian: nalgebra::Matrix6xX<f64>,
 }
 
 impl Krc {
@@ -102,6 +103,7 @@ impl Krc {
             missed_cycles: 0,
             ack: 10,
             fault: None,
+            jacobian: nalgebra::Matrix6xX::zeros(7),
         }
     }
 
@@ -261,16 +263,16 @@ impl Krc {
         &mut self,
         model: &Model,
         data: &mut Data,
+        tool: FrameId,
         q: &[f64; 7],
         torque: &[f64; 7],
-        external: &[f64; 7],
+        contact_force: &nalgebra::Vector3<f64>,
         time: f64,
         rng: &mut impl Rng,
     ) -> fri::Measurement {
         self.send_seq = self.send_seq.wrapping_add(1);
         let noise = Normal::new(0.0, self.config.torque_noise.max(1e-300)).expect("finite σ");
         let mut sample = |v: f64| (v + if self.config.torque_noise > 0.0 { noise.sample(rng) } else { 0.0 }) as f32;
-        let tool = model.frame_id(lwr4::TOOL_FRAME).expect("the LWR model has lwr_tool");
         model.forward_kinematics(data, q);
         let pose = model.frame_pose(data, tool);
         let r = pose.rotation.to_rotation_matrix().into_inner();
@@ -279,12 +281,14 @@ impl Krc {
             let (row, col) = (k / 4, k % 4);
             (if col == 3 { p[row] } else { r[(row, col)] }) as f32
         });
-        let mut jac = nalgebra::Matrix6xX::zeros(7);
-        model.frame_jacobian(data, tool, Axes::World, &mut jac);
+        let jac = &mut self.jacobian;
+        model.frame_jacobian(data, tool, Axes::World, jac);
         // FRI row order X Y Z RZ RY RX.
         let rows = [0usize, 1, 2, 5, 4, 3];
         let jacobian: [f32; 42] = std::array::from_fn(|k| jac[(rows[k / 7], k % 7)] as f32);
-        let m = model.mass_matrix(data, q).clone();
+        // The contact's joint torques, Jᵀ w: what the KRC's external-torque estimate sees.
+        let external: [f64; 7] = std::array::from_fn(|j| (0..3).map(|r| jac[(r, j)] * contact_force[r]).sum::<f64>());
+        let m = model.mass_matrix(data, q);
         let mass_matrix: [f32; 49] = std::array::from_fn(|k| m[(k / 7, k % 7)] as f32);
         let g = model.gravity_torques(data, q);
         let gravity: [f32; 7] = std::array::from_fn(|i| g[i] as f32);

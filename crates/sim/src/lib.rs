@@ -2,11 +2,12 @@
 //! deterministic from a seed. It produces and consumes the real wire structs (FRI measurement and
 //! command, RDT records), so the very driver code that runs on the robot closes the loop against it.
 //!
-//! Integration: semi-implicit (symplectic) Euler at a fixed step (default 0.5 ms, two per FRI cycle),
-//! one forward-dynamics evaluation per step. It is stable while ω·dt < 2 for every mode and keeps
-//! energy bounded instead of drifting; the stiffest modes here are the hand on the surface (sponge:
-//! ∂f/∂z ≈ 8 kN/m on ≈ 3 kg of effective mass, ω ≈ 55 rad/s; dice ≈ 2 kN/m, ω ≈ 25 rad/s) and the wrist
-//! under a joint spring (≈ 100–300 rad/s), all below ω·dt = 0.15 at 0.5 ms: a margin of more than 10.
+//! Integration: semi-implicit (symplectic) Euler at a fixed step (default 1 ms, one per FRI cycle, as
+//! the KRC holds each command for a cycle), one forward-dynamics evaluation per step. It is stable
+//! while ω·dt < 2 for every mode and keeps energy bounded instead of drifting; the stiffest modes here
+//! are the hand on the surface (sponge: ∂f/∂z ≈ 8 kN/m on ≈ 3 kg of effective mass, ω ≈ 55 rad/s;
+//! dice ≈ 2 kN/m, ω ≈ 25 rad/s) and the wrist under a joint spring (≈ 100–300 rad/s), all below
+//! ω·dt = 0.3 at 1 ms: a margin of more than 6. `SimConfig::step` can be made finer.
 
 mod krc;
 mod sensor;
@@ -66,7 +67,7 @@ impl SimConfig {
         arm.forward_kinematics(&mut data, &DEFAULT_Q);
         let sole = arm.frame_pose(&data, arm.frame_id(lwr4::TOOL_FRAME).expect("lwr_tool")).translation.vector;
         Self {
-            step: 5e-4,
+            step: 1e-3,
             cycle: 1e-3,
             initial_q: DEFAULT_Q,
             friction: None,
@@ -179,13 +180,13 @@ impl Simulator {
 
     /// The FRI measurement the KRC sends now (advances the KRC's sequence counter).
     pub fn measurement(&mut self) -> fri::Measurement {
-        let external = self.external_torque();
         self.krc.measurement(
             &self.model,
             &mut self.data,
+            self.tool,
             &self.q,
             &self.last_torque,
-            &external,
+            &self.last_contact.force,
             self.time,
             &mut self.rng,
         )
@@ -211,15 +212,6 @@ impl Simulator {
         )
     }
 
-    /// Joint torques the contact exerts (Jᵀ w), what the KRC's external-torque estimate sees.
-    fn external_torque(&mut self) -> [f64; 7] {
-        let zero = [0.0; 7];
-        let w = ExternalWrench { frame: self.tool, force: self.last_contact.force, torque: Vector3::zeros() };
-        let with = self.model.rnea(&mut self.data, &self.q, &zero, &zero, Some(&w)).clone();
-        let without = self.model.gravity_torques(&mut self.data, &self.q);
-        std::array::from_fn(|i| without[i] - with[i])
-    }
-
     /// Advances one FRI cycle: the KRC closes its cycle (quality, watchdog), then the arm moves under
     /// the KRC's torques and the surface's force.
     pub fn step_cycle(&mut self) -> Result<Option<KrcEvent>, SimError> {
@@ -235,7 +227,7 @@ impl Simulator {
         // Contact at the current state.
         self.model.forward_kinematics(&mut self.data, &self.q);
         let pose = self.model.frame_pose(&self.data, self.tool);
-        let velocity = self.model.frame_velocity(&mut self.data, &self.q, &self.dq, self.tool);
+        let velocity = self.model.frame_velocity(&mut self.data, &self.q, &self.dq, self.tool); // FK reused
         let tool_velocity = Vector3::new(velocity[0], velocity[1], velocity[2]);
         self.last_contact = match self.surface.as_mut() {
             Some(s) => s.contact(&pose.translation.vector, &tool_velocity, h)?,
