@@ -169,7 +169,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
 fn run_sim(seconds: f64, reps: usize) -> anyhow::Result<()> {
     use softcontact_sim::{SimConfig, Simulator};
     use softcontact_wire::fri::{self, Quality, flags};
-    if !(seconds > 0.0) || reps == 0 {
+    if !(seconds.is_finite() && seconds > 0.0 && reps > 0) {
         bail!("--seconds and --reps must be positive");
     }
     let sponge = softcontact_contact::ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1100.0)?;
