@@ -13,8 +13,11 @@ use rand_distr::{Distribution, Normal};
 use softcontact_dynamics::{Axes, Data, FrameId, Model};
 use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
-/// The grade the KRC gives the remote's answers over a sliding window of cycles (the real thresholds
-/// are not published; these are documented and configurable).
+/// The grade the KRC gives the remote's answers over a sliding window of cycles. KUKA does not publish
+/// the real thresholds; these defaults are configurable: PERFECT needs every cycle answered (the KRL
+/// program starts command mode only then), OK ≥ 98 %, BAD ≥ 80 % (still commanding, as FRI allows
+/// from BAD up: a link losing 5 % of its datagrams each way answers ≈ 90 % of cycles), UNACCEPTABLE
+/// below, which ends command mode, as do more than `max_consecutive_misses` misses in a row.
 #[derive(Debug, Clone, PartialEq)]
 pub struct QualityPolicy {
     pub window: usize,
@@ -25,7 +28,7 @@ pub struct QualityPolicy {
 
 impl Default for QualityPolicy {
     fn default() -> Self {
-        Self { window: 100, ok_rate: 0.98, bad_rate: 0.9 }
+        Self { window: 100, ok_rate: 0.98, bad_rate: 0.8 }
     }
 }
 

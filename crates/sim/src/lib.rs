@@ -79,6 +79,17 @@ impl SimConfig {
     }
 }
 
+/// Seed 001's sponge: Azad-Featherstone-like, ≈ 280 N at 5 cm.
+pub fn sponge() -> ContactModel {
+    ContactModel::new(softcontact_contact::Kind::AzadFeatherstone, 280.0 / 0.05f64.powf(1.5), 1100.0)
+        .expect("valid preset")
+}
+
+/// Seed 001's dice: Kelvin-Voigt-like, ≈ 130 N at 7 cm.
+pub fn dice() -> ContactModel {
+    ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 130.0 / 0.07, 60.0).expect("valid preset")
+}
+
 /// A pose with the hand facing down in front of the robot: A2 = 30°, A3 = −80°, A5 = 70° (the pitches
 /// add up to 180°).
 pub const DEFAULT_Q: [f64; 7] = [0.0, 30.0 * DEG, 0.0, -80.0 * DEG, 0.0, 70.0 * DEG, 0.0];
@@ -142,6 +153,11 @@ impl Simulator {
             last_contact: Contact::default(),
             last_torque: [0.0; 7],
         })
+    }
+
+    /// The FRI cycle [s].
+    pub fn krc_cycle(&self) -> f64 {
+        self.config.cycle
     }
 
     pub fn model(&self) -> &Model {

@@ -1,0 +1,8 @@
+//! The product's nodes. Each node's logic is a plain struct driven by datagrams and messages
+//! ([`lwr_driver::LwrDriver`], [`ft_sensor::FtSensorNode`]); [`udp`] and [`sim_arm`] are the socket
+//! ends, kept thin, so the same logic runs against the real KRC and Net F/T box or the simulator.
+
+pub mod ft_sensor;
+pub mod lwr_driver;
+pub mod sim_arm;
+pub mod udp;

@@ -1,0 +1,240 @@
+//! The joint-torque interface of the LWR IV: answers every FRI measurement with a command, turning the
+//! total desired joint torque (gravity included, as /lwr/joint_torque_command carries it) into what the
+//! KRC expects — joint impedance with zero stiffness, the measured position mirrored, and the KRC's own
+//! gravity removed because the KRC adds it back.
+//!
+//! Safety, in this order: a command older than `watchdog_cycles` (or none yet), or a joint moving faster
+//! than `velocity_margin` of its limit, makes the driver hold the current position with a stiff joint
+//! impedance instead; torques are clipped to the joint limits; the driver never waits for the
+//! controller — it answers with the newest command it has and counts stale cycles.
+
+use nalgebra::{Isometry3, Matrix6xX, Vector6};
+use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
+use softcontact_wire::WireError;
+use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
+
+/// KRL exchange convention (CentroEPiaggio ros_control.src): `$FRI_FRM_INT[1]` strategy,
+/// `$FRI_FRM_INT[2]` 1 = start.
+const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriverConfig {
+    /// A command older than this many cycles is stale: hold position.
+    pub watchdog_cycles: u64,
+    /// Joint stiffness [N·m/rad] and damping ratio of the hold.
+    pub hold_stiffness: [f64; 7],
+    pub hold_damping: f64,
+    /// Ask the KRL program to start command mode once the KRC grades the timing perfect.
+    pub request_command_mode: bool,
+    /// Hold when a joint exceeds this fraction of its velocity limit.
+    pub velocity_margin: f64,
+}
+
+impl Default for DriverConfig {
+    fn default() -> Self {
+        Self {
+            watchdog_cycles: 5,
+            hold_stiffness: [800.0, 800.0, 500.0, 500.0, 200.0, 100.0, 100.0],
+            hold_damping: 0.7,
+            request_command_mode: true,
+            velocity_margin: 0.9,
+        }
+    }
+}
+
+/// Why a command or datagram was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DriverError {
+    #[error(transparent)]
+    Wire(#[from] WireError),
+    #[error("torque command has {0} joints, the arm has 7")]
+    CommandLength(usize),
+    #[error("torque command holds a non-finite value for joint {0}")]
+    NonFiniteCommand(usize),
+}
+
+/// What the driver counted (published on /diagnostics).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DriverCounters {
+    pub measurements: u64,
+    /// Measurements the sequence counter says never arrived.
+    pub lost: u64,
+    /// Repeated or reordered measurements (answered, not used for control).
+    pub out_of_order: u64,
+    pub malformed: u64,
+    /// Cycles answered with a command older than the watchdog, or none.
+    pub stale_cycles: u64,
+    /// Cycles where a torque was clipped to its limit.
+    pub clipped_cycles: u64,
+    /// Cycles held because a joint was too fast.
+    pub overspeed_cycles: u64,
+    pub commands_refused: u64,
+}
+
+/// The state the driver publishes for one measurement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DriverOutput {
+    pub q: [f64; 7],
+    /// Joint velocities by differencing positions over the KRC's own cycle count.
+    pub dq: [f64; 7],
+    /// Measured joint torques [N·m].
+    pub effort: [f64; 7],
+    pub tool_pose: Isometry3<f64>,
+    /// Twist of the tool origin, world axes (linear, angular).
+    pub tool_twist: Vector6<f64>,
+    pub state: InterfaceState,
+    pub quality: Quality,
+    /// The driver is holding position instead of applying the command.
+    pub holding: bool,
+    /// The KRC's cycle counter of this measurement.
+    pub sequence: u16,
+}
+
+/// The driver: one instance per FRI connection.
+pub struct LwrDriver {
+    config: DriverConfig,
+    model: Model,
+    data: Data,
+    tool: FrameId,
+    jacobian: Matrix6xX<f64>,
+    effort_limits: [f64; 7],
+    velocity_limits: [f64; 7],
+    send_seq: u16,
+    last_msr: Option<(u16, [f64; 7])>,
+    cycle: u64,
+    command: Option<([f64; 7], u64)>,
+    hold: Option<[f64; 7]>,
+    pub counters: DriverCounters,
+}
+
+impl LwrDriver {
+    pub fn new(config: DriverConfig) -> Self {
+        let model = lwr4::model();
+        let effort_limits = std::array::from_fn(|i| model.joints[i].limits.effort);
+        let velocity_limits = std::array::from_fn(|i| model.joints[i].limits.velocity);
+        Self {
+            data: model.data(),
+            tool: model.frame_id(lwr4::TOOL_FRAME).expect("the LWR model has lwr_tool"),
+            jacobian: Matrix6xX::zeros(7),
+            effort_limits,
+            velocity_limits,
+            config,
+            model,
+            send_seq: 0,
+            last_msr: None,
+            cycle: 0,
+            command: None,
+            hold: None,
+            counters: DriverCounters::default(),
+        }
+    }
+
+    /// A new total joint torque command (gravity included). Refused, keeping the previous one, if it
+    /// is not 7 finite values.
+    pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
+        let refuse = |e| Err::<(), _>(e);
+        if effort.len() != 7 {
+            self.counters.commands_refused += 1;
+            return refuse(DriverError::CommandLength(effort.len()));
+        }
+        if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
+            self.counters.commands_refused += 1;
+            return refuse(DriverError::NonFiniteCommand(i));
+        }
+        self.command = Some((std::array::from_fn(|i| effort[i]), self.cycle));
+        Ok(())
+    }
+
+    /// Handles one datagram from the KRC: the reply to send back and the state to publish. A malformed
+    /// datagram is counted and refused (no reply: the KRC bridges a missing answer).
+    pub fn handle(&mut self, datagram: &[u8]) -> Result<(fri::Command, DriverOutput), DriverError> {
+        let m = match fri::Measurement::decode(datagram) {
+            Ok(m) => m,
+            Err(e) => {
+                self.counters.malformed += 1;
+                return Err(e.into());
+            }
+        };
+        self.counters.measurements += 1;
+        let q: [f64; 7] = std::array::from_fn(|i| m.data.msr_jnt_pos[i] as f64);
+        let seq = m.header.send_seq;
+        let mut dq = [0.0; 7];
+        let mut in_order = true;
+        if let Some((prev_seq, prev_q)) = self.last_msr {
+            let gap = fri::sequence_gap(prev_seq, seq);
+            if gap < 0 {
+                self.counters.out_of_order += 1;
+                in_order = false;
+            } else {
+                self.counters.lost += gap as u64;
+                let dt = (gap as f64 + 1.0) * (m.intf.desired_msr_sample_time as f64).max(1e-4);
+                dq = std::array::from_fn(|i| (q[i] - prev_q[i]) / dt);
+            }
+        }
+        if in_order {
+            self.last_msr = Some((seq, q));
+            self.cycle += 1;
+        }
+
+        let commanding = m.intf.state == InterfaceState::Command && m.robot.power != 0;
+        let overspeed = dq.iter().zip(&self.velocity_limits).any(|(v, l)| v.abs() > self.config.velocity_margin * l);
+        let fresh = self.command.filter(|(_, at)| self.cycle.saturating_sub(*at) <= self.config.watchdog_cycles);
+
+        let mut reply = fri::Command::default();
+        self.send_seq = self.send_seq.wrapping_add(1);
+        reply.header.send_seq = self.send_seq;
+        reply.header.refl_seq = seq;
+        reply.krl.int[0] = STRATEGY_JOINT_IMPEDANCE;
+        reply.krl.int[1] =
+            i32::from(self.config.request_command_mode && m.intf.quality == Quality::Perfect || commanding);
+        reply.flags = flags::JOINT_IMPEDANCE;
+        let holding;
+        if !commanding {
+            // Mirror what the KRC commands itself, so that entering command mode is seamless.
+            reply.jnt_pos = std::array::from_fn(|i| m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]);
+            reply.jnt_damping = [self.config.hold_damping as f32; 7];
+            self.hold = None;
+            holding = false;
+        } else if let (Some((effort, _)), false) = (fresh, overspeed) {
+            let mut clipped = false;
+            for (i, (&wanted, &limit)) in effort.iter().zip(&self.effort_limits).enumerate() {
+                let total = wanted.clamp(-limit, limit);
+                clipped |= total != wanted;
+                // The KRC adds its own gravity model: send only the rest.
+                reply.add_jnt_trq[i] = (total - m.data.gravity[i] as f64) as f32;
+            }
+            self.counters.clipped_cycles += u64::from(clipped);
+            reply.jnt_pos = m.data.msr_jnt_pos;
+            self.hold = None;
+            holding = false;
+        } else {
+            self.counters.stale_cycles += u64::from(fresh.is_none());
+            self.counters.overspeed_cycles += u64::from(overspeed);
+            let hold = *self.hold.get_or_insert(q);
+            reply.jnt_pos = hold.map(|v| v as f32);
+            reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
+            reply.jnt_damping = [self.config.hold_damping as f32; 7];
+            holding = true;
+        }
+
+        self.model.forward_kinematics(&mut self.data, &q);
+        let tool_pose = self.model.frame_pose(&self.data, self.tool);
+        self.model.frame_jacobian(&self.data, self.tool, Axes::World, &mut self.jacobian);
+        let mut tool_twist = Vector6::zeros();
+        for (j, v) in dq.iter().enumerate() {
+            tool_twist += self.jacobian.column(j) * *v;
+        }
+        let output = DriverOutput {
+            q,
+            dq,
+            effort: std::array::from_fn(|i| m.data.msr_jnt_trq[i] as f64),
+            tool_pose,
+            tool_twist,
+            state: m.intf.state,
+            quality: m.intf.quality,
+            holding,
+            sequence: seq,
+        };
+        Ok((reply, output))
+    }
+}

@@ -1,0 +1,162 @@
+//! The simulated cell behind real UDP sockets: the KRC's side of FRI (a measurement to the remote every
+//! cycle, its answer applied) and the Net F/T's side of RDT (records streamed on request), paced in
+//! real time. Optional loss in both directions for robustness tests.
+
+use std::net::{SocketAddr, UdpSocket};
+use std::time::{Duration, Instant};
+
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use softcontact_sim::Simulator;
+use softcontact_wire::{fri, rdt};
+
+#[derive(Debug, Clone)]
+pub struct SimArmConfig {
+    pub fri_bind: SocketAddr,
+    /// Where the driver listens (the KRC's `FRIHOST`/`FRISOCK`).
+    pub fri_remote: SocketAddr,
+    pub rdt_bind: SocketAddr,
+    /// Fractions of measurements (KRC → remote) and of commands (remote → KRC) lost, once the KRC is in
+    /// command mode (a KRC will not enter command mode over a lossy link).
+    pub measurement_loss: f64,
+    pub command_loss: f64,
+    pub seed: u64,
+}
+
+/// What the cell counted.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimArmStats {
+    pub cycles: u64,
+    pub measurements_dropped: u64,
+    pub commands_dropped: u64,
+    pub malformed: u64,
+    pub overruns: u64,
+    pub records_sent: u64,
+}
+
+pub struct SimArmServer {
+    sim: Simulator,
+    fri: UdpSocket,
+    rdt: UdpSocket,
+    config: SimArmConfig,
+    stream_to: Option<SocketAddr>,
+    remaining: Option<u32>,
+    rng: SmallRng,
+    pub stats: SimArmStats,
+}
+
+impl SimArmServer {
+    pub fn bind(sim: Simulator, config: SimArmConfig) -> std::io::Result<Self> {
+        let fri = UdpSocket::bind(config.fri_bind)?;
+        let rdt = UdpSocket::bind(config.rdt_bind)?;
+        rdt.set_nonblocking(true)?;
+        let rng = SmallRng::seed_from_u64(config.seed ^ 0x5eed);
+        Ok(Self { sim, fri, rdt, config, stream_to: None, remaining: None, rng, stats: SimArmStats::default() })
+    }
+
+    pub fn fri_addr(&self) -> std::io::Result<SocketAddr> {
+        self.fri.local_addr()
+    }
+
+    pub fn rdt_addr(&self) -> std::io::Result<SocketAddr> {
+        self.rdt.local_addr()
+    }
+
+    pub fn simulator(&mut self) -> &mut Simulator {
+        &mut self.sim
+    }
+
+    fn serve_rdt_requests(&mut self) {
+        let mut buf = [0u8; 64];
+        while let Ok((n, from)) = self.rdt.recv_from(&mut buf) {
+            match rdt::Request::decode(&buf[..n]) {
+                Ok(req) => match req.command {
+                    rdt::RdtCommand::StartRealTime | rdt::RdtCommand::StartBuffered => {
+                        // A newer start steals the stream.
+                        self.stream_to = Some(from);
+                        self.remaining = (req.sample_count > 0).then_some(req.sample_count);
+                        self.sim.sensor.start_stream();
+                    }
+                    rdt::RdtCommand::Stop => self.stream_to = None,
+                    rdt::RdtCommand::SetBias => self.sim.sensor.set_bias(),
+                    _ => {}
+                },
+                Err(_) => self.stats.malformed += 1,
+            }
+        }
+    }
+
+    /// Runs cycles paced in real time until `observe` returns false. `observe` sees the simulator after
+    /// every cycle (the truth a test compares against).
+    pub fn run(&mut self, mut observe: impl FnMut(&mut Simulator) -> bool) -> std::io::Result<SimArmStats> {
+        let cycle = Duration::from_secs_f64(self.sim.krc_cycle());
+        let mut next = Instant::now();
+        let mut buf = [0u8; 2048];
+        loop {
+            let m = self.sim.measurement();
+            let lossy = m.intf.state == fri::InterfaceState::Command;
+            if lossy && self.rng.random::<f64>() < self.config.measurement_loss {
+                self.stats.measurements_dropped += 1;
+            } else {
+                self.fri.send_to(&m.encode(), self.config.fri_remote)?;
+            }
+            // Take answers until one for this measurement arrives or 0.9 of a cycle has passed since it
+            // was sent (measured from the send, so that one late cycle does not also cost the next).
+            let deadline = Instant::now() + cycle.mul_f64(0.9);
+            loop {
+                let now = Instant::now();
+                if now >= deadline {
+                    break;
+                }
+                self.fri.set_read_timeout(Some(deadline - now))?;
+                match self.fri.recv_from(&mut buf) {
+                    Ok((n, _)) => match fri::Command::decode(&buf[..n]) {
+                        Ok(cmd) => {
+                            if lossy && self.rng.random::<f64>() < self.config.command_loss {
+                                self.stats.commands_dropped += 1;
+                                continue;
+                            }
+                            let answered = cmd.header.refl_seq == m.header.send_seq;
+                            self.sim.command(&cmd);
+                            if answered {
+                                break;
+                            }
+                        }
+                        Err(_) => self.stats.malformed += 1,
+                    },
+                    Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                        break;
+                    }
+                    Err(e) => return Err(e),
+                }
+            }
+            self.serve_rdt_requests();
+            self.sim.step_cycle().map_err(std::io::Error::other)?;
+            if let Some(to) = self.stream_to {
+                let record = self.sim.ft_record();
+                self.rdt.send_to(&record.encode(), to)?;
+                self.stats.records_sent += 1;
+                if let Some(left) = self.remaining.as_mut() {
+                    *left -= 1;
+                    if *left == 0 {
+                        self.stream_to = None;
+                    }
+                }
+            }
+            self.stats.cycles += 1;
+            if !observe(&mut self.sim) {
+                return Ok(self.stats);
+            }
+            next += cycle;
+            let now = Instant::now();
+            if now < next {
+                std::thread::sleep(next - now);
+            } else {
+                self.stats.overruns += 1;
+                if now - next > cycle * 10 {
+                    next = now; // fell far behind (debugger, overload): resynchronise instead of bursting
+                }
+            }
+        }
+    }
+}
