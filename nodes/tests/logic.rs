@@ -41,8 +41,8 @@ fn in_command_mode_the_krc_gravity_is_removed_from_the_total_torque() {
     assert_eq!(reply.jnt_stiffness, [0.0; 7], "torque control is joint impedance with zero stiffness");
     assert_eq!(reply.jnt_pos, Q, "mirrors the measured position");
     let expected = [1.0, 2.0, 0.0, 2.0, 0.0, 0.1, 0.3];
-    for i in 0..7 {
-        assert!((reply.add_jnt_trq[i] as f64 - expected[i]).abs() < 1e-5, "joint {i}: {}", reply.add_jnt_trq[i]);
+    for (i, (sent, want)) in reply.add_jnt_trq.iter().zip(expected).enumerate() {
+        assert!((*sent as f64 - want).abs() < 1e-5, "joint {i}: {sent}");
     }
     assert!(!out.holding);
 }
