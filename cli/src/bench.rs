@@ -43,6 +43,14 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 3)]
         reps: usize,
     },
+    /// The FRI driver's work per cycle: decode the measurement, decide the reply, compute the tool pose
+    /// and twist it publishes, encode the reply.
+    Driver {
+        #[arg(long, default_value_t = 200_000)]
+        calls: usize,
+        #[arg(long, default_value_t = 5)]
+        reps: usize,
+    },
     /// Contact estimation: sliding-window update per sample, full refit of every kind with 5-fold
     /// cross-validation over the window, exponent and contact-offset estimation.
     Contact {
@@ -162,7 +170,49 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Dynamics { calls, reps, pinocchio, json } => run_dynamics(calls, reps, pinocchio, json),
         BenchCommand::Contact { window, reps, json } => run_contact(window, reps, json),
         BenchCommand::Sim { seconds, reps } => run_sim(seconds, reps),
+        BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
     }
+}
+
+/// Times `LwrDriver::handle` + reply encoding on measurements recorded from the simulator in command
+/// mode (moving arm, every field filled).
+fn run_driver(calls: usize, reps: usize) -> anyhow::Result<()> {
+    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    use softcontact_sim::{SimConfig, Simulator};
+    use softcontact_wire::fri::{self, Quality, flags};
+    if calls == 0 || reps == 0 {
+        bail!("--calls and --reps must be positive");
+    }
+    let mut sim = Simulator::new(SimConfig::above_surface(softcontact_sim::sponge(), 1))?;
+    let mut cmd = fri::Command::default();
+    cmd.krl.int[0] = 30;
+    cmd.flags = flags::JOINT_IMPEDANCE;
+    let mut datagrams = Vec::new();
+    for i in 0..1500u16 {
+        let m = sim.measurement();
+        cmd.header.refl_seq = m.header.send_seq;
+        cmd.krl.int[1] = i32::from(m.intf.quality == Quality::Perfect);
+        cmd.jnt_pos = m.data.msr_jnt_pos;
+        cmd.add_jnt_trq = [0.0, -2.0, 0.0, 1.0, 0.0, 0.3, 0.05];
+        sim.command(&cmd);
+        sim.step_cycle()?;
+        if i >= 500 {
+            datagrams.push(m.encode());
+        }
+    }
+    let mut driver = LwrDriver::new(DriverConfig::default());
+    let torque = [0.0, -40.0, 0.0, 12.0, 0.0, 1.0, 0.0];
+    let ns = best_ns(calls, reps, |i| {
+        if i % 2 == 0 {
+            driver.set_command(&torque).ok();
+        }
+        if let Ok((reply, out)) = driver.handle(&datagrams[i % datagrams.len()]) {
+            black_box(reply.encode());
+            black_box(out.tool_twist[0]);
+        }
+    });
+    println!("FRI driver per cycle (decode, reply, tool pose and twist, encode): {ns:.0} ns (goal ≤ 20 µs)");
+    Ok(())
 }
 
 /// Pushes a simulated sponge with a steady additional torque through the whole FRI/RDT exchange.
