@@ -4,5 +4,6 @@
 
 pub mod ft_sensor;
 pub mod lwr_driver;
+pub mod ros;
 pub mod sim_arm;
 pub mod udp;

@@ -1,0 +1,175 @@
+//! `ft_sensor`: the ATI Net F/T as a ROS 2 node. Streams RDT records, publishes /ft_sensor/wrench_raw
+//! (bias removed) and /ft_sensor/wrench (also the hand's weight removed, for the orientation taken from
+//! /lwr/ee_pose), serves /ft_sensor/bias (std_srvs/Trigger: software tare), and reports stale,
+//! saturated or faulty data on /diagnostics.
+
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use ros2_client::{Name, ServiceTypeName};
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use softcontact_msgs::geometry_msgs::{self as geo, PoseStamped, WrenchStamped};
+use softcontact_msgs::std_msgs::Header;
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
+use softcontact_nodes::ros;
+use softcontact_nodes::udp::RdtClient;
+use softcontact_wire::rdt::Calibration;
+
+#[derive(Parser)]
+#[command(version, about = "ATI Net F/T over RDT, as a ROS 2 node")]
+struct Args {
+    /// The Net F/T box's RDT address.
+    #[arg(long, default_value = "127.0.0.1:49152")]
+    sensor: SocketAddr,
+    /// Counts per force unit and per torque unit, and the units, as netftapi2.xml gives them.
+    #[arg(long, default_value_t = 1e6)]
+    counts_per_force: f64,
+    #[arg(long, default_value_t = 1e6)]
+    counts_per_torque: f64,
+    #[arg(long, default_value = "N")]
+    force_unit: String,
+    #[arg(long, default_value = "Nm")]
+    torque_unit: String,
+    /// Low-pass cut-off [Hz]; none by default.
+    #[arg(long)]
+    low_pass: Option<f64>,
+    /// The box's RDT output rate [Hz].
+    #[arg(long, default_value_t = 1000.0)]
+    rate: f64,
+    /// Data older than this is stale [s].
+    #[arg(long, default_value_t = 0.1)]
+    stale_after: f64,
+    /// Service mapping of the peers' middleware: cyclone, enhanced or basic.
+    #[arg(long, default_value = "cyclone")]
+    service_mapping: String,
+    /// Stop after this many seconds without a record (0: wait forever).
+    #[arg(long, default_value_t = 0.0)]
+    exit_after_silence: f64,
+}
+
+fn wrench(frame: &str, w: &[f64; 6]) -> WrenchStamped {
+    WrenchStamped {
+        header: Header { stamp: Time::now(), frame_id: frame.into() },
+        wrench: geo::Wrench {
+            force: geo::Vector3 { x: w[0], y: w[1], z: w[2] },
+            torque: geo::Vector3 { x: w[3], y: w[4], z: w[5] },
+        },
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let calibration = Calibration::from_settings(
+        args.counts_per_force,
+        args.counts_per_torque,
+        &args.force_unit,
+        &args.torque_unit,
+        Calibration::gamma_si_130_10().range,
+    )?;
+    let config = FtConfig {
+        calibration,
+        tool: lwr4::tool_load(),
+        gravity: Vector3::new(0.0, 0.0, -9.81),
+        low_pass: args.low_pass,
+        sample_rate: args.rate,
+    };
+    let mut client = RdtClient::connect(args.sensor, FtSensorNode::new(config).map_err(anyhow::Error::msg)?)?;
+    let mut node = ros::node("ft_sensor")?;
+    let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
+    let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
+    let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
+    let bias = node.create_server::<TriggerRequest, TriggerResponse>(
+        ros::service_mapping(&args.service_mapping)?,
+        &Name::new("/ft_sensor", "bias")?,
+        &ServiceTypeName::new("std_srvs", "Trigger"),
+        ros::reliable_qos(),
+        ros::reliable_qos(),
+    )?;
+
+    // The sensing frame's rotation relative to the tool frame, from the URDF.
+    let model = lwr4::model();
+    let mut data = model.data();
+    model.forward_kinematics(&mut data, &[0.0; 7]);
+    let tool_to_sensor = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
+        * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation;
+
+    client.start()?;
+    eprintln!("ft_sensor: streaming from {}, domain {}", args.sensor, node.domain_id());
+    let mut orientation: Option<UnitQuaternion<f64>> = None;
+    let mut last_record = Instant::now();
+    let mut last_status = 0u32;
+    let mut started = Instant::now();
+    let mut next_diagnostics = Instant::now();
+    loop {
+        while let Ok(Some((pose, _))) = poses.take() {
+            let o = pose.pose.orientation;
+            orientation = Some(UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z)) * tool_to_sensor);
+        }
+        if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
+            last_record = Instant::now();
+            last_status = out.status.0;
+            if !out.invalid {
+                raw_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &out.raw))?;
+                if let Some(c) = out.compensated {
+                    wrench_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &c))?;
+                }
+            }
+        }
+        while let Ok(Some((id, _))) = bias.receive_request() {
+            let response = match client.node.tare(orientation.as_ref()) {
+                Ok(b) => TriggerResponse { success: true, message: format!("bias set to {b:?}") },
+                Err(e) => TriggerResponse { success: false, message: e },
+            };
+            bias.send_response(id, response)?;
+        }
+        let silent = last_record.elapsed().as_secs_f64();
+        if silent > 1.0 && started.elapsed().as_secs_f64() > 1.0 {
+            // The box may have lost our stream (a newer start from elsewhere, a reboot): ask again.
+            client.start()?;
+            started = Instant::now();
+        }
+        if args.exit_after_silence > 0.0 && silent > args.exit_after_silence {
+            eprintln!("ft_sensor: no record for {} s, exiting; {:?}", args.exit_after_silence, client.node.counters);
+            client.stop()?;
+            return Ok(());
+        }
+        if Instant::now() >= next_diagnostics {
+            let c = client.node.counters;
+            let status = softcontact_wire::rdt::Status(last_status);
+            let (level, message) = if silent > args.stale_after {
+                (DiagnosticStatus::STALE, format!("no record for {silent:.3} s"))
+            } else if status.is_saturated() || status.is_error() {
+                (DiagnosticStatus::ERROR, status.describe().join(", "))
+            } else if orientation.is_none() {
+                (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
+            } else {
+                (DiagnosticStatus::OK, "streaming".into())
+            };
+            let kv = |k: &str, v: u64| KeyValue { key: k.into(), value: v.to_string() };
+            diag.publish(DiagnosticArray {
+                header: Header { stamp: Time::now(), frame_id: String::new() },
+                status: vec![DiagnosticStatus {
+                    level,
+                    name: "ft_sensor: RDT".into(),
+                    message,
+                    hardware_id: args.sensor.to_string(),
+                    values: vec![
+                        kv("records", c.records),
+                        kv("lost", c.lost),
+                        kv("out_of_order", c.out_of_order),
+                        kv("malformed", c.malformed),
+                        kv("saturated", c.saturated),
+                        kv("errors", c.errors),
+                    ],
+                }],
+            })?;
+            next_diagnostics += Duration::from_secs(1);
+        }
+    }
+}
