@@ -218,6 +218,18 @@ pub mod diagnostic_msgs {
     ros_type!("diagnostic_msgs", KeyValue, DiagnosticStatus, DiagnosticArray);
 }
 
+pub mod rosgraph_msgs {
+    use super::builtin_interfaces::Time;
+    use super::*;
+
+    /// Simulated time on /clock, for nodes running with use_sim_time.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+    pub struct Clock {
+        pub clock: Time,
+    }
+    ros_type!("rosgraph_msgs", Clock);
+}
+
 pub mod std_srvs {
     use super::*;
 

@@ -74,3 +74,35 @@ pub fn service_mapping(name: &str) -> anyhow::Result<ServiceMapping> {
         other => anyhow::bail!("unknown service mapping `{other}` (cyclone, enhanced or basic)"),
     })
 }
+
+/// The time a node stamps its messages with: the system clock, or with `use_sim_time` the newest
+/// /clock sample (the simulator's time when it runs faster than real time).
+pub struct Clock {
+    sim: Option<(
+        ros2_client::Subscription<softcontact_msgs::rosgraph_msgs::Clock>,
+        softcontact_msgs::builtin_interfaces::Time,
+    )>,
+}
+
+impl Clock {
+    pub fn new(node: &mut Node, use_sim_time: bool) -> anyhow::Result<Self> {
+        let sim = if use_sim_time {
+            Some((subscription(node, "/clock", reliable_qos())?, softcontact_msgs::builtin_interfaces::Time::default()))
+        } else {
+            None
+        };
+        Ok(Self { sim })
+    }
+
+    pub fn now(&mut self) -> softcontact_msgs::builtin_interfaces::Time {
+        match &mut self.sim {
+            None => softcontact_msgs::builtin_interfaces::Time::now(),
+            Some((sub, latest)) => {
+                while let Ok(Some((c, _))) = sub.take() {
+                    *latest = c.clock;
+                }
+                *latest
+            }
+        }
+    }
+}

@@ -20,7 +20,20 @@ pub struct SimArmConfig {
     /// command mode (a KRC will not enter command mode over a lossy link).
     pub measurement_loss: f64,
     pub command_loss: f64,
+    /// RDT records per second while streaming (the box's `comrdtrate`, 1–7000 Hz).
+    pub rdt_rate: f64,
+    pub pacing: Pacing,
     pub seed: u64,
+}
+
+/// How cycles follow each other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pacing {
+    /// One cycle per FRI period of wall time, as the KRC does.
+    RealTime,
+    /// The next cycle as soon as the remote has answered (or after `timeout`): faster than real time,
+    /// with simulated time published on /clock by the caller.
+    Lockstep { timeout: Duration },
 }
 
 /// What the cell counted.
@@ -42,6 +55,7 @@ pub struct SimArmServer {
     stream_to: Option<SocketAddr>,
     remaining: Option<u32>,
     rng: SmallRng,
+    records_due: f64,
     pub stats: SimArmStats,
 }
 
@@ -51,7 +65,20 @@ impl SimArmServer {
         let rdt = UdpSocket::bind(config.rdt_bind)?;
         rdt.set_nonblocking(true)?;
         let rng = SmallRng::seed_from_u64(config.seed ^ 0x5eed);
-        Ok(Self { sim, fri, rdt, config, stream_to: None, remaining: None, rng, stats: SimArmStats::default() })
+        if !(1.0..=7000.0).contains(&config.rdt_rate) {
+            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "RDT rate must lie in 1..=7000 Hz"));
+        }
+        Ok(Self {
+            sim,
+            fri,
+            rdt,
+            config,
+            stream_to: None,
+            remaining: None,
+            rng,
+            records_due: 0.0,
+            stats: SimArmStats::default(),
+        })
     }
 
     pub fn fri_addr(&self) -> std::io::Result<SocketAddr> {
@@ -102,7 +129,11 @@ impl SimArmServer {
             }
             // Take answers until one for this measurement arrives or 0.9 of a cycle has passed since it
             // was sent (measured from the send, so that one late cycle does not also cost the next).
-            let deadline = Instant::now() + cycle.mul_f64(0.9);
+            let wait = match self.config.pacing {
+                Pacing::RealTime => cycle.mul_f64(0.9),
+                Pacing::Lockstep { timeout } => timeout,
+            };
+            let deadline = Instant::now() + wait;
             loop {
                 let now = Instant::now();
                 if now >= deadline {
@@ -132,7 +163,10 @@ impl SimArmServer {
             }
             self.serve_rdt_requests();
             self.sim.step_cycle().map_err(std::io::Error::other)?;
-            if let Some(to) = self.stream_to {
+            self.records_due += self.config.rdt_rate * self.sim.krc_cycle();
+            while self.records_due >= 1.0 {
+                self.records_due -= 1.0;
+                let Some(to) = self.stream_to else { continue };
                 let record = self.sim.ft_record();
                 self.rdt.send_to(&record.encode(), to)?;
                 self.stats.records_sent += 1;
@@ -146,6 +180,9 @@ impl SimArmServer {
             self.stats.cycles += 1;
             if !observe(&mut self.sim) {
                 return Ok(self.stats);
+            }
+            if matches!(self.config.pacing, Pacing::Lockstep { .. }) {
+                continue;
             }
             next += cycle;
             let now = Instant::now();

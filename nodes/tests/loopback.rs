@@ -48,6 +48,8 @@ fn start_cell(
             rdt_bind: "127.0.0.1:0".parse().unwrap(),
             measurement_loss: loss_each_way,
             command_loss: loss_each_way,
+            rdt_rate: 1000.0,
+            pacing: softcontact_nodes::sim_arm::Pacing::RealTime,
             seed: 3,
         },
     )

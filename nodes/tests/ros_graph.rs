@@ -143,3 +143,51 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
     let d = driver_diag.expect("driver diagnostics");
     assert!(d.values.iter().any(|kv| kv.key == "lost"), "{d:?}");
 }
+
+#[test]
+fn lockstep_runs_faster_than_real_time_on_sim_time() {
+    if std::env::var(INNER).is_err() {
+        in_isolated_namespace("lockstep_runs_faster_than_real_time_on_sim_time");
+        return;
+    }
+    use softcontact_msgs::rosgraph_msgs::Clock;
+    let mut node = ros::node("lockstep_test").unwrap();
+    let clock = ros::subscription::<Clock>(&mut node, "/clock", ros::reliable_qos()).unwrap();
+    let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let mut driver = spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["--use-sim-time", "--exit-after-silence", "1"]);
+    std::thread::sleep(Duration::from_millis(500)); // discovery
+    let start = Instant::now();
+    let mut sim = spawn(env!("CARGO_BIN_EXE_sim_arm"), &["--lockstep", "--surface", "none", "--seconds", "10"]);
+    let (mut latest_clock, mut latest_stamp, mut stamps) = (0.0f64, 0.0f64, 0usize);
+    let status = loop {
+        while let Ok(Some((c, _))) = clock.take() {
+            latest_clock = latest_clock.max(c.clock.as_secs_f64());
+        }
+        while let Ok(Some((js, _))) = joints.take() {
+            latest_stamp = js.header.stamp.as_secs_f64();
+            stamps += 1;
+        }
+        if let Some(status) = sim.try_wait().unwrap() {
+            break status;
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "lockstep run did not finish");
+        std::thread::sleep(Duration::from_micros(500));
+    };
+    let wall = start.elapsed().as_secs_f64();
+    std::thread::sleep(Duration::from_millis(200));
+    while let Ok(Some((c, _))) = clock.take() {
+        latest_clock = latest_clock.max(c.clock.as_secs_f64());
+    }
+    let _ = driver.kill();
+    let _ = driver.wait();
+    eprintln!(
+        "lockstep: 10 simulated s in {wall:.2} s wall; /clock reached {latest_clock:.3} s; {stamps} joint states"
+    );
+    assert!(status.success());
+    assert!(wall < 10.0, "faster than real time: {wall} s of wall time for 10 s");
+    assert!(latest_clock > 9.9, "/clock advanced to the end: {latest_clock}");
+    assert!(
+        stamps > 1000 && latest_stamp > 1.0 && latest_stamp <= 10.01,
+        "joint states stamped in sim time: {latest_stamp}"
+    );
+}

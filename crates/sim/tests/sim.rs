@@ -235,3 +235,57 @@ fn exceeding_a_joint_velocity_limit_trips_the_krc() {
     assert!(sim.krc.last_fault().unwrap().contains("lwr_a6_joint exceeded its velocity limit"));
     assert!(sim.dq().iter().all(|v| *v == 0.0), "braked");
 }
+
+#[test]
+fn the_walton_tangential_law_sticks_then_slides_at_the_friction_cone() {
+    use softcontact_contact::Tangential;
+    use softcontact_sim::{Surface, SurfaceConfig};
+    let model = ContactModel {
+        tangential: Some(Tangential { stiffness: 4.0e4, friction: 0.5 }),
+        ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
+    };
+    let mut surface =
+        Surface::new(SurfaceConfig { point: Vector3::zeros(), normal: Vector3::new(0.0, 0.0, -1.0), model }).unwrap();
+    // Press 1 cm in, then drag along x.
+    let v = Vector3::zeros();
+    let c = surface.contact(&Vector3::new(0.0, 0.0, -0.01), &v, 1e-3).unwrap();
+    let fn_ = 2.0e4 * 0.01f64.powf(1.5);
+    assert!((c.force - Vector3::new(0.0, 0.0, fn_)).norm() < 1e-9, "pure normal force at first touch");
+    // A small drag sticks: f_t = k_t √z δ, opposing the motion.
+    let c = surface.contact(&Vector3::new(0.0005, 0.0, -0.01), &v, 1e-3).unwrap();
+    assert!(!c.sliding && (c.force.x + 4.0e4 * 0.1 * 0.0005).abs() < 1e-9, "{:?}", c.force);
+    // A long drag slides: |f_t| = μ f_n, and stays there as the drag goes on.
+    for x in [0.01, 0.02, 0.03] {
+        let c = surface.contact(&Vector3::new(x, 0.0, -0.01), &v, 1e-3).unwrap();
+        assert!(c.sliding && (c.force.x + 0.5 * fn_).abs() < 1e-9, "at {x}: {:?}", c.force);
+    }
+    // Coming back a little: the anchor moved with the slip, so the contact sticks again.
+    let c = surface.contact(&Vector3::new(0.0299, 0.0, -0.01), &v, 1e-3).unwrap();
+    assert!(!c.sliding && c.force.x < 0.0 && c.force.x.abs() < 0.5 * fn_);
+    // Leaving the surface releases everything.
+    assert_eq!(surface.contact(&Vector3::new(0.03, 0.0, 0.001), &v, 1e-3).unwrap().force, Vector3::zeros());
+}
+
+#[test]
+fn joint_friction_dissipates_energy() {
+    use softcontact_sim::JointFriction;
+    let swing = |friction: Option<JointFriction>| {
+        let mut config = free_config();
+        config.friction = friction;
+        let mut sim = Simulator::new(config).unwrap();
+        let mut seq = enter_command(&mut sim);
+        // Spin the wrist up with a torque pulse, then let it coast.
+        for i in 0..600 {
+            let m = sim.measurement();
+            seq = seq.wrapping_add(1);
+            let t = if i < 100 { 0.004 } else { 0.0 };
+            sim.command(&answer(&m, seq, true, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t]));
+            sim.step_cycle().unwrap();
+        }
+        sim.dq()[6]
+    };
+    let free = swing(None);
+    let damped = swing(Some(JointFriction { viscous: [0.002; 7], coulomb: [0.0005; 7] }));
+    assert!(free > 0.1, "the wrist coasts without friction: {free} rad/s");
+    assert!(damped >= 0.0 && damped < 0.5 * free, "friction slows it: {damped} vs {free} rad/s");
+}

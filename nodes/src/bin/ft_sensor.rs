@@ -50,11 +50,14 @@ struct Args {
     /// Stop after this many seconds without a record (0: wait forever).
     #[arg(long, default_value_t = 0.0)]
     exit_after_silence: f64,
+    /// Stamp messages with the simulated time of /clock.
+    #[arg(long)]
+    use_sim_time: bool,
 }
 
-fn wrench(frame: &str, w: &[f64; 6]) -> WrenchStamped {
+fn wrench(frame: &str, w: &[f64; 6], stamp: Time) -> WrenchStamped {
     WrenchStamped {
-        header: Header { stamp: Time::now(), frame_id: frame.into() },
+        header: Header { stamp, frame_id: frame.into() },
         wrench: geo::Wrench {
             force: geo::Vector3 { x: w[0], y: w[1], z: w[2] },
             torque: geo::Vector3 { x: w[3], y: w[4], z: w[5] },
@@ -84,6 +87,7 @@ fn main() -> anyhow::Result<()> {
     let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
     let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
     let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
+    let mut clock = ros::Clock::new(&mut node, args.use_sim_time)?;
     let bias = node.create_server::<TriggerRequest, TriggerResponse>(
         ros::service_mapping(&args.service_mapping)?,
         &Name::new("/ft_sensor", "bias")?,
@@ -115,9 +119,10 @@ fn main() -> anyhow::Result<()> {
             last_record = Instant::now();
             last_status = out.status.0;
             if !out.invalid {
-                raw_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &out.raw))?;
+                let stamp = clock.now();
+                raw_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &out.raw, stamp))?;
                 if let Some(c) = out.compensated {
-                    wrench_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &c))?;
+                    wrench_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &c, stamp))?;
                 }
             }
         }
@@ -153,7 +158,7 @@ fn main() -> anyhow::Result<()> {
             };
             let kv = |k: &str, v: u64| KeyValue { key: k.into(), value: v.to_string() };
             diag.publish(DiagnosticArray {
-                header: Header { stamp: Time::now(), frame_id: String::new() },
+                header: Header { stamp: clock.now(), frame_id: String::new() },
                 status: vec![DiagnosticStatus {
                     level,
                     name: "ft_sensor: RDT".into(),

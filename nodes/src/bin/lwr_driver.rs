@@ -36,10 +36,13 @@ struct Args {
     /// Stop after this many seconds without a measurement (0: wait forever).
     #[arg(long, default_value_t = 0.0)]
     exit_after_silence: f64,
+    /// Stamp messages with the simulated time of /clock.
+    #[arg(long)]
+    use_sim_time: bool,
 }
 
-fn header(frame: &str) -> Header {
-    Header { stamp: Time::now(), frame_id: frame.into() }
+fn header(frame: &str, stamp: Time) -> Header {
+    Header { stamp, frame_id: frame.into() }
 }
 
 fn pose_parts(p: &Isometry3<f64>) -> (Vector3, Quaternion) {
@@ -48,16 +51,16 @@ fn pose_parts(p: &Isometry3<f64>) -> (Vector3, Quaternion) {
     (Vector3 { x: t.x, y: t.y, z: t.z }, Quaternion { x: q.i, y: q.j, z: q.k, w: q.w })
 }
 
-fn transform(parent: &str, child: &str, p: &Isometry3<f64>) -> TransformStamped {
+fn transform(parent: &str, child: &str, p: &Isometry3<f64>, stamp: Time) -> TransformStamped {
     let (translation, rotation) = pose_parts(p);
     TransformStamped {
-        header: header(parent),
+        header: header(parent, stamp),
         child_frame_id: child.into(),
         transform: Transform { translation, rotation },
     }
 }
 
-fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>) -> DiagnosticArray {
+fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>, stamp: Time) -> DiagnosticArray {
     let c = driver.counters;
     let (level, message) = match last {
         None => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
@@ -68,7 +71,7 @@ fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>) -> DiagnosticArr
     };
     let kv = |k: &str, v: u64| KeyValue { key: k.into(), value: v.to_string() };
     DiagnosticArray {
-        header: header(""),
+        header: header("", stamp),
         status: vec![DiagnosticStatus {
             level,
             name: "lwr_driver: FRI".into(),
@@ -104,6 +107,7 @@ fn main() -> anyhow::Result<()> {
     let tf_static = ros::publisher::<TFMessage>(&mut node, "/tf_static", ros::latched_qos())?;
     let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
     let commands = ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
+    let mut clock = ros::Clock::new(&mut node, args.use_sim_time)?;
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
     let model = lwr4::model();
@@ -112,7 +116,12 @@ fn main() -> anyhow::Result<()> {
     let tool_pose0 = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?);
     let sensor_pose0 = model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?);
     tf_static.publish(TFMessage {
-        transforms: vec![transform(lwr4::TOOL_FRAME, lwr4::FT_SENSOR_FRAME, &(tool_pose0.inverse() * sensor_pose0))],
+        transforms: vec![transform(
+            lwr4::TOOL_FRAME,
+            lwr4::FT_SENSOR_FRAME,
+            &(tool_pose0.inverse() * sensor_pose0),
+            clock.now(),
+        )],
     })?;
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     eprintln!("lwr_driver: FRI on {}, domain {}", client.local_addr()?, node.domain_id());
@@ -130,7 +139,8 @@ fn main() -> anyhow::Result<()> {
         }
         if let Some(out) = output {
             last_seen = Instant::now();
-            let h = header("world");
+            let stamp = clock.now();
+            let h = header("world", stamp);
             joint_states.publish(JointState {
                 header: h.clone(),
                 name: names.clone(),
@@ -151,10 +161,10 @@ fn main() -> anyhow::Result<()> {
                     angular: Vector3 { x: v[3], y: v[4], z: v[5] },
                 },
             })?;
-            tf.publish(TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &out.tool_pose)] })?;
+            tf.publish(TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &out.tool_pose, stamp)] })?;
             last = Some(out);
         } else if args.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > args.exit_after_silence {
-            diag.publish(diagnostics(&client.driver, last.as_ref()))?;
+            diag.publish(diagnostics(&client.driver, last.as_ref(), clock.now()))?;
             eprintln!(
                 "lwr_driver: no measurement for {} s, exiting; {:?}",
                 args.exit_after_silence, client.driver.counters
@@ -162,7 +172,7 @@ fn main() -> anyhow::Result<()> {
             return Ok(());
         }
         if Instant::now() >= next_diagnostics {
-            diag.publish(diagnostics(&client.driver, last.as_ref()))?;
+            diag.publish(diagnostics(&client.driver, last.as_ref(), clock.now()))?;
             next_diagnostics += Duration::from_secs(1);
         }
     }

@@ -4,7 +4,12 @@
 use std::net::SocketAddr;
 
 use clap::{Parser, ValueEnum};
-use softcontact_nodes::sim_arm::{SimArmConfig, SimArmServer};
+use std::time::Duration;
+
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::rosgraph_msgs::Clock;
+use softcontact_nodes::ros;
+use softcontact_nodes::sim_arm::{Pacing, SimArmConfig, SimArmServer};
 use softcontact_sim::{SimConfig, Simulator};
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -34,6 +39,13 @@ struct Args {
     /// Fraction of FRI datagrams lost once commanding, in each direction.
     #[arg(long, default_value_t = 0.0)]
     drop_rate: f64,
+    /// RDT records per second while streaming (the box's comrdtrate).
+    #[arg(long, default_value_t = 1000.0)]
+    rdt_rate: f64,
+    /// Faster than real time: step as soon as the driver has answered, and publish the simulated time
+    /// on /clock (run the nodes with --use-sim-time).
+    #[arg(long)]
+    lockstep: bool,
     #[arg(long, default_value_t = 1)]
     seed: u64,
 }
@@ -58,12 +70,29 @@ fn main() -> anyhow::Result<()> {
             rdt_bind: args.rdt_bind,
             measurement_loss: args.drop_rate,
             command_loss: args.drop_rate,
+            rdt_rate: args.rdt_rate,
+            pacing: if args.lockstep {
+                Pacing::Lockstep { timeout: Duration::from_millis(50) }
+            } else {
+                Pacing::RealTime
+            },
             seed: args.seed,
         },
     )?;
+    let clock = if args.lockstep {
+        let mut node = ros::node("sim_arm")?;
+        Some((ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?, node))
+    } else {
+        None
+    };
     eprintln!("sim_arm: FRI from {} to {}, RDT at {}", server.fri_addr()?, args.fri_remote, server.rdt_addr()?);
     let cycles = args.seconds.map(|s| (s * 1000.0).round() as u64);
-    let stats = server.run(|sim| cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n as f64))?;
+    let stats = server.run(|sim| {
+        if let Some((publisher, _)) = &clock {
+            let _ = publisher.publish(Clock { clock: Time::from_secs_f64(sim.time()) });
+        }
+        cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n as f64)
+    })?;
     eprintln!("sim_arm: {stats:?}");
     Ok(())
 }
