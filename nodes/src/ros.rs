@@ -106,3 +106,25 @@ impl Clock {
         }
     }
 }
+
+/// One /diagnostics message with a single status and its counters.
+pub fn diagnostics(
+    stamp: softcontact_msgs::builtin_interfaces::Time,
+    name: &str,
+    hardware_id: &str,
+    level: u8,
+    message: String,
+    counters: &[(&str, u64)],
+) -> softcontact_msgs::diagnostic_msgs::DiagnosticArray {
+    use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+    DiagnosticArray {
+        header: softcontact_msgs::std_msgs::Header { stamp, frame_id: String::new() },
+        status: vec![DiagnosticStatus {
+            level,
+            name: name.into(),
+            message,
+            hardware_id: hardware_id.into(),
+            values: counters.iter().map(|(k, v)| KeyValue { key: (*k).into(), value: v.to_string() }).collect(),
+        }],
+    }
+}

@@ -11,7 +11,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
-use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{self as geo, PoseStamped, WrenchStamped};
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
@@ -156,24 +156,21 @@ fn main() -> anyhow::Result<()> {
             } else {
                 (DiagnosticStatus::OK, "streaming".into())
             };
-            let kv = |k: &str, v: u64| KeyValue { key: k.into(), value: v.to_string() };
-            diag.publish(DiagnosticArray {
-                header: Header { stamp: clock.now(), frame_id: String::new() },
-                status: vec![DiagnosticStatus {
-                    level,
-                    name: "ft_sensor: RDT".into(),
-                    message,
-                    hardware_id: args.sensor.to_string(),
-                    values: vec![
-                        kv("records", c.records),
-                        kv("lost", c.lost),
-                        kv("out_of_order", c.out_of_order),
-                        kv("malformed", c.malformed),
-                        kv("saturated", c.saturated),
-                        kv("errors", c.errors),
-                    ],
-                }],
-            })?;
+            diag.publish(ros::diagnostics(
+                clock.now(),
+                "ft_sensor: RDT",
+                &args.sensor.to_string(),
+                level,
+                message,
+                &[
+                    ("records", c.records),
+                    ("lost", c.lost),
+                    ("out_of_order", c.out_of_order),
+                    ("malformed", c.malformed),
+                    ("saturated", c.saturated),
+                    ("errors", c.errors),
+                ],
+            ))?;
             next_diagnostics += Duration::from_secs(1);
         }
     }

@@ -10,7 +10,7 @@ use clap::Parser;
 use nalgebra::Isometry3;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
-use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue};
+use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{
     Point, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Twist, TwistStamped, Vector3,
 };
@@ -69,26 +69,23 @@ fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>, stamp: Time) -> 
         }
         Some(o) => (DiagnosticStatus::OK, format!("{:?}, quality {:?}", o.state, o.quality)),
     };
-    let kv = |k: &str, v: u64| KeyValue { key: k.into(), value: v.to_string() };
-    DiagnosticArray {
-        header: header("", stamp),
-        status: vec![DiagnosticStatus {
-            level,
-            name: "lwr_driver: FRI".into(),
-            message,
-            hardware_id: "kuka_lwr4".into(),
-            values: vec![
-                kv("measurements", c.measurements),
-                kv("lost", c.lost),
-                kv("out_of_order", c.out_of_order),
-                kv("malformed", c.malformed),
-                kv("stale_cycles", c.stale_cycles),
-                kv("clipped_cycles", c.clipped_cycles),
-                kv("overspeed_cycles", c.overspeed_cycles),
-                kv("commands_refused", c.commands_refused),
-            ],
-        }],
-    }
+    ros::diagnostics(
+        stamp,
+        "lwr_driver: FRI",
+        "kuka_lwr4",
+        level,
+        message,
+        &[
+            ("measurements", c.measurements),
+            ("lost", c.lost),
+            ("out_of_order", c.out_of_order),
+            ("malformed", c.malformed),
+            ("stale_cycles", c.stale_cycles),
+            ("clipped_cycles", c.clipped_cycles),
+            ("overspeed_cycles", c.overspeed_cycles),
+            ("commands_refused", c.commands_refused),
+        ],
+    )
 }
 
 fn main() -> anyhow::Result<()> {
