@@ -84,8 +84,8 @@ fn not_built(command: &str, plan: &str) -> anyhow::Result<()> {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo { out, json, graph } => {
-            println!("softcontact demo: the simulated LWR IV and soft surfaces are not built yet.");
-            println!("When they are, this command will, for a simulated sponge and dice:");
+            println!("softcontact demo: the closed loop (deformation controller, estimator node) is not built yet.");
+            println!("When it is, this command will, for a simulated sponge and dice:");
             println!("  1. run seed 001's identification (approach ramp, 1 Hz sine pushes, retreat; 10 runs),");
             println!("     fit Kelvin-Voigt, Hunt-Crossley and Azad-Featherstone with 5-fold CV (Table I);");
             println!("  2. run its 30-command force control experiment with online re-estimation (Tables II, III);");

@@ -15,15 +15,19 @@ use softcontact_nodes::ros;
 
 const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
 
-/// Runs the named test of this binary again, inside a fresh network namespace with only `lo`.
+/// Runs the named test of this binary again, inside a fresh network namespace with only `lo` (in a user
+/// namespace too, so that it needs no root).
 fn in_isolated_namespace(test: &str) {
     let exe = std::env::current_exe().unwrap();
     let script = format!(
         "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
         exe.display()
     );
-    let out =
-        Command::new("unshare").args(["--net", "sh", "-c", &script]).env(INNER, "1").output().expect("unshare runs");
+    let out = Command::new("unshare")
+        .args(["--map-root-user", "--net", "sh", "-c", &script])
+        .env(INNER, "1")
+        .output()
+        .expect("unshare runs");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     eprintln!("{text}");
     assert!(out.status.success() && text.contains("1 passed"), "isolated run failed:\n{text}");
