@@ -189,7 +189,9 @@ fn free_swing_conserves_energy() {
     // Relative to the energy that changed form during the swing (the potential's zero is arbitrary).
     assert!(max_kinetic > 10.0, "the arm should swing: max kinetic energy {max_kinetic} J");
     let relative = max_drift / max_kinetic;
-    eprintln!("free swing, 10 s, RK4 at 0.2 ms: energy drift {max_drift:e} J, {relative:e} of the largest kinetic energy {max_kinetic:.2} J");
+    eprintln!(
+        "free swing, 10 s, RK4 at 0.2 ms: energy drift {max_drift:e} J, {relative:e} of the largest kinetic energy {max_kinetic:.2} J"
+    );
     assert!(relative < 1e-6, "energy drift {max_drift:e} J over max kinetic {max_kinetic} J = {relative:e}");
 }
 

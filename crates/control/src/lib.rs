@@ -1,0 +1,11 @@
+//! Control of the normal force on a soft surface (seed 001): quintic references ([`quintic`]), the
+//! deformation law that turns force commands into deformation accelerations ([`law`]), and task-space
+//! torques with null-space joint impedance ([`task`]). Pure: the controller node wires it to ROS.
+
+pub mod law;
+pub mod quintic;
+pub mod task;
+
+pub use law::{DeformationGains, deformation_acceleration, force_to_deformation};
+pub use quintic::{Quintic, Reference, SetpointSequence};
+pub use task::{Damping, TaskTorque, task_space_torque};
