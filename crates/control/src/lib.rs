@@ -3,9 +3,11 @@
 //! torques with null-space joint impedance ([`task`]). Pure: the controller node wires it to ROS.
 
 pub mod law;
+pub mod limits;
 pub mod quintic;
 pub mod task;
 
 pub use law::{DeformationGains, deformation_acceleration, force_to_deformation};
+pub use limits::{LimitError, Limits, TorqueLimiter};
 pub use quintic::{Quintic, Reference, SetpointSequence};
 pub use task::{Damping, TaskTorque, task_space_torque};

@@ -168,3 +168,33 @@ fn near_a_singularity_the_inversion_is_damped_and_torques_stay_bounded() {
     assert!(out.damped);
     assert!(out.tau.iter().all(|t| t.is_finite()) && out.tau.amax() < 1e3, "{}", out.tau);
 }
+
+#[test]
+fn limits_refuse_bad_commands_and_bound_torques() {
+    use softcontact_control::{LimitError, Limits, TorqueLimiter};
+    let limits = Limits {
+        joint_torque: vec![176.0, 176.0, 100.0, 100.0, 100.0, 38.0, 38.0],
+        torque_rate: 1000.0,
+        max_force: 250.0,
+        max_deformation: 0.06,
+        contact_lost_below: 0.5,
+    };
+    assert_eq!(limits.check_force(100.0), Ok(100.0));
+    assert_eq!(limits.check_force(300.0), Err(LimitError::Force(300.0, 250.0)));
+    assert_eq!(limits.check_force(-1.0), Err(LimitError::Force(-1.0, 250.0)));
+    assert_eq!(limits.check_force(f64::NAN), Err(LimitError::NonFinite));
+    assert!(limits.check_deformation(0.07).is_err());
+    let mut limiter = TorqueLimiter::new();
+    let mut tau = vec![0.0; 7];
+    limiter.apply(&limits, &mut tau, 1e-3);
+    // A step of 50 N·m is spread over ticks at 1000 N·m/s: 1 N·m per 1 ms tick.
+    let mut step = vec![50.0, -50.0, 0.0, 0.0, 0.0, 200.0, f64::NAN];
+    limiter.apply(&limits, &mut step, 1e-3);
+    assert_eq!(step, vec![1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    for _ in 0..100 {
+        let mut big = vec![500.0; 7];
+        limiter.apply(&limits, &mut big, 1e-3);
+        assert!(big.iter().zip(&limits.joint_torque).all(|(t, l)| t.abs() <= *l));
+    }
+    assert!(limiter.clipped >= 100);
+}

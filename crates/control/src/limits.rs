@@ -1,0 +1,99 @@
+//! Safety limits the controller never bypasses: commands outside the surface's force or deformation
+//! range are refused (not silently clipped), torques are clipped to the joint limits and their change
+//! per second is bounded, and losing contact while pushing stops the push.
+
+/// Limits of one robot on one surface.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Limits {
+    /// |τ_i| [N·m] (the URDF's effort limits).
+    pub joint_torque: Vec<f64>,
+    /// |dτ_i/dt| [N·m/s]: no torque step above this rate.
+    pub torque_rate: f64,
+    /// Largest force command [N].
+    pub max_force: f64,
+    /// Largest deformation command [m].
+    pub max_deformation: f64,
+    /// Below this normal force while a force is commanded, contact counts as lost [N].
+    pub contact_lost_below: f64,
+}
+
+/// Why a command was refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LimitError {
+    #[error("force command {0} N is outside [0, {1}] N")]
+    Force(f64, f64),
+    #[error("the force command needs a deformation of {0} m, beyond the surface's limit of {1} m")]
+    Deformation(f64, f64),
+    #[error("the command is not a finite number")]
+    NonFinite,
+}
+
+impl Limits {
+    pub fn check_force(&self, force: f64) -> Result<f64, LimitError> {
+        if !force.is_finite() {
+            return Err(LimitError::NonFinite);
+        }
+        if !(0.0..=self.max_force).contains(&force) {
+            return Err(LimitError::Force(force, self.max_force));
+        }
+        Ok(force)
+    }
+
+    pub fn check_deformation(&self, z: f64) -> Result<f64, LimitError> {
+        if !z.is_finite() {
+            return Err(LimitError::NonFinite);
+        }
+        if z > self.max_deformation {
+            return Err(LimitError::Deformation(z, self.max_deformation));
+        }
+        Ok(z)
+    }
+}
+
+/// Clips torques to the joint limits and to the rate limit relative to the previous tick's output.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TorqueLimiter {
+    last: Option<Vec<f64>>,
+    /// Ticks in which something was clipped.
+    pub clipped: u64,
+}
+
+impl TorqueLimiter {
+    pub fn new() -> Self {
+        Self { last: None, clipped: 0 }
+    }
+
+    /// Limits `tau` in place for a tick of `dt` seconds. A non-finite torque is replaced by the previous
+    /// output (or zero) and counted, never passed on.
+    pub fn apply(&mut self, limits: &Limits, tau: &mut [f64], dt: f64) {
+        let mut clipped = false;
+        for (i, t) in tau.iter_mut().enumerate() {
+            let previous = self.last.as_ref().map(|l| l[i]);
+            if !t.is_finite() {
+                *t = previous.unwrap_or(0.0);
+                clipped = true;
+            }
+            let limit = limits.joint_torque[i];
+            let mut v = t.clamp(-limit, limit);
+            if let Some(p) = previous {
+                let step = limits.torque_rate * dt;
+                v = v.clamp(p - step, p + step);
+            }
+            clipped |= v != *t;
+            *t = v;
+        }
+        self.clipped += u64::from(clipped);
+        self.last = Some(tau.to_vec());
+    }
+
+    /// Forget the previous output (e.g. after the driver held position).
+    pub fn reset(&mut self) {
+        self.last = None;
+    }
+}
+
+impl Default for TorqueLimiter {
+    fn default() -> Self {
+        Self::new()
+    }
+}

@@ -1,0 +1,241 @@
+//! The deformation controller (seed 001) as a node struct: one `tick` per joint-state measurement.
+//!
+//! Before contact the hand descends along the contact direction n at a slow, constant speed; the onset
+//! detector fixes the contact position d. In contact a force command becomes a deformation command
+//! through the inverse of the current contact model, a quintic joins the present deformation to it, the
+//! deformation law turns the reference into z̈_des along n, the hand's position across the surface and its
+//! orientation are held by PD laws, and eq. 15 turns the task acceleration into joint torques with a
+//! null-space joint impedance holding the initial posture. Every output passes the torque limiter.
+
+use nalgebra::{DVector, UnitQuaternion, Vector3, Vector6};
+use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
+use softcontact_control::{
+    Damping, DeformationGains, LimitError, Limits, Quintic, Reference, TorqueLimiter, deformation_acceleration,
+    task_space_torque,
+};
+use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControllerConfig {
+    /// Contact direction n in the world: the way the hand moves to compress the surface.
+    pub normal: Vector3<f64>,
+    pub gains: DeformationGains,
+    /// PD of the hand's position across the surface [1/s², 1/s].
+    pub lateral: (f64, f64),
+    /// PD of the hand's orientation [1/s², 1/s].
+    pub orientation: (f64, f64),
+    /// Null-space joint impedance holding the initial posture [N·m/rad, N·m·s/rad].
+    pub posture_stiffness: [f64; 7],
+    pub posture_damping: [f64; 7],
+    /// Descent speed before contact [m/s].
+    pub approach_speed: f64,
+    pub onset: OnsetConfig,
+    pub limits: Limits,
+    /// Control period [s].
+    pub period: f64,
+}
+
+impl ControllerConfig {
+    /// Seed 001's set-up on the LWR IV: surface below, 1 kHz.
+    pub fn lwr4(max_force: f64, max_deformation: f64) -> Self {
+        let model = lwr4::model();
+        Self {
+            normal: Vector3::new(0.0, 0.0, -1.0),
+            gains: DeformationGains::critically_damped(20.0),
+            lateral: (400.0, 40.0),
+            orientation: (400.0, 40.0),
+            posture_stiffness: [20.0, 20.0, 10.0, 10.0, 2.0, 1.0, 0.5],
+            posture_damping: [2.0, 2.0, 1.0, 1.0, 0.2, 0.05, 0.02],
+            approach_speed: 0.01,
+            onset: OnsetConfig::default(),
+            limits: Limits {
+                joint_torque: model.joints.iter().map(|j| j.limits.effort).collect(),
+                torque_rate: 2000.0,
+                max_force,
+                max_deformation,
+                contact_lost_below: 0.5,
+            },
+            period: 1e-3,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ControlError {
+    #[error(transparent)]
+    Limit(#[from] LimitError),
+    #[error(transparent)]
+    Contact(#[from] softcontact_contact::ContactError),
+    #[error(transparent)]
+    Dynamics(#[from] softcontact_dynamics::Error),
+    #[error("no contact yet: force commands wait for the onset")]
+    NoContact,
+    #[error("move duration must be positive")]
+    Duration,
+}
+
+/// What the controller reports each tick (/deformation_controller/state).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ControllerState {
+    pub in_contact: bool,
+    pub contact_lost: bool,
+    pub f_cmd: f64,
+    pub z_cmd: f64,
+    pub zdot_cmd: f64,
+    pub z: f64,
+    pub zdot: f64,
+    pub f: f64,
+    /// The model's force at the commanded deformation and rate.
+    pub f_predicted: f64,
+}
+
+pub struct DeformationController {
+    config: ControllerConfig,
+    model: Model,
+    data: Data,
+    tool: FrameId,
+    contact_model: ContactModel,
+    onset: OnsetDetector,
+    /// d·n and the estimated offset of the true surface from it.
+    contact_level: Option<f64>,
+    offset: f64,
+    start: Option<(Vector3<f64>, UnitQuaternion<f64>, [f64; 7])>,
+    time: f64,
+    plan: Option<(Quintic, f64)>,
+    f_cmd: f64,
+    contact_lost: bool,
+    limiter: TorqueLimiter,
+}
+
+impl DeformationController {
+    pub fn new(config: ControllerConfig, contact_model: ContactModel) -> Result<Self, ControlError> {
+        let model = lwr4::model();
+        let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::Duration)?;
+        Ok(Self {
+            data: model.data(),
+            tool: model.frame_id(lwr4::TOOL_FRAME)?,
+            onset: OnsetDetector::new(config.onset)?,
+            config: ControllerConfig { normal, ..config },
+            model,
+            contact_model,
+            contact_level: None,
+            offset: 0.0,
+            start: None,
+            time: 0.0,
+            plan: None,
+            f_cmd: 0.0,
+            contact_lost: false,
+            limiter: TorqueLimiter::new(),
+        })
+    }
+
+    /// Adopts a new contact model and the estimated offset of the surface from the onset position (the
+    /// true surface lies at d + offset·n; negative when the onset fired late, as on a soft sponge).
+    pub fn set_contact_model(&mut self, model: ContactModel, offset: f64) {
+        self.contact_model = model;
+        self.offset = offset;
+    }
+
+    pub fn contact_model(&self) -> &ContactModel {
+        &self.contact_model
+    }
+
+    fn reference(&self) -> Reference {
+        self.plan.map(|(q, t0)| q.at(self.time - t0)).unwrap_or_default()
+    }
+
+    /// A new force command, reached by a quintic of `duration` seconds from the present reference.
+    pub fn command_force(&mut self, force: f64, duration: f64) -> Result<(), ControlError> {
+        let force = self.config.limits.check_force(force)?;
+        if !(duration.is_finite() && duration > 0.0) {
+            return Err(ControlError::Duration);
+        }
+        if self.contact_level.is_none() {
+            return Err(ControlError::NoContact);
+        }
+        let z = self.config.limits.check_deformation(self.contact_model.deformation_for_force(force)?)?;
+        let from = self.reference();
+        let to = Reference { position: z, ..Default::default() };
+        self.plan = Some((Quintic::new(from, to, duration).ok_or(ControlError::Duration)?, self.time));
+        self.f_cmd = force;
+        self.contact_lost = false;
+        Ok(())
+    }
+
+    /// One control tick: total joint torques (gravity included) for the measured joint state, the
+    /// measured normal force f and the contact force on the hand in the world.
+    pub fn tick(
+        &mut self,
+        q: &[f64; 7],
+        dq: &[f64; 7],
+        normal_force: f64,
+        contact_force: &Vector3<f64>,
+    ) -> Result<([f64; 7], ControllerState), ControlError> {
+        self.time += self.config.period;
+        let n = self.config.normal;
+        self.model.forward_kinematics(&mut self.data, q);
+        let pose = self.model.frame_pose(&self.data, self.tool);
+        let r = pose.translation.vector;
+        let start = *self.start.get_or_insert((r, pose.rotation, *q));
+        let twist = self.model.frame_velocity(&mut self.data, q, dq, self.tool);
+        let (v, w) = (twist.fixed_rows::<3>(0).into_owned(), twist.fixed_rows::<3>(3).into_owned());
+        let along = r.dot(&n);
+        if let Some(OnsetEvent::Contact { position }) = self.onset.update(along, normal_force)?
+            && self.contact_level.is_none()
+        {
+            self.contact_level = Some(position);
+            // Hold where contact was made until a force is commanded.
+            let z = along - position - self.offset;
+            let hold = Reference { position: z, ..Default::default() };
+            self.plan = Some((Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?, self.time));
+        }
+
+        let mut state = ControllerState { f: normal_force, f_cmd: self.f_cmd, ..Default::default() };
+        let z_accel = match self.contact_level {
+            None => {
+                // Approach: a constant descent along n from where the hand started.
+                let target = start.0.dot(&n) + self.config.approach_speed * self.time;
+                let g = &self.config.gains;
+                g.stiffness * (target - along) + g.damping * (self.config.approach_speed - v.dot(&n))
+            }
+            Some(level) => {
+                state.in_contact = true;
+                state.z = along - level - self.offset;
+                state.zdot = v.dot(&n);
+                if self.f_cmd > 0.0 && normal_force < self.config.limits.contact_lost_below && !self.contact_lost {
+                    // The surface is gone while we push: stop pushing, hold here.
+                    self.contact_lost = true;
+                    let hold = Reference { position: state.z, ..Default::default() };
+                    self.plan = Some((Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?, self.time));
+                    self.f_cmd = 0.0;
+                }
+                let reference = self.reference();
+                state.z_cmd = reference.position;
+                state.zdot_cmd = reference.velocity;
+                state.f_predicted = self.contact_model.force(reference.position, reference.velocity).unwrap_or(0.0);
+                deformation_acceleration(&self.config.gains, &reference, state.z, state.zdot)
+            }
+        };
+        state.contact_lost = self.contact_lost;
+
+        // Across the surface and in orientation: hold the start.
+        let (kp, kd) = self.config.lateral;
+        let lateral_error = (start.0 - r) - (start.0 - r).dot(&n) * n;
+        let lateral_velocity = v - v.dot(&n) * n;
+        let linear = z_accel * n + kp * lateral_error - kd * lateral_velocity;
+        let (ko, kw) = self.config.orientation;
+        let rotation_error = (start.1 * pose.rotation.inverse()).scaled_axis();
+        let angular = ko * rotation_error - kw * w;
+        let acceleration = Vector6::new(linear.x, linear.y, linear.z, angular.x, angular.y, angular.z);
+
+        let tau0 = DVector::from_fn(7, |i, _| {
+            self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i]
+        });
+        let wrench = Vector6::new(contact_force.x, contact_force.y, contact_force.z, 0.0, 0.0, 0.0);
+        let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
+        let out = task_space_torque(&terms, &acceleration, &wrench, &tau0, &Damping::default());
+        let mut tau: [f64; 7] = std::array::from_fn(|i| out.tau[i]);
+        self.limiter.apply(&self.config.limits, &mut tau, self.config.period);
+        Ok((tau, state))
+    }
+}
