@@ -51,6 +51,14 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 5)]
         reps: usize,
     },
+    /// The deformation controller's tick in contact: FK, J, J̇q̇, M, M⁻¹, h, the deformation law, eq. 15
+    /// and the limiter.
+    Controller {
+        #[arg(long, default_value_t = 200_000)]
+        calls: usize,
+        #[arg(long, default_value_t = 5)]
+        reps: usize,
+    },
     /// Contact estimation: sliding-window update per sample, full refit of every kind with 5-fold
     /// cross-validation over the window, exponent and contact-offset estimation.
     Contact {
@@ -171,7 +179,39 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Contact { window, reps, json } => run_contact(window, reps, json),
         BenchCommand::Sim { seconds, reps } => run_sim(seconds, reps),
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
+        BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
     }
+}
+
+/// Times `DeformationController::tick` on states of a hand pressing the simulated sponge.
+fn run_controller(calls: usize, reps: usize) -> anyhow::Result<()> {
+    use nalgebra::Vector3;
+    use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
+    if calls == 0 || reps == 0 {
+        bail!("--calls and --reps must be positive");
+    }
+    let sponge = softcontact_sim::sponge();
+    let mut controller = DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), sponge)?;
+    // A descent onto the surface: states the controller sees around contact.
+    let mut q = softcontact_sim::DEFAULT_Q;
+    let dq = [0.0, 0.01, 0.0, -0.02, 0.0, 0.01, 0.0];
+    let mut states = Vec::new();
+    for i in 0..2000 {
+        q[1] += 1e-5;
+        q[3] -= 2e-5;
+        let f = if i > 500 { (i - 500) as f64 * 0.1 } else { 0.0 };
+        states.push((q, dq, f));
+    }
+    for (q, dq, f) in &states {
+        controller.tick(q, dq, *f, &Vector3::new(0.0, 0.0, *f))?;
+    }
+    controller.command_force(140.0, 2.0)?;
+    let ns = best_ns(calls, reps, |i| {
+        let (q, dq, f) = &states[500 + i % 1500];
+        black_box(controller.tick(q, dq, *f, &Vector3::new(0.0, 0.0, *f)).map(|(t, _)| t[0]).ok());
+    });
+    println!("deformation controller tick in contact (all dynamics terms, eq. 15, limits): {ns:.0} ns (goal < 10 µs)");
+    Ok(())
 }
 
 /// Times `LwrDriver::handle` + reply encoding on measurements recorded from the simulator in command
