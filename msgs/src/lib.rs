@@ -248,3 +248,8 @@ pub mod std_srvs {
     impl Message for TriggerRequest {}
     impl Message for TriggerResponse {}
 }
+
+/// The project's own messages, generated from msg/*.msg by build.rs.
+pub mod softcontact_msgs {
+    include!(concat!(env!("OUT_DIR"), "/softcontact_msgs.rs"));
+}

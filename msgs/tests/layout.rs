@@ -1,0 +1,59 @@
+//! The types generated from msg/*.msg encode in CDR exactly as the .msg field list says, which is what
+//! rclcpp/rclpy peers decode.
+
+use ros2_client::dds::rustdds::cdr_encoding::{from_bytes, to_vec};
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::softcontact_msgs::{ContactModel, ContactState, ControllerState, ForceCommand};
+use softcontact_msgs::std_msgs::Header;
+
+type Le = byteorder::LittleEndian;
+
+#[test]
+fn contact_state_lays_out_in_msg_field_order() {
+    let msg = ContactState {
+        header: Header { stamp: Time { sec: 7, nanosec: 9 }, frame_id: "world".into() },
+        deformation: 0.02,
+        deformation_rate: -0.1,
+        normal_force: 140.0,
+        in_contact: true,
+    };
+    // By hand: Time (i32, u32), string (u32 length incl. NUL, bytes), pad to 8, three f64, bool.
+    let mut want = Vec::new();
+    want.extend_from_slice(&7i32.to_le_bytes());
+    want.extend_from_slice(&9u32.to_le_bytes());
+    want.extend_from_slice(&6u32.to_le_bytes());
+    want.extend_from_slice(b"world\0");
+    while want.len() % 8 != 0 {
+        want.push(0);
+    }
+    for v in [0.02f64, -0.1, 140.0] {
+        want.extend_from_slice(&v.to_le_bytes());
+    }
+    want.push(1);
+    assert_eq!(to_vec::<_, Le>(&msg).unwrap(), want);
+}
+
+#[test]
+fn every_project_message_round_trips_through_cdr() {
+    let model = ContactModel {
+        kind: "azad_featherstone".into(),
+        stiffness: 25_044.0,
+        damping: 1100.0,
+        exponent_a: 1.5,
+        exponent_b: 0.5,
+        exponent_c: 1.0,
+        candidate_kinds: vec!["kelvin_voigt".into(), "hunt_crossley".into(), "azad_featherstone".into()],
+        candidate_fitness_mean: vec![0.965, 0.981, 0.986],
+        candidate_fitness_std: vec![0.001; 3],
+        window_fill: 1.0,
+        stiffness_excited: true,
+        damping_excited: false,
+        ..Default::default()
+    };
+    let bytes = to_vec::<_, Le>(&model).unwrap();
+    assert_eq!(from_bytes::<ContactModel, Le>(&bytes).unwrap().0, model);
+    let cmd = ForceCommand { force: 140.0, duration: 2.0 };
+    assert_eq!(to_vec::<_, Le>(&cmd).unwrap().len(), 16);
+    let state = ControllerState { f_cmd: 140.0, z: 0.03, contact_lost: true, ..Default::default() };
+    assert_eq!(from_bytes::<ControllerState, Le>(&to_vec::<_, Le>(&state).unwrap()).unwrap().0, state);
+}
