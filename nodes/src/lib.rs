@@ -2,6 +2,7 @@
 //! ([`lwr_driver::LwrDriver`], [`ft_sensor::FtSensorNode`]); [`udp`] and [`sim_arm`] are the socket
 //! ends, kept thin, so the same logic runs against the real KRC and Net F/T box or the simulator.
 
+pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod lwr_driver;
