@@ -10,8 +10,8 @@
 use nalgebra::{DVector, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
-    Damping, DeformationGains, LimitError, Limits, Quintic, Reference, TorqueLimiter, deformation_acceleration,
-    task_space_torque,
+    Damping, DeformationGains, LimitError, Limits, Quintic, Reference, TaskTorque, TorqueLimiter,
+    deformation_acceleration,
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 
@@ -72,6 +72,8 @@ pub enum ControlError {
     NoContact,
     #[error("move duration must be positive")]
     Duration,
+    #[error("the contact normal must not be zero")]
+    ZeroNormal,
 }
 
 /// What the controller reports each tick (/deformation_controller/state).
@@ -105,12 +107,15 @@ pub struct DeformationController {
     f_cmd: f64,
     contact_lost: bool,
     limiter: TorqueLimiter,
+    /// Buffers of eq. 15 and of the posture torque: the tick allocates nothing.
+    torque: TaskTorque,
+    tau0: DVector<f64>,
 }
 
 impl DeformationController {
     pub fn new(config: ControllerConfig, contact_model: ContactModel) -> Result<Self, ControlError> {
         let model = lwr4::model();
-        let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::Duration)?;
+        let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::ZeroNormal)?;
         Ok(Self {
             data: model.data(),
             tool: model.frame_id(lwr4::TOOL_FRAME)?,
@@ -126,6 +131,8 @@ impl DeformationController {
             f_cmd: 0.0,
             contact_lost: false,
             limiter: TorqueLimiter::new(),
+            torque: TaskTorque::new(7),
+            tau0: DVector::zeros(7),
         })
     }
 
@@ -228,13 +235,14 @@ impl DeformationController {
         let angular = ko * rotation_error - kw * w;
         let acceleration = Vector6::new(linear.x, linear.y, linear.z, angular.x, angular.y, angular.z);
 
-        let tau0 = DVector::from_fn(7, |i, _| {
-            self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i]
-        });
+        for i in 0..7 {
+            self.tau0[i] =
+                self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i];
+        }
         let wrench = Vector6::new(contact_force.x, contact_force.y, contact_force.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
-        let out = task_space_torque(&terms, &acceleration, &wrench, &tau0, &Damping::default());
-        let mut tau: [f64; 7] = std::array::from_fn(|i| out.tau[i]);
+        self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
+        let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
         self.limiter.apply(&self.config.limits, &mut tau, self.config.period);
         Ok((tau, state))
     }

@@ -83,7 +83,10 @@ impl TorqueLimiter {
             *t = v;
         }
         self.clipped += u64::from(clipped);
-        self.last = Some(tau.to_vec());
+        match self.last.as_mut() {
+            Some(last) if last.len() == tau.len() => last.copy_from_slice(tau),
+            _ => self.last = Some(tau.to_vec()),
+        }
     }
 
     /// Forget the previous output (e.g. after the driver held position).

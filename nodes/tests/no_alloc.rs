@@ -1,0 +1,69 @@
+//! The controller's 1 kHz tick allocates nothing after start-up: counted by a global allocator that
+//! counts this thread's allocations while a flag is set.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use nalgebra::Vector3;
+use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.with(|c| c.get()) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.with(|c| c.get()) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn the_controller_tick_does_not_allocate() {
+    let mut controller =
+        DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge()).unwrap();
+    let mut q = softcontact_sim::DEFAULT_Q;
+    let dq = [0.0, 0.01, 0.0, -0.02, 0.0, 0.01, 0.0];
+    // Start-up and contact: the first ticks may allocate (nothing is preallocated before the first state).
+    for i in 0..600 {
+        q[1] += 1e-5;
+        let f = if i > 300 { (i - 300) as f64 * 0.1 } else { 0.0 };
+        controller.tick(&q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+    }
+    controller.command_force(120.0, 2.0).unwrap();
+    COUNTING.with(|c| c.set(true));
+    let mut sum = 0.0;
+    for i in 0..2000 {
+        q[3] -= 1e-6;
+        let f = 30.0 + i as f64 * 0.01;
+        let (tau, state) = controller.tick(&q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+        sum += tau[1] + state.z_cmd;
+    }
+    COUNTING.with(|c| c.set(false));
+    assert!(sum.is_finite());
+    assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 0, "allocations in 2000 ticks in contact");
+    // Positive control: the counter does see an allocation on this thread.
+    COUNTING.with(|c| c.set(true));
+    let probe: Vec<u64> = Vec::with_capacity(std::hint::black_box(16));
+    COUNTING.with(|c| c.set(false));
+    drop(std::hint::black_box(probe));
+    assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 1, "the counter counts");
+}
