@@ -28,6 +28,30 @@ struct Loop {
 }
 
 impl Loop {
+    /// The cell, the nodes and the controller, with the F/T node set up for the LWR's hand.
+    fn new(sim: SimConfig, controller: DeformationController) -> Self {
+        let model = lwr4::model();
+        Loop {
+            sim: Simulator::new(sim).unwrap(),
+            driver: LwrDriver::new(DriverConfig::default()),
+            ft: FtSensorNode::new(FtConfig {
+                calibration: Calibration::gamma_si_130_10(),
+                tool: lwr4::tool_load(),
+                gravity: Vector3::new(0.0, 0.0, -9.81),
+                low_pass: None,
+                sample_rate: 1000.0,
+            })
+            .unwrap(),
+            controller,
+            estimator: ContactEstimatorNode::new(EstimatorConfig::default()).unwrap(),
+            data: model.data(),
+            sensor: model.frame_id(lwr4::FT_SENSOR_FRAME).unwrap(),
+            model,
+            tared: false,
+            commanding: 0,
+        }
+    }
+
     /// One 1 ms cycle through the wire formats; returns the controller's state once commanding.
     fn cycle(&mut self) -> Option<ControllerState> {
         let m = self.sim.measurement().encode();
@@ -65,29 +89,9 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
     let sponge = softcontact_sim::sponge();
     let mut config = SimConfig::above_surface(sponge.clone(), 11);
     config.sensor = softcontact_sim::FtSensorConfig::gamma();
-    let model = lwr4::model();
-    let sensor = model.frame_id(lwr4::FT_SENSOR_FRAME).unwrap();
     // The controller starts with a rough guess of the surface (half the stiffness): it learns it.
     let guess = softcontact_contact::ContactModel::new(Kind::AzadFeatherstone, 12_000.0, 0.0).unwrap();
-    let mut l = Loop {
-        sim: Simulator::new(config).unwrap(),
-        driver: LwrDriver::new(DriverConfig::default()),
-        ft: FtSensorNode::new(FtConfig {
-            calibration: Calibration::gamma_si_130_10(),
-            tool: lwr4::tool_load(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            low_pass: None,
-            sample_rate: 1000.0,
-        })
-        .unwrap(),
-        controller: DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), guess).unwrap(),
-        estimator: ContactEstimatorNode::new(EstimatorConfig::default()).unwrap(),
-        data: model.data(),
-        model,
-        sensor,
-        tared: false,
-        commanding: 0,
-    };
+    let mut l = Loop::new(config, DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), guess).unwrap());
     // Approach until contact (the hand starts 4 cm above the sponge and descends at 1 cm/s).
     let mut cycles = 0;
     while !l.cycle().is_some_and(|s| s.in_contact) {
@@ -150,27 +154,8 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
 fn losing_the_surface_stops_the_push() {
     let mut config = SimConfig::above_surface(softcontact_sim::dice(), 12);
     config.sensor = softcontact_sim::FtSensorConfig::ideal();
-    let model = lwr4::model();
-    let sensor = model.frame_id(lwr4::FT_SENSOR_FRAME).unwrap();
-    let mut l = Loop {
-        sim: Simulator::new(config).unwrap(),
-        driver: LwrDriver::new(DriverConfig::default()),
-        ft: FtSensorNode::new(FtConfig {
-            calibration: Calibration::gamma_si_130_10(),
-            tool: lwr4::tool_load(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            low_pass: None,
-            sample_rate: 1000.0,
-        })
-        .unwrap(),
-        controller: DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap(),
-        estimator: ContactEstimatorNode::new(EstimatorConfig::default()).unwrap(),
-        data: model.data(),
-        model,
-        sensor,
-        tared: false,
-        commanding: 0,
-    };
+    let controller = DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap();
+    let mut l = Loop::new(config, controller);
     while !l.cycle().is_some_and(|s| s.in_contact) {}
     assert!(l.controller.command_force(500.0, 2.0).is_err(), "beyond the surface's force limit");
     l.controller.command_force(60.0, 2.0).unwrap();
