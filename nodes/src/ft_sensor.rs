@@ -170,3 +170,83 @@ impl FtSensorNode {
         Ok(FtOutput { raw, compensated, status: record.status, invalid, rdt_sequence: record.rdt_sequence })
     }
 }
+
+/// The `ft_sensor` node's parameters (config/ft_sensor.yaml).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// The Net F/T box's RDT address.
+    pub sensor: std::net::SocketAddr,
+    /// Counts per force unit and per torque unit, and the units, as the box's netftapi2.xml gives them.
+    pub counts_per_force: f64,
+    pub counts_per_torque: f64,
+    pub force_unit: String,
+    pub torque_unit: String,
+    /// Low-pass cut-off [Hz]; 0 for none.
+    pub low_pass: f64,
+    /// The box's RDT output rate [Hz].
+    pub rate: f64,
+    /// Data older than this is stale [s].
+    pub stale_after: f64,
+    /// Tare once, this long after the stream and the hand's orientation are both there [s]; negative:
+    /// never (then call /ft_sensor/bias). /ft_sensor/wrench is published only once tared.
+    pub tare_after: f64,
+    /// Service mapping of the peers' middleware: cyclone, enhanced or basic.
+    pub service_mapping: String,
+    /// Stop after this many seconds without a record (0: wait forever).
+    pub exit_after_silence: f64,
+    /// Stamp messages with the simulated time of /clock.
+    pub use_sim_time: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            sensor: ([127, 0, 0, 1], 49152).into(),
+            counts_per_force: 1e6,
+            counts_per_torque: 1e6,
+            force_unit: "N".into(),
+            torque_unit: "Nm".into(),
+            low_pass: 0.0,
+            rate: 1000.0,
+            stale_after: 0.1,
+            tare_after: 0.5,
+            service_mapping: "cyclone".into(),
+            exit_after_silence: 0.0,
+            use_sim_time: false,
+        }
+    }
+}
+
+impl Params {
+    pub fn calibration(&self) -> Result<Calibration, String> {
+        Calibration::from_settings(
+            self.counts_per_force,
+            self.counts_per_torque,
+            &self.force_unit,
+            &self.torque_unit,
+            Calibration::gamma_si_130_10().range,
+        )
+        .map_err(|e| e.to_string())
+    }
+}
+
+impl crate::params::NodeParams for Params {
+    fn validate(&self) -> Result<(), String> {
+        self.calibration()?;
+        if !(self.rate.is_finite() && (1.0..=7000.0).contains(&self.rate)) {
+            return Err(format!("rate must lie in 1..=7000 Hz (RDT), not {}", self.rate));
+        }
+        if !(self.low_pass.is_finite() && self.low_pass >= 0.0 && self.low_pass < self.rate / 2.0) {
+            return Err(format!("low_pass must lie in [0, rate/2), not {}", self.low_pass));
+        }
+        if !(self.stale_after.is_finite() && self.stale_after > 0.0) {
+            return Err("stale_after must be positive".into());
+        }
+        if !self.tare_after.is_finite() || !self.exit_after_silence.is_finite() || self.exit_after_silence < 0.0 {
+            return Err("tare_after must be finite and exit_after_silence ≥ 0".into());
+        }
+        crate::ros::service_mapping(&self.service_mapping).map_err(|e| e.to_string())?;
+        Ok(())
+    }
+}

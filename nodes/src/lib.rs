@@ -6,6 +6,8 @@ pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod lwr_driver;
+pub mod params;
 pub mod ros;
 pub mod sim_arm;
+pub mod stats;
 pub mod udp;

@@ -238,3 +238,73 @@ impl LwrDriver {
         Ok((reply, output))
     }
 }
+
+/// The `lwr_driver` node's parameters (config/lwr_driver.yaml).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK).
+    pub fri_bind: std::net::SocketAddr,
+    /// A command older than this many cycles makes the driver hold position.
+    pub watchdog_cycles: u64,
+    /// Joint stiffness of the hold [N·m/rad] and its damping ratio.
+    pub hold_stiffness: [f64; 7],
+    pub hold_damping: f64,
+    /// Hold when a joint exceeds this fraction of its velocity limit.
+    pub velocity_margin: f64,
+    /// Do not ask the KRL program to start command mode (monitor only).
+    pub monitor_only: bool,
+    /// Stop after this many seconds without a measurement (0: wait forever).
+    pub exit_after_silence: f64,
+    /// Stamp messages with the simulated time of /clock.
+    pub use_sim_time: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        let c = DriverConfig::default();
+        Self {
+            fri_bind: ([127, 0, 0, 1], 49938).into(),
+            watchdog_cycles: c.watchdog_cycles,
+            hold_stiffness: c.hold_stiffness,
+            hold_damping: c.hold_damping,
+            velocity_margin: c.velocity_margin,
+            monitor_only: false,
+            exit_after_silence: 0.0,
+            use_sim_time: false,
+        }
+    }
+}
+
+impl Params {
+    pub fn driver_config(&self) -> DriverConfig {
+        DriverConfig {
+            watchdog_cycles: self.watchdog_cycles,
+            hold_stiffness: self.hold_stiffness,
+            hold_damping: self.hold_damping,
+            request_command_mode: !self.monitor_only,
+            velocity_margin: self.velocity_margin,
+        }
+    }
+}
+
+impl crate::params::NodeParams for Params {
+    fn validate(&self) -> Result<(), String> {
+        if !(1..=100).contains(&self.watchdog_cycles) {
+            return Err(format!("watchdog_cycles must lie in 1..=100, not {}", self.watchdog_cycles));
+        }
+        if self.hold_stiffness.iter().any(|k| !(k.is_finite() && *k > 0.0)) {
+            return Err("hold_stiffness must be positive for every joint".into());
+        }
+        if !(self.hold_damping.is_finite() && self.hold_damping > 0.0 && self.hold_damping <= 1.0) {
+            return Err(format!("hold_damping is a damping ratio in (0, 1], not {}", self.hold_damping));
+        }
+        if !(self.velocity_margin > 0.0 && self.velocity_margin <= 1.0) {
+            return Err(format!("velocity_margin must lie in (0, 1], not {}", self.velocity_margin));
+        }
+        if !(self.exit_after_silence.is_finite() && self.exit_after_silence >= 0.0) {
+            return Err("exit_after_silence must be ≥ 0".into());
+        }
+        Ok(())
+    }
+}

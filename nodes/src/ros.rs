@@ -2,20 +2,97 @@
 //! per design.md (sensor streams best-effort keep-last, commands and models reliable, static frames
 //! latched), topics by their ROS 2 names and types.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use ros2_client::qos::{Durability, History, WhenFull};
-use ros2_client::{Context, ContextOptions, Name, Node, NodeName, NodeOptions, QosProfile, ServiceMapping};
+pub use ros2_client::ros2::LogLevel;
+use ros2_client::{
+    Context, ContextOptions, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile, RosoutRaw, ServiceMapping,
+};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use softcontact_msgs::RosType;
 
-/// A node on the domain of `ROS_DOMAIN_ID` (0 if unset).
+fn domain_id() -> anyhow::Result<u16> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Ok(v) if v.trim().is_empty() => Ok(0),
+        Ok(v) => v.trim().parse::<u16>().map_err(|_| anyhow::anyhow!("ROS_DOMAIN_ID `{v}` is not a domain number")),
+        Err(_) => Ok(0),
+    }
+}
+
+/// A node on the domain of `ROS_DOMAIN_ID` (0 if unset), logging to /rosout, without parameters.
 pub fn node(name: &str) -> anyhow::Result<Node> {
-    let domain = match std::env::var("ROS_DOMAIN_ID") {
-        Ok(v) => v.trim().parse::<u16>().map_err(|_| anyhow::anyhow!("ROS_DOMAIN_ID `{v}` is not a domain number"))?,
-        Err(_) => 0,
-    };
-    let context = Context::with_options(ContextOptions::new().domain_id(domain))?;
-    Ok(context.new_node(NodeName::new("/", name)?, NodeOptions::new().enable_rosout(true))?)
+    node_with_parameters(name, Vec::new())
+}
+
+/// A node on the domain of `ROS_DOMAIN_ID` that declares `parameters` and serves them through the
+/// standard parameter services (list, get, get_types, describe; set answers that a node reads its
+/// parameters at start-up). The services run on a spinner thread of their own, never in a 1 kHz path.
+pub fn node_with_parameters(name: &str, parameters: Vec<(String, ParameterValue)>) -> anyhow::Result<Node> {
+    let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?))?;
+    let serve = !parameters.is_empty();
+    // Declaring sets each value once through the validator: those are the only values it accepts.
+    let start_values = parameters.clone();
+    let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(serve).parameter_validator(
+        Box::new(move |name, value| {
+            if start_values.iter().any(|(n, v)| n == name && v == value) {
+                Ok(())
+            } else {
+                Err(format!("`{name}` is read at start-up: change the parameter file and restart"))
+            }
+        }),
+    );
+    for (n, v) in parameters {
+        options = options.declare_parameter(&n, v);
+    }
+    let mut node = context.new_node(NodeName::new("/", name)?, options)?;
+    if serve {
+        let spinner = node.spinner()?;
+        std::thread::Builder::new().name(format!("{name}-spinner")).spawn(move || {
+            if let Err(e) = futures::executor::block_on(spinner.spin()) {
+                eprintln!("parameter services stopped: {e:?}");
+            }
+        })?;
+    }
+    Ok(node)
+}
+
+/// Logs to stderr and to /rosout.
+pub fn log(node: &Node, level: LogLevel, message: &str) {
+    eprintln!("{}: {message}", RosoutRaw::base_name(node));
+    node.rosout_raw(
+        ros2_client::builtin_interfaces::Time::now(),
+        level,
+        RosoutRaw::base_name(node),
+        message,
+        file!(),
+        "",
+        line!(),
+    );
+}
+
+/// Set by SIGINT or SIGTERM: nodes finish their cycle, report and exit 0.
+pub fn shutdown_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&flag))?;
+    }
+    Ok(flag)
+}
+
+/// Whether a shutdown was asked for.
+pub fn stopping(flag: &AtomicBool) -> bool {
+    flag.load(Ordering::Relaxed)
+}
+
+/// Peak resident memory of this process [MB] (Linux `VmHWM`), for the exit report.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
 }
 
 /// Sensor streams: best effort, newest only.

@@ -197,3 +197,66 @@ impl SimArmServer {
         }
     }
 }
+
+/// The simulated surface under the hand.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SurfaceKind {
+    Sponge,
+    Dice,
+    None,
+}
+
+/// The `sim_arm` node's parameters (config/sim_arm.yaml).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Where the FRI driver listens (the KRC's FRIHOST:FRISOCK).
+    pub fri_remote: SocketAddr,
+    /// The simulated KRC's own FRI address.
+    pub fri_bind: SocketAddr,
+    /// The simulated Net F/T box's RDT address.
+    pub rdt_bind: SocketAddr,
+    pub surface: SurfaceKind,
+    /// Stop after this many simulated seconds (0: run until stopped).
+    pub seconds: f64,
+    /// Fraction of FRI datagrams lost once commanding, in each direction.
+    pub drop_rate: f64,
+    /// RDT records per second while streaming (the box's comrdtrate).
+    pub rdt_rate: f64,
+    /// Faster than real time: step as soon as the driver has answered, and publish the simulated time on
+    /// /clock (run the nodes with use_sim_time).
+    pub lockstep: bool,
+    pub seed: u64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self {
+            fri_remote: ([127, 0, 0, 1], 49938).into(),
+            fri_bind: ([127, 0, 0, 1], 0).into(),
+            rdt_bind: ([127, 0, 0, 1], 49152).into(),
+            surface: SurfaceKind::Sponge,
+            seconds: 0.0,
+            drop_rate: 0.0,
+            rdt_rate: 1000.0,
+            lockstep: false,
+            seed: 1,
+        }
+    }
+}
+
+impl crate::params::NodeParams for Params {
+    fn validate(&self) -> Result<(), String> {
+        if !(0.0..1.0).contains(&self.drop_rate) {
+            return Err(format!("drop_rate must lie in [0, 1), not {}", self.drop_rate));
+        }
+        if !(self.seconds.is_finite() && self.seconds >= 0.0) {
+            return Err("seconds must be ≥ 0".into());
+        }
+        if !(1.0..=7000.0).contains(&self.rdt_rate) {
+            return Err(format!("rdt_rate must lie in 1..=7000 Hz, not {}", self.rdt_rate));
+        }
+        Ok(())
+    }
+}

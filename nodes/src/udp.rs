@@ -2,23 +2,26 @@
 //! main loop (or a test) calls `cycle`/`receive`.
 
 use std::net::{SocketAddr, UdpSocket};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use nalgebra::UnitQuaternion;
 use softcontact_wire::rdt::{RdtCommand, Request};
 
 use crate::ft_sensor::{FtOutput, FtSensorNode};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
+use crate::stats::Histogram;
 
 /// The remote end of FRI: listens where the KRC sends, answers the sender of each measurement.
 pub struct FriClient {
     socket: UdpSocket,
     pub driver: LwrDriver,
+    /// Time from a measurement's arrival to its answer leaving [s].
+    pub reply_latency: Histogram,
 }
 
 impl FriClient {
     pub fn bind(addr: SocketAddr, driver: LwrDriver) -> std::io::Result<Self> {
-        Ok(Self { socket: UdpSocket::bind(addr)?, driver })
+        Ok(Self { socket: UdpSocket::bind(addr)?, driver, reply_latency: Histogram::new(1e-6, 20_000) })
     }
 
     pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
@@ -38,8 +41,10 @@ impl FriClient {
                 }
                 Err(e) => return Err(e),
             };
+            let arrived = Instant::now();
             if let Ok((reply, output)) = self.driver.handle(&buf[..n]) {
                 self.socket.send_to(&reply.encode(), from)?;
+                self.reply_latency.record(arrived.elapsed().as_secs_f64());
                 return Ok(Some(output));
             }
         }

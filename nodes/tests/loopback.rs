@@ -323,15 +323,8 @@ fn the_sim_arm_process_serves_fri_to_the_driver() {
     let _rt = one_at_a_time();
     let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim_arm"))
-        .args([
-            "--fri-remote",
-            &client.local_addr().unwrap().to_string(),
-            "--rdt-bind",
-            "127.0.0.1:0",
-            "--surface",
-            "none",
-        ])
-        .args(["--seconds", "1.2"])
+        .args(["-p", &format!("fri_remote:={}", client.local_addr().unwrap())])
+        .args(["-p", "rdt_bind:=127.0.0.1:0", "-p", "surface:=none", "-p", "seconds:=1.2"])
         .spawn()
         .unwrap();
     let outputs = drive(&mut client, |out| Some(gravity(&out.q)));

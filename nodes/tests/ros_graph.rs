@@ -71,9 +71,9 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
         .unwrap();
 
     let _procs = Processes(vec![
-        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["--surface", "dice", "--seconds", "8"]),
-        spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["--exit-after-silence", "1"]),
-        spawn(env!("CARGO_BIN_EXE_ft_sensor"), &["--exit-after-silence", "1"]),
+        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=8"]),
+        spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "exit_after_silence:=1"]),
+        spawn(env!("CARGO_BIN_EXE_ft_sensor"), &["-p", "exit_after_silence:=1", "-p", "tare_after:=-1"]),
     ]);
 
     let model = lwr4::model();
@@ -158,10 +158,12 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
     let mut node = ros::node("lockstep_test").unwrap();
     let clock = ros::subscription::<Clock>(&mut node, "/clock", ros::reliable_qos()).unwrap();
     let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
-    let mut driver = spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["--use-sim-time", "--exit-after-silence", "1"]);
+    let mut driver =
+        spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "use_sim_time:=true", "-p", "exit_after_silence:=1"]);
     std::thread::sleep(Duration::from_millis(500)); // discovery
     let start = Instant::now();
-    let mut sim = spawn(env!("CARGO_BIN_EXE_sim_arm"), &["--lockstep", "--surface", "none", "--seconds", "10"]);
+    let mut sim =
+        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "lockstep:=true", "-p", "surface:=none", "-p", "seconds:=10"]);
     let (mut latest_clock, mut latest_stamp, mut stamps) = (0.0f64, 0.0f64, 0usize);
     let status = loop {
         while let Ok(Some((c, _))) = clock.take() {

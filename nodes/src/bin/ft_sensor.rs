@@ -3,7 +3,6 @@
 //! /lwr/ee_pose), serves /ft_sensor/bias (std_srvs/Trigger: software tare), and reports stale,
 //! saturated or faulty data on /diagnostics.
 
-use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
@@ -15,44 +14,16 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{self as geo, PoseStamped, WrenchStamped};
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
-use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
-use softcontact_nodes::ros;
+use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
+use softcontact_nodes::params::{self, ParamArgs};
+use softcontact_nodes::ros::{self, LogLevel};
 use softcontact_nodes::udp::RdtClient;
-use softcontact_wire::rdt::Calibration;
 
 #[derive(Parser)]
-#[command(version, about = "ATI Net F/T over RDT, as a ROS 2 node")]
+#[command(version, about = "ATI Net F/T over RDT, as a ROS 2 node (parameters: config/ft_sensor.yaml)")]
 struct Args {
-    /// The Net F/T box's RDT address.
-    #[arg(long, default_value = "127.0.0.1:49152")]
-    sensor: SocketAddr,
-    /// Counts per force unit and per torque unit, and the units, as netftapi2.xml gives them.
-    #[arg(long, default_value_t = 1e6)]
-    counts_per_force: f64,
-    #[arg(long, default_value_t = 1e6)]
-    counts_per_torque: f64,
-    #[arg(long, default_value = "N")]
-    force_unit: String,
-    #[arg(long, default_value = "Nm")]
-    torque_unit: String,
-    /// Low-pass cut-off [Hz]; none by default.
-    #[arg(long)]
-    low_pass: Option<f64>,
-    /// The box's RDT output rate [Hz].
-    #[arg(long, default_value_t = 1000.0)]
-    rate: f64,
-    /// Data older than this is stale [s].
-    #[arg(long, default_value_t = 0.1)]
-    stale_after: f64,
-    /// Service mapping of the peers' middleware: cyclone, enhanced or basic.
-    #[arg(long, default_value = "cyclone")]
-    service_mapping: String,
-    /// Stop after this many seconds without a record (0: wait forever).
-    #[arg(long, default_value_t = 0.0)]
-    exit_after_silence: f64,
-    /// Stamp messages with the simulated time of /clock.
-    #[arg(long)]
-    use_sim_time: bool,
+    #[command(flatten)]
+    params: ParamArgs,
 }
 
 fn wrench(frame: &str, w: &[f64; 6], stamp: Time) -> WrenchStamped {
@@ -66,30 +37,24 @@ fn wrench(frame: &str, w: &[f64; 6], stamp: Time) -> WrenchStamped {
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
-    let calibration = Calibration::from_settings(
-        args.counts_per_force,
-        args.counts_per_torque,
-        &args.force_unit,
-        &args.torque_unit,
-        Calibration::gamma_si_130_10().range,
-    )?;
+    let (p, declared) = params::load::<Params>("ft_sensor", &Args::parse().params)?;
     let config = FtConfig {
-        calibration,
+        calibration: p.calibration().map_err(anyhow::Error::msg)?,
         tool: lwr4::tool_load(),
         gravity: Vector3::new(0.0, 0.0, -9.81),
-        low_pass: args.low_pass,
-        sample_rate: args.rate,
+        low_pass: (p.low_pass > 0.0).then_some(p.low_pass),
+        sample_rate: p.rate,
     };
-    let mut client = RdtClient::connect(args.sensor, FtSensorNode::new(config).map_err(anyhow::Error::msg)?)?;
-    let mut node = ros::node("ft_sensor")?;
+    let stop = ros::shutdown_flag()?;
+    let mut client = RdtClient::connect(p.sensor, FtSensorNode::new(config).map_err(anyhow::Error::msg)?)?;
+    let mut node = ros::node_with_parameters("ft_sensor", declared)?;
     let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
     let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
     let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
     let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
-    let mut clock = ros::Clock::new(&mut node, args.use_sim_time)?;
+    let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
     let bias = node.create_server::<TriggerRequest, TriggerResponse>(
-        ros::service_mapping(&args.service_mapping)?,
+        ros::service_mapping(&p.service_mapping)?,
         &Name::new("/ft_sensor", "bias")?,
         &ServiceTypeName::new("std_srvs", "Trigger"),
         ros::reliable_qos(),
@@ -104,13 +69,16 @@ fn main() -> anyhow::Result<()> {
         * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation;
 
     client.start()?;
-    eprintln!("ft_sensor: streaming from {}, domain {}", args.sensor, node.domain_id());
+    ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
     let mut orientation: Option<UnitQuaternion<f64>> = None;
     let mut last_record = Instant::now();
     let mut last_status = 0u32;
     let mut started = Instant::now();
     let mut next_diagnostics = Instant::now();
-    loop {
+    // Tared yet? With `tare_after` < 0 the user tares through the service; until then only raw data.
+    let mut tared = p.tare_after < 0.0;
+    let mut tare_due: Option<Instant> = None;
+    while !ros::stopping(&stop) {
         while let Ok(Some((pose, _))) = poses.take() {
             let o = pose.pose.orientation;
             orientation = Some(UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z)) * tool_to_sensor);
@@ -121,14 +89,29 @@ fn main() -> anyhow::Result<()> {
             if !out.invalid {
                 let stamp = clock.now();
                 raw_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &out.raw, stamp))?;
-                if let Some(c) = out.compensated {
+                if let Some(c) = out.compensated.filter(|_| tared) {
                     wrench_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &c, stamp))?;
+                }
+            }
+        }
+        if !tared && orientation.is_some() {
+            let due = *tare_due.get_or_insert_with(|| Instant::now() + Duration::from_secs_f64(p.tare_after));
+            if Instant::now() >= due {
+                match client.node.tare(orientation.as_ref()) {
+                    Ok(b) => {
+                        tared = true;
+                        ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
+                    }
+                    Err(e) => ros::log(&node, LogLevel::Warn, &format!("tare failed: {e}")),
                 }
             }
         }
         while let Ok(Some((id, _))) = bias.receive_request() {
             let response = match client.node.tare(orientation.as_ref()) {
-                Ok(b) => TriggerResponse { success: true, message: format!("bias set to {b:?}") },
+                Ok(b) => {
+                    tared = true;
+                    TriggerResponse { success: true, message: format!("bias set to {b:?}") }
+                }
                 Err(e) => TriggerResponse { success: false, message: e },
             };
             bias.send_response(id, response)?;
@@ -139,27 +122,28 @@ fn main() -> anyhow::Result<()> {
             client.start()?;
             started = Instant::now();
         }
-        if args.exit_after_silence > 0.0 && silent > args.exit_after_silence {
-            eprintln!("ft_sensor: no record for {} s, exiting; {:?}", args.exit_after_silence, client.node.counters);
-            client.stop()?;
-            return Ok(());
+        if p.exit_after_silence > 0.0 && silent > p.exit_after_silence {
+            ros::log(&node, LogLevel::Info, &format!("no record for {} s, exiting", p.exit_after_silence));
+            break;
         }
         if Instant::now() >= next_diagnostics {
             let c = client.node.counters;
             let status = softcontact_wire::rdt::Status(last_status);
-            let (level, message) = if silent > args.stale_after {
+            let (level, message) = if silent > p.stale_after {
                 (DiagnosticStatus::STALE, format!("no record for {silent:.3} s"))
             } else if status.is_saturated() || status.is_error() {
                 (DiagnosticStatus::ERROR, status.describe().join(", "))
             } else if orientation.is_none() {
                 (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
+            } else if !tared {
+                (DiagnosticStatus::WARN, "not tared yet: /ft_sensor/wrench waits".into())
             } else {
                 (DiagnosticStatus::OK, "streaming".into())
             };
             diag.publish(ros::diagnostics(
                 clock.now(),
                 "ft_sensor: RDT",
-                &args.sensor.to_string(),
+                &p.sensor.to_string(),
                 level,
                 message,
                 &[
@@ -174,4 +158,7 @@ fn main() -> anyhow::Result<()> {
             next_diagnostics += Duration::from_secs(1);
         }
     }
+    client.stop()?;
+    eprintln!("ft_sensor: exit: {:?}; peak RSS {:.1} MB", client.node.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
+    Ok(())
 }

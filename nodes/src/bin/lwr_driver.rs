@@ -3,7 +3,6 @@
 //! /lwr/ee_twist, /tf and /tf_static, takes /lwr/joint_torque_command (effort = total torque, gravity
 //! included), and reports its counters on /diagnostics once a second.
 
-use std::net::SocketAddr;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
@@ -17,28 +16,21 @@ use softcontact_msgs::geometry_msgs::{
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::tf2_msgs::TFMessage;
-use softcontact_nodes::lwr_driver::{DriverConfig, DriverOutput, LwrDriver};
-use softcontact_nodes::ros;
+use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params};
+use softcontact_nodes::params::{self, ParamArgs};
+use softcontact_nodes::ros::{self, LogLevel};
+use softcontact_nodes::stats::Histogram;
 use softcontact_nodes::udp::FriClient;
+use softcontact_wire::fri::InterfaceState;
 
 #[derive(Parser)]
-#[command(version, about = "KUKA LWR IV joint-torque interface over FRI, as a ROS 2 node")]
+#[command(
+    version,
+    about = "KUKA LWR IV joint-torque interface over FRI, as a ROS 2 node (parameters: config/lwr_driver.yaml)"
+)]
 struct Args {
-    /// Where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK).
-    #[arg(long, default_value = "127.0.0.1:49938")]
-    fri_bind: SocketAddr,
-    /// A command older than this many cycles makes the driver hold position.
-    #[arg(long, default_value_t = 5)]
-    watchdog_cycles: u64,
-    /// Do not ask the KRL program to start command mode (monitor only).
-    #[arg(long)]
-    monitor_only: bool,
-    /// Stop after this many seconds without a measurement (0: wait forever).
-    #[arg(long, default_value_t = 0.0)]
-    exit_after_silence: f64,
-    /// Stamp messages with the simulated time of /clock.
-    #[arg(long)]
-    use_sim_time: bool,
+    #[command(flatten)]
+    params: ParamArgs,
 }
 
 fn header(frame: &str, stamp: Time) -> Header {
@@ -60,8 +52,14 @@ fn transform(parent: &str, child: &str, p: &Isometry3<f64>, stamp: Time) -> Tran
     }
 }
 
-fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>, stamp: Time) -> DiagnosticArray {
-    let c = driver.counters;
+fn diagnostics(
+    client: &FriClient,
+    command_age: &Histogram,
+    last: Option<&DriverOutput>,
+    stamp: Time,
+) -> DiagnosticArray {
+    let c = client.driver.counters;
+    let us = |s: f64| (s * 1e6).round() as u64;
     let (level, message) = match last {
         None => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
         Some(o) if o.holding => {
@@ -84,19 +82,19 @@ fn diagnostics(driver: &LwrDriver, last: Option<&DriverOutput>, stamp: Time) -> 
             ("clipped_cycles", c.clipped_cycles),
             ("overspeed_cycles", c.overspeed_cycles),
             ("commands_refused", c.commands_refused),
+            ("reply_latency_p99_us", us(client.reply_latency.quantile(0.99))),
+            ("reply_latency_max_us", us(client.reply_latency.max())),
+            ("command_age_p99_us", us(command_age.quantile(0.99))),
+            ("command_age_max_us", us(command_age.max())),
         ],
     )
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
-    let config = DriverConfig {
-        watchdog_cycles: args.watchdog_cycles,
-        request_command_mode: !args.monitor_only,
-        ..Default::default()
-    };
-    let mut client = FriClient::bind(args.fri_bind, LwrDriver::new(config))?;
-    let mut node = ros::node("lwr_driver")?;
+    let (p, declared) = params::load::<Params>("lwr_driver", &Args::parse().params)?;
+    let stop = ros::shutdown_flag()?;
+    let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
+    let mut node = ros::node_with_parameters("lwr_driver", declared)?;
     let joint_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos())?;
     let ee_pose = ros::publisher::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
     let ee_twist = ros::publisher::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
@@ -104,7 +102,7 @@ fn main() -> anyhow::Result<()> {
     let tf_static = ros::publisher::<TFMessage>(&mut node, "/tf_static", ros::latched_qos())?;
     let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
     let commands = ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
-    let mut clock = ros::Clock::new(&mut node, args.use_sim_time)?;
+    let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
     let model = lwr4::model();
@@ -121,22 +119,30 @@ fn main() -> anyhow::Result<()> {
         )],
     })?;
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
-    eprintln!("lwr_driver: FRI on {}, domain {}", client.local_addr()?, node.domain_id());
+    ros::log(&node, LogLevel::Info, &format!("ready: FRI on {}, domain {}", client.local_addr()?, node.domain_id()));
 
+    // How old the joint state behind the applied command is, each cycle (the controller stamps its
+    // command with the stamp of the joint state it answered).
+    let mut command_age = Histogram::new(1e-5, 100_000);
+    let mut command_stamp: Option<f64> = None;
     let mut last: Option<DriverOutput> = None;
     let mut next_diagnostics = Instant::now();
     let mut last_seen = Instant::now();
-    loop {
+    while !ros::stopping(&stop) {
         let output = client.cycle(Duration::from_millis(5))?;
         // Newest torque command wins; a bad one is refused and counted, the previous one stays.
         while let Ok(Some((cmd, _))) = commands.take() {
-            if let Err(e) = client.driver.set_command(&cmd.effort) {
-                eprintln!("lwr_driver: torque command refused: {e}");
+            match client.driver.set_command(&cmd.effort) {
+                Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
+                Err(e) => ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}")),
             }
         }
         if let Some(out) = output {
             last_seen = Instant::now();
             let stamp = clock.now();
+            if let Some(t) = command_stamp.filter(|_| out.state == InterfaceState::Command) {
+                command_age.record(stamp.as_secs_f64() - t);
+            }
             let h = header("world", stamp);
             joint_states.publish(JointState {
                 header: h.clone(),
@@ -160,17 +166,24 @@ fn main() -> anyhow::Result<()> {
             })?;
             tf.publish(TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &out.tool_pose, stamp)] })?;
             last = Some(out);
-        } else if args.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > args.exit_after_silence {
-            diag.publish(diagnostics(&client.driver, last.as_ref(), clock.now()))?;
-            eprintln!(
-                "lwr_driver: no measurement for {} s, exiting; {:?}",
-                args.exit_after_silence, client.driver.counters
-            );
-            return Ok(());
+        } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
+            ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));
+            break;
         }
         if Instant::now() >= next_diagnostics {
-            diag.publish(diagnostics(&client.driver, last.as_ref(), clock.now()))?;
+            diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now()))?;
             next_diagnostics += Duration::from_secs(1);
         }
     }
+    diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now()))?;
+    // The exit report: tests and `launch-scripts/sim.sh` read these lines.
+    eprintln!("lwr_driver: exit: {:?}", client.driver.counters);
+    eprintln!(
+        "lwr_driver: reply latency {}; within 200 us: {:.4} %",
+        client.reply_latency.summary(1e6, "us"),
+        client.reply_latency.fraction_within(200e-6) * 100.0
+    );
+    eprintln!("lwr_driver: command age {}", command_age.summary(1e3, "ms"));
+    eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
+    Ok(())
 }

@@ -1,62 +1,33 @@
 //! `sim_arm`: the simulated LWR IV, KRC, soft surface and Net F/T box behind the robot's and the
-//! sensor's own UDP protocols, paced in real time. Point the driver nodes at it as at the hardware.
+//! sensor's own UDP protocols, paced in real time (or in lockstep with the driver, publishing /clock).
+//! Point the driver nodes at it as at the hardware.
 
-use std::net::SocketAddr;
-
-use clap::{Parser, ValueEnum};
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use clap::Parser;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::rosgraph_msgs::Clock;
+use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros;
-use softcontact_nodes::sim_arm::{Pacing, SimArmConfig, SimArmServer};
+use softcontact_nodes::sim_arm::{Pacing, Params, SimArmConfig, SimArmServer, SurfaceKind};
 use softcontact_sim::{SimConfig, Simulator};
 
-#[derive(Clone, Copy, ValueEnum)]
-enum SurfaceKind {
-    Sponge,
-    Dice,
-    None,
-}
-
 #[derive(Parser)]
-#[command(version, about = "Simulated KUKA LWR IV + soft surface + ATI Net F/T over FRI and RDT (UDP)")]
+#[command(
+    version,
+    about = "Simulated KUKA LWR IV + soft surface + ATI Net F/T over FRI and RDT (UDP) (parameters: config/sim_arm.yaml)"
+)]
 struct Args {
-    /// Where the FRI driver listens (the KRC's FRIHOST:FRISOCK).
-    #[arg(long, default_value = "127.0.0.1:49938")]
-    fri_remote: SocketAddr,
-    /// The KRC side's own FRI address.
-    #[arg(long, default_value = "127.0.0.1:0")]
-    fri_bind: SocketAddr,
-    /// The Net F/T box's RDT address.
-    #[arg(long, default_value = "127.0.0.1:49152")]
-    rdt_bind: SocketAddr,
-    #[arg(long, value_enum, default_value = "sponge")]
-    surface: SurfaceKind,
-    /// Stop after this many simulated seconds (default: run until killed).
-    #[arg(long)]
-    seconds: Option<f64>,
-    /// Fraction of FRI datagrams lost once commanding, in each direction.
-    #[arg(long, default_value_t = 0.0)]
-    drop_rate: f64,
-    /// RDT records per second while streaming (the box's comrdtrate).
-    #[arg(long, default_value_t = 1000.0)]
-    rdt_rate: f64,
-    /// Faster than real time: step as soon as the driver has answered, and publish the simulated time
-    /// on /clock (run the nodes with --use-sim-time).
-    #[arg(long)]
-    lockstep: bool,
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    params: ParamArgs,
 }
 
 fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
-    if !(0.0..1.0).contains(&args.drop_rate) {
-        anyhow::bail!("--drop-rate must lie in [0, 1)");
-    }
-    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), args.seed);
-    match args.surface {
+    let (p, declared) = params::load::<Params>("sim_arm", &Args::parse().params)?;
+    let stop = ros::shutdown_flag()?;
+    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), p.seed);
+    match p.surface {
         SurfaceKind::Sponge => {}
         SurfaceKind::Dice => config.surface.as_mut().expect("preset has a surface").model = softcontact_sim::dice(),
         SurfaceKind::None => config.surface = None,
@@ -65,34 +36,31 @@ fn main() -> anyhow::Result<()> {
     let mut server = SimArmServer::bind(
         sim,
         SimArmConfig {
-            fri_bind: args.fri_bind,
-            fri_remote: args.fri_remote,
-            rdt_bind: args.rdt_bind,
-            measurement_loss: args.drop_rate,
-            command_loss: args.drop_rate,
-            rdt_rate: args.rdt_rate,
-            pacing: if args.lockstep {
-                Pacing::Lockstep { timeout: Duration::from_millis(50) }
-            } else {
-                Pacing::RealTime
-            },
-            seed: args.seed,
+            fri_bind: p.fri_bind,
+            fri_remote: p.fri_remote,
+            rdt_bind: p.rdt_bind,
+            measurement_loss: p.drop_rate,
+            command_loss: p.drop_rate,
+            rdt_rate: p.rdt_rate,
+            pacing: if p.lockstep { Pacing::Lockstep { timeout: Duration::from_millis(50) } } else { Pacing::RealTime },
+            seed: p.seed,
         },
     )?;
-    let clock = if args.lockstep {
-        let mut node = ros::node("sim_arm")?;
+    // The hardware it stands in for has no ROS side: a DDS participant only to publish /clock.
+    let clock = if p.lockstep {
+        let mut node = ros::node_with_parameters("sim_arm", declared)?;
         Some((ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?, node))
     } else {
         None
     };
-    eprintln!("sim_arm: FRI from {} to {}, RDT at {}", server.fri_addr()?, args.fri_remote, server.rdt_addr()?);
-    let cycles = args.seconds.map(|s| (s * 1000.0).round() as u64);
+    eprintln!("sim_arm: ready: FRI from {} to {}, RDT at {}", server.fri_addr()?, p.fri_remote, server.rdt_addr()?);
+    let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());
     let stats = server.run(|sim| {
         if let Some((publisher, _)) = &clock {
             let _ = publisher.publish(Clock { clock: Time::from_secs_f64(sim.time()) });
         }
-        cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n as f64)
+        !stop.load(Ordering::Relaxed) && cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n)
     })?;
-    eprintln!("sim_arm: {stats:?}");
+    eprintln!("sim_arm: exit: {stats:?}; peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
 }

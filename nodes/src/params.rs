@@ -1,0 +1,271 @@
+//! Node parameters the ROS 2 way: ROS 2 parameter YAML files (`node: ros__parameters: {…}`, `/**`
+//! for every node) merged in order, then `-p name:=value` overrides, read into one typed struct per node
+//! that rejects unknown names and checks its values before the node starts. The same values are
+//! declared on the node, so `ros2 param list/get/describe` show what the node runs with.
+
+use std::path::{Path, PathBuf};
+
+use ros2_client::ParameterValue;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use serde_yaml_ng::{Mapping, Value};
+
+/// The parameter arguments every node binary takes (a ROS 2 `--ros-args` subset).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ParamArgs {
+    /// ROS 2 parameter YAML file; repeat to layer files (later ones win).
+    #[arg(long = "params-file", value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// One parameter, `name:=value` (value in YAML syntax); wins over the files.
+    #[arg(short = 'p', long = "param", value_name = "NAME:=VALUE")]
+    pub overrides: Vec<String>,
+    /// Accepted for `ros2 run` compatibility; the options above follow it.
+    #[arg(long = "ros-args", hide = true)]
+    pub ros_args: bool,
+}
+
+/// A node's parameter struct: its defaults come from serde, its checks from here.
+pub trait NodeParams: Serialize + DeserializeOwned {
+    /// Every value that serde cannot check by its type alone.
+    fn validate(&self) -> Result<(), String>;
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ParamError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: not a ROS 2 parameter file: {reason}")]
+    Format { path: PathBuf, reason: String },
+    #[error("parameter override `{0}`: expected name:=value")]
+    Override(String),
+    #[error("parameters of {node}: {reason}")]
+    Invalid { node: String, reason: String },
+}
+
+/// Reads the parameters of `node` from `args`, checks them, and returns them with their flat list.
+pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Vec<(String, ParameterValue)>), ParamError> {
+    let mut merged = Mapping::new();
+    for path in &args.files {
+        let text = std::fs::read_to_string(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
+        merge(&mut merged, node_section(node, path, &text)?);
+    }
+    for o in &args.overrides {
+        let (name, value) = o.split_once(":=").ok_or_else(|| ParamError::Override(o.clone()))?;
+        let value: Value = serde_yaml_ng::from_str(value).map_err(|_| ParamError::Override(o.clone()))?;
+        set_path(&mut merged, name.trim(), value);
+    }
+    from_mapping(node, merged)
+}
+
+/// The typed parameters from a merged mapping, checked, with their flat list.
+pub fn from_mapping<P: NodeParams>(
+    node: &str,
+    mapping: Mapping,
+) -> Result<(P, Vec<(String, ParameterValue)>), ParamError> {
+    let invalid = |reason: String| ParamError::Invalid { node: node.into(), reason };
+    // Through text, so that a type error names the parameter it is about.
+    let text = serde_yaml_ng::to_string(&mapping).map_err(|e| invalid(e.to_string()))?;
+    let params: P = serde_yaml_ng::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+    params.validate().map_err(invalid)?;
+    let value = serde_yaml_ng::to_value(&params).map_err(|e| invalid(e.to_string()))?;
+    let mut flat = Vec::new();
+    flatten("", &value, &mut flat);
+    Ok((params, flat))
+}
+
+/// The `ros__parameters` of `node` in one file: the `/**` section, then the node's own (`node` or
+/// `/node`).
+fn node_section(node: &str, path: &Path, text: &str) -> Result<Mapping, ParamError> {
+    let format = |reason: String| ParamError::Format { path: path.to_owned(), reason };
+    let doc: Value = serde_yaml_ng::from_str(text).map_err(|e| format(e.to_string()))?;
+    let top = match doc {
+        Value::Mapping(m) => m,
+        Value::Null => return Ok(Mapping::new()),
+        _ => return Err(format("the top level must map node names to `ros__parameters`".into())),
+    };
+    if let Some((key, _)) = top.iter().find(|(_, v)| v.get("ros__parameters").is_none()) {
+        return Err(format(format!("`{}` has no `ros__parameters` mapping", key.as_str().unwrap_or("?"))));
+    }
+    let mut out = Mapping::new();
+    for key in ["/**".to_string(), node.to_string(), format!("/{node}")] {
+        let Some(section) = top.get(key.as_str()) else { continue };
+        match section.get("ros__parameters") {
+            Some(Value::Mapping(m)) => merge(&mut out, m.clone()),
+            Some(Value::Null) => {}
+            _ => return Err(format(format!("`{key}` has no `ros__parameters` mapping"))),
+        }
+    }
+    Ok(out)
+}
+
+/// Later values win; nested mappings merge key by key.
+fn merge(into: &mut Mapping, from: Mapping) {
+    for (k, v) in from {
+        match (into.get_mut(&k), v) {
+            (Some(Value::Mapping(a)), Value::Mapping(b)) => merge(a, b),
+            (_, v) => {
+                into.insert(k, v);
+            }
+        }
+    }
+}
+
+/// Sets `a.b.c` in nested mappings (ROS 2 names nested parameters with dots).
+fn set_path(into: &mut Mapping, name: &str, value: Value) {
+    match name.split_once('.') {
+        None => {
+            into.insert(Value::from(name), value);
+        }
+        Some((head, rest)) => {
+            let entry = into.entry(Value::from(head)).or_insert_with(|| Value::Mapping(Mapping::new()));
+            if !entry.is_mapping() {
+                *entry = Value::Mapping(Mapping::new());
+            }
+            set_path(entry.as_mapping_mut().expect("made a mapping above"), rest, value);
+        }
+    }
+}
+
+fn flatten(prefix: &str, value: &Value, out: &mut Vec<(String, ParameterValue)>) {
+    let name = |k: &str| if prefix.is_empty() { k.to_string() } else { format!("{prefix}.{k}") };
+    match value {
+        Value::Mapping(m) => {
+            for (k, v) in m {
+                let key = k.as_str().map(str::to_string).unwrap_or_else(|| format!("{k:?}"));
+                flatten(&name(&key), v, out);
+            }
+        }
+        Value::Tagged(t) => flatten(prefix, &t.value, out),
+        v => out.push((prefix.to_string(), parameter_value(v))),
+    }
+}
+
+/// A YAML value as a ROS 2 parameter value (arrays must be of one type, as in ROS 2).
+fn parameter_value(v: &Value) -> ParameterValue {
+    match v {
+        Value::Null => ParameterValue::NotSet,
+        Value::Bool(b) => ParameterValue::Boolean(*b),
+        Value::Number(n) if n.is_i64() => ParameterValue::Integer(n.as_i64().expect("checked")),
+        Value::Number(n) => ParameterValue::Double(n.as_f64().unwrap_or(f64::NAN)),
+        Value::String(s) => ParameterValue::String(s.clone()),
+        Value::Sequence(items) => {
+            if items.iter().all(Value::is_bool) {
+                ParameterValue::BooleanArray(items.iter().filter_map(Value::as_bool).collect())
+            } else if items.iter().all(Value::is_i64) {
+                ParameterValue::IntegerArray(items.iter().filter_map(Value::as_i64).collect())
+            } else if items.iter().all(Value::is_number) {
+                ParameterValue::DoubleArray(items.iter().filter_map(Value::as_f64).collect())
+            } else {
+                ParameterValue::StringArray(
+                    items.iter().map(|i| serde_yaml_ng::to_string(i).unwrap_or_default().trim().to_string()).collect(),
+                )
+            }
+        }
+        other => ParameterValue::String(serde_yaml_ng::to_string(other).unwrap_or_default().trim().to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde::Deserialize;
+
+    #[derive(Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Demo {
+        rate: f64,
+        name: String,
+        gains: Gains,
+        joints: Vec<f64>,
+    }
+    #[derive(Debug, PartialEq, Serialize, Deserialize)]
+    #[serde(default, deny_unknown_fields)]
+    struct Gains {
+        kp: f64,
+        kd: f64,
+    }
+    impl Default for Gains {
+        fn default() -> Self {
+            Self { kp: 1.0, kd: 2.0 }
+        }
+    }
+    impl Default for Demo {
+        fn default() -> Self {
+            Self { rate: 100.0, name: "a".into(), gains: Gains::default(), joints: vec![1.0, 2.0] }
+        }
+    }
+    impl NodeParams for Demo {
+        fn validate(&self) -> Result<(), String> {
+            if self.rate > 0.0 { Ok(()) } else { Err(format!("rate must be positive, not {}", self.rate)) }
+        }
+    }
+
+    fn file(text: &str) -> tempfile_path::TempPath {
+        tempfile_path::TempPath::with(text)
+    }
+
+    /// A file in the system's temporary folder, removed on drop.
+    mod tempfile_path {
+        pub struct TempPath(pub std::path::PathBuf);
+        impl TempPath {
+            pub fn with(text: &str) -> Self {
+                use std::sync::atomic::{AtomicUsize, Ordering};
+                static N: AtomicUsize = AtomicUsize::new(0);
+                let p = std::env::temp_dir().join(format!(
+                    "softcontact-params-{}-{}.yaml",
+                    std::process::id(),
+                    N.fetch_add(1, Ordering::Relaxed)
+                ));
+                std::fs::write(&p, text).unwrap();
+                Self(p)
+            }
+        }
+        impl Drop for TempPath {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_file(&self.0);
+            }
+        }
+    }
+
+    fn args(files: &[&tempfile_path::TempPath], overrides: &[&str]) -> ParamArgs {
+        ParamArgs {
+            files: files.iter().map(|f| f.0.clone()).collect(),
+            overrides: overrides.iter().map(|s| s.to_string()).collect(),
+            ros_args: false,
+        }
+    }
+
+    #[test]
+    fn files_layer_and_overrides_win() {
+        let base = file(
+            "/**:\n  ros__parameters:\n    rate: 50.0\ndemo:\n  ros__parameters:\n    gains: {kp: 3.0}\nother:\n  ros__parameters:\n    rate: 7.0\n",
+        );
+        let robot = file("/demo:\n  ros__parameters:\n    name: robot\n    gains: {kd: 4.0}\n");
+        let (p, flat): (Demo, _) = load("demo", &args(&[&base, &robot], &["rate:=25", "gains.kp:=9"])).unwrap();
+        assert_eq!(
+            p,
+            Demo { rate: 25.0, name: "robot".into(), gains: Gains { kp: 9.0, kd: 4.0 }, joints: vec![1.0, 2.0] }
+        );
+        let names: Vec<&str> = flat.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["rate", "name", "gains.kp", "gains.kd", "joints"]);
+        assert!(matches!(flat[4].1, ParameterValue::DoubleArray(ref v) if v == &[1.0, 2.0]));
+    }
+
+    #[test]
+    fn unknown_names_bad_values_and_bad_files_are_refused() {
+        let typo = file("demo:\n  ros__parameters:\n    rte: 5.0\n");
+        let e = load::<Demo>("demo", &args(&[&typo], &[])).unwrap_err().to_string();
+        assert!(e.contains("rte"), "{e}");
+        let e = load::<Demo>("demo", &args(&[], &["rate:=-1"])).unwrap_err().to_string();
+        assert!(e.contains("rate must be positive"), "{e}");
+        let e = load::<Demo>("demo", &args(&[], &["rate:=fast"])).unwrap_err().to_string();
+        assert!(e.contains("rate"), "{e}");
+        assert!(matches!(load::<Demo>("demo", &args(&[], &["rate=1"])), Err(ParamError::Override(_))));
+        let flat = file("rate: 5.0\n");
+        assert!(matches!(load::<Demo>("demo", &args(&[&flat], &[])), Err(ParamError::Format { .. })));
+        let broken = file("demo: [unclosed\n");
+        assert!(matches!(load::<Demo>("demo", &args(&[&broken], &[])), Err(ParamError::Format { .. })));
+        let missing = ParamArgs { files: vec!["/nonexistent/x.yaml".into()], ..Default::default() };
+        assert!(matches!(load::<Demo>("demo", &missing), Err(ParamError::Io { .. })));
+    }
+}
