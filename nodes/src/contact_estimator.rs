@@ -125,6 +125,11 @@ impl ContactEstimatorNode {
         Ok(out)
     }
 
+    /// The fraction of the window filled.
+    pub fn window_fill(&self) -> f64 {
+        self.window.len() as f64 / self.window.capacity() as f64
+    }
+
     /// Refits every kind over the window, chooses one, and places the surface.
     pub fn refit(&mut self) -> Result<ModelOut, ContactError> {
         let (_, onset_point) = self.contact.ok_or(ContactError::NotEnoughData { kind: "a contact" })?;
@@ -138,10 +143,141 @@ impl ContactEstimatorNode {
             model: fit.model()?,
             offset,
             contact_position: onset_point + offset * self.normal,
-            window_fill: self.window.len() as f64 / self.window.capacity() as f64,
+            window_fill: self.window_fill(),
             stiffness_excited: !chosen.stiffness_held,
             damping_excited: !chosen.damping_held,
             estimate,
         })
     }
+}
+
+/// The `contact_estimator` node's parameters (config/contact_estimator.yaml).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Contact direction n in the world.
+    pub normal: [f64; 3],
+    /// Time between window samples [s] and samples in the window (seed 001: 10 ms, 1200).
+    pub sample_period: f64,
+    pub window: usize,
+    /// Onset: normal force threshold [N] and consecutive readings.
+    pub onset_threshold: f64,
+    pub onset_confirm: usize,
+    /// Cross-validation folds, and the excitation guard (largest relative standard error of an
+    /// identified parameter).
+    pub folds: usize,
+    pub max_relative_error: f64,
+    /// Where to search for the undeformed surface relative to the onset position, along n [m].
+    pub offset_range: [f64; 2],
+    /// Seconds between refits (each published on /contact_estimator/model).
+    pub refit_period: f64,
+    /// No model is published before the window is this full.
+    pub min_window_fill: f64,
+    /// /contact_estimator/state rate [Hz].
+    pub state_rate: f64,
+    /// A pose older than this when a force arrives is not paired with it [s].
+    pub stale_after: f64,
+    /// Stamp messages with the simulated time of /clock.
+    pub use_sim_time: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        let c = EstimatorConfig::default();
+        Self {
+            normal: c.normal.into(),
+            sample_period: c.sample_period,
+            window: c.window,
+            onset_threshold: c.onset.threshold,
+            onset_confirm: c.onset.confirm,
+            folds: c.fit.folds,
+            max_relative_error: c.fit.max_relative_error,
+            offset_range: [c.offset_range.0, c.offset_range.1],
+            refit_period: 1.0,
+            min_window_fill: 0.25,
+            state_rate: 100.0,
+            stale_after: 0.05,
+            use_sim_time: false,
+        }
+    }
+}
+
+impl Params {
+    pub fn estimator_config(&self) -> EstimatorConfig {
+        EstimatorConfig {
+            normal: self.normal.into(),
+            sample_period: self.sample_period,
+            window: self.window,
+            onset: OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm },
+            fit: FitConfig { folds: self.folds, max_relative_error: self.max_relative_error },
+            offset_range: (self.offset_range[0], self.offset_range[1]),
+        }
+    }
+}
+
+impl crate::params::NodeParams for Params {
+    fn validate(&self) -> Result<(), String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be positive, not {v}")) }
+        };
+        positive("refit_period", self.refit_period)?;
+        positive("state_rate", self.state_rate)?;
+        positive("stale_after", self.stale_after)?;
+        if !(0.0..=1.0).contains(&self.min_window_fill) {
+            return Err(format!("min_window_fill must lie in [0, 1], not {}", self.min_window_fill));
+        }
+        let [lo, hi] = self.offset_range;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(format!("offset_range must be [low, high] with low < high, not {:?}", self.offset_range));
+        }
+        if self.window < 10 * self.folds.max(1) {
+            return Err(format!("window of {} samples is too short for {} folds", self.window, self.folds));
+        }
+        // The estimator checks the rest (normal, sample period, onset, folds) as it is built.
+        ContactEstimatorNode::new(self.estimator_config()).map(|_| ()).map_err(|e| e.to_string())
+    }
+}
+
+/// /contact_estimator/model as the message the nodes exchange.
+pub type ModelMsg = softcontact_msgs::softcontact_msgs::ContactModel;
+
+impl ModelOut {
+    pub fn to_msg(&self, header: softcontact_msgs::std_msgs::Header) -> ModelMsg {
+        let m = &self.model;
+        let p = self.contact_position;
+        ModelMsg {
+            header,
+            kind: m.kind.id().into(),
+            stiffness: m.stiffness,
+            damping: m.damping,
+            exponent_a: m.exponents.a,
+            exponent_b: m.exponents.b,
+            exponent_c: m.exponents.c,
+            contact_position: softcontact_msgs::geometry_msgs::Point { x: p.x, y: p.y, z: p.z },
+            candidate_kinds: self.estimate.fits.iter().map(|f| f.kind.id().into()).collect(),
+            candidate_fitness_mean: self.estimate.fits.iter().map(|f| f.fitness_mean).collect(),
+            candidate_fitness_std: self.estimate.fits.iter().map(|f| f.fitness_std).collect(),
+            window_fill: self.window_fill,
+            stiffness_excited: self.stiffness_excited,
+            damping_excited: self.damping_excited,
+        }
+    }
+}
+
+/// The contact model and the surface position a /contact_estimator/model message carries, checked
+/// (a model from the wire is refused rather than trusted if it is not physical).
+pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), ContactError> {
+    let kind: softcontact_contact::Kind = serde_json::from_value(serde_json::Value::String(msg.kind.clone()))
+        .map_err(|_| ContactError::InvalidConfig(format!("unknown model kind `{}`", msg.kind)))?;
+    let exponents = softcontact_contact::Exponents { a: msg.exponent_a, b: msg.exponent_b, c: msg.exponent_c };
+    let mut model = ContactModel::general(msg.stiffness, msg.damping, exponents)?;
+    if kind.exponents().is_some_and(|e| e == exponents) {
+        model = ContactModel::new(kind, msg.stiffness, msg.damping)?;
+    }
+    let p = &msg.contact_position;
+    let position = Vector3::new(p.x, p.y, p.z);
+    if !position.iter().all(|v| v.is_finite()) {
+        return Err(ContactError::InvalidConfig("contact position is not finite".into()));
+    }
+    Ok((model, position))
 }

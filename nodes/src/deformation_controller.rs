@@ -143,6 +143,33 @@ impl DeformationController {
         self.offset = offset;
     }
 
+    /// Adopts the estimator's model and its placement of the undeformed surface in the world. The
+    /// present reference is shifted with the new surface, so the hand's target does not jump; with
+    /// `retarget` the standing force command is then re-planned through the new model over that many
+    /// seconds (the continuous update policy).
+    pub fn adopt_estimate(
+        &mut self,
+        model: ContactModel,
+        surface: &Vector3<f64>,
+        retarget: Option<f64>,
+    ) -> Result<(), ControlError> {
+        let offset = match self.contact_level {
+            Some(level) => surface.dot(&self.config.normal) - level,
+            None => self.offset,
+        };
+        let shift = offset - self.offset;
+        if let Some((q, t0)) = self.plan {
+            let moved = |r: Reference| Reference { position: r.position - shift, ..r };
+            let shifted = Quintic::new(moved(q.at(0.0)), moved(q.at(q.duration())), q.duration());
+            self.plan = Some((shifted.ok_or(ControlError::Duration)?, t0));
+        }
+        self.set_contact_model(model, offset);
+        match retarget {
+            Some(duration) if self.f_cmd > 0.0 && !self.contact_lost => self.command_force(self.f_cmd, duration),
+            _ => Ok(()),
+        }
+    }
+
     pub fn contact_model(&self) -> &ContactModel {
         &self.contact_model
     }
@@ -245,5 +272,137 @@ impl DeformationController {
         let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
         self.limiter.apply(&self.config.limits, &mut tau, self.config.period);
         Ok((tau, state))
+    }
+}
+
+/// When the controller takes a new model from the estimator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelUpdate {
+    /// The newest model is adopted when the next force command arrives (seed 001: once per cycle).
+    OnCommand,
+    /// Every model is adopted when it arrives, and the standing command re-planned through it.
+    Continuous,
+}
+
+/// The `deformation_controller` node's parameters (config/deformation_controller.yaml).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Contact direction n in the world (the way the hand moves to compress the surface).
+    pub normal: [f64; 3],
+    /// Natural frequency of the critically damped deformation law [rad/s] (k_z = ω², k_ż = 2ω).
+    pub deformation_frequency: f64,
+    /// PD gains across the surface and of the orientation [1/s², 1/s].
+    pub lateral_gains: [f64; 2],
+    pub orientation_gains: [f64; 2],
+    /// Null-space joint impedance holding the initial posture [N·m/rad], [N·m·s/rad].
+    pub posture_stiffness: [f64; 7],
+    pub posture_damping: [f64; 7],
+    /// Descent speed before contact [m/s].
+    pub approach_speed: f64,
+    /// Onset: normal force threshold [N] and consecutive readings.
+    pub onset_threshold: f64,
+    pub onset_confirm: usize,
+    /// Largest torque rate [N·m/s], force [N] and deformation [m] commanded; contact counts as lost
+    /// below `contact_lost_below` [N] while a force is commanded.
+    pub torque_rate: f64,
+    pub max_force: f64,
+    pub max_deformation: f64,
+    pub contact_lost_below: f64,
+    pub model_update: ModelUpdate,
+    /// Re-planning time of the continuous policy [s].
+    pub retarget_duration: f64,
+    /// The model used until the estimator has one (a rough guess is enough to start identification).
+    pub initial_model: ContactModel,
+    /// /deformation_controller/state rate [Hz].
+    pub state_rate: f64,
+    /// No command is sent while the force reading is older than this [s]: the driver then holds.
+    pub stale_after: f64,
+    /// Stamp messages with the simulated time of /clock.
+    pub use_sim_time: bool,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        let c = ControllerConfig::lwr4(250.0, 0.06);
+        Self {
+            normal: c.normal.into(),
+            deformation_frequency: c.gains.stiffness.sqrt(),
+            lateral_gains: c.lateral.into(),
+            orientation_gains: c.orientation.into(),
+            posture_stiffness: c.posture_stiffness,
+            posture_damping: c.posture_damping,
+            approach_speed: c.approach_speed,
+            onset_threshold: c.onset.threshold,
+            onset_confirm: c.onset.confirm,
+            torque_rate: c.limits.torque_rate,
+            max_force: c.limits.max_force,
+            max_deformation: c.limits.max_deformation,
+            contact_lost_below: c.limits.contact_lost_below,
+            model_update: ModelUpdate::OnCommand,
+            retarget_duration: 0.5,
+            initial_model: ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 5_000.0, 0.0)
+                .expect("a valid model"),
+            state_rate: 100.0,
+            stale_after: 0.05,
+            use_sim_time: false,
+        }
+    }
+}
+
+impl Params {
+    pub fn controller_config(&self) -> ControllerConfig {
+        let mut c = ControllerConfig::lwr4(self.max_force, self.max_deformation);
+        c.normal = self.normal.into();
+        c.gains = DeformationGains::critically_damped(self.deformation_frequency);
+        c.lateral = self.lateral_gains.into();
+        c.orientation = self.orientation_gains.into();
+        c.posture_stiffness = self.posture_stiffness;
+        c.posture_damping = self.posture_damping;
+        c.approach_speed = self.approach_speed;
+        c.onset = OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm };
+        c.limits.torque_rate = self.torque_rate;
+        c.limits.contact_lost_below = self.contact_lost_below;
+        c
+    }
+}
+
+impl crate::params::NodeParams for Params {
+    fn validate(&self) -> Result<(), String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be positive, not {v}")) }
+        };
+        let non_negative = |name: &str, v: &[f64]| {
+            if v.iter().all(|x| x.is_finite() && *x >= 0.0) { Ok(()) } else { Err(format!("{name} must be ≥ 0")) }
+        };
+        if !Vector3::from(self.normal).norm().is_normal() {
+            return Err("normal must be a non-zero direction".into());
+        }
+        positive("deformation_frequency", self.deformation_frequency)?;
+        non_negative("lateral_gains", &self.lateral_gains)?;
+        non_negative("orientation_gains", &self.orientation_gains)?;
+        non_negative("posture_stiffness", &self.posture_stiffness)?;
+        non_negative("posture_damping", &self.posture_damping)?;
+        positive("approach_speed", self.approach_speed)?;
+        if self.approach_speed > 0.05 {
+            return Err(format!("approach_speed above 0.05 m/s is not a gentle approach: {}", self.approach_speed));
+        }
+        positive("onset_threshold", self.onset_threshold)?;
+        if self.onset_confirm == 0 {
+            return Err("onset_confirm must be at least 1".into());
+        }
+        positive("torque_rate", self.torque_rate)?;
+        positive("max_force", self.max_force)?;
+        positive("max_deformation", self.max_deformation)?;
+        positive("contact_lost_below", self.contact_lost_below)?;
+        if self.contact_lost_below >= self.max_force {
+            return Err("contact_lost_below must be below max_force".into());
+        }
+        positive("retarget_duration", self.retarget_duration)?;
+        positive("state_rate", self.state_rate)?;
+        positive("stale_after", self.stale_after)?;
+        self.initial_model.validate().map_err(|e| format!("initial_model: {e}"))?;
+        Ok(())
     }
 }

@@ -205,3 +205,11 @@ pub fn diagnostics(
         }],
     }
 }
+
+/// Waits up to `timeout` for readiness; a signal (the shutdown flag's) only ends the wait early.
+pub fn wait(poll: &mut mio::Poll, events: &mut mio::Events, timeout: std::time::Duration) -> std::io::Result<()> {
+    match poll.poll(events, Some(timeout)) {
+        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => Ok(()),
+        r => r,
+    }
+}

@@ -155,7 +155,14 @@ impl SimArmServer {
                         }
                         Err(_) => self.stats.malformed += 1,
                     },
-                    Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::WouldBlock
+                                | std::io::ErrorKind::TimedOut
+                                | std::io::ErrorKind::Interrupted
+                        ) =>
+                    {
                         break;
                     }
                     Err(e) => return Err(e),

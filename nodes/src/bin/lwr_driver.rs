@@ -121,8 +121,8 @@ fn main() -> anyhow::Result<()> {
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     ros::log(&node, LogLevel::Info, &format!("ready: FRI on {}, domain {}", client.local_addr()?, node.domain_id()));
 
-    // How old the joint state behind the applied command is, each cycle (the controller stamps its
-    // command with the stamp of the joint state it answered).
+    // How old the joint state behind the applied command is, each cycle it is applied (the controller
+    // stamps its command with the stamp of the joint state it answered; older ones are stale cycles).
     let mut command_age = Histogram::new(1e-5, 100_000);
     let mut command_stamp: Option<f64> = None;
     let mut last: Option<DriverOutput> = None;
@@ -140,7 +140,7 @@ fn main() -> anyhow::Result<()> {
         if let Some(out) = output {
             last_seen = Instant::now();
             let stamp = clock.now();
-            if let Some(t) = command_stamp.filter(|_| out.state == InterfaceState::Command) {
+            if let Some(t) = command_stamp.filter(|_| out.state == InterfaceState::Command && !out.holding) {
                 command_age.record(stamp.as_secs_f64() - t);
             }
             let h = header("world", stamp);

@@ -1,0 +1,151 @@
+#!/usr/bin/env bash
+# The node graph, started, watched and stopped as one: the implementation behind sim.sh and robot.sh.
+#
+#   launch.sh --sim|--robot [--isolated] [--lockstep] [--surface sponge|dice|none] [--log-dir DIR]
+#             [--params-file FILE]... [--run COMMAND [ARGS...]]
+#
+# Starts the nodes with the parameter files of config/ (plus any --params-file overlays, later ones win),
+# waits until every node has said it is ready, then either runs COMMAND (and stops the graph when it
+# returns, exiting with its status) or waits for Ctrl-C. When any node dies, the others are stopped too.
+# Stopping is SIGTERM to each node in turn (controller first, so the driver holds the arm), SIGKILL after
+# 5 s. The exit status is non-zero if a node failed or was killed, or COMMAND failed. Each node's log
+# (its exit report included) is in the log folder.
+#
+# --isolated runs everything in a new network namespace with only loopback (DDS never leaves the machine;
+# needs unprivileged user namespaces). Binaries: $SOFTCONTACT_BIN (default target/release, built with
+# `cargo build --release` when missing).
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+root="$(dirname "$here")"
+mode="" isolated=0 lockstep=0 surface="" log_dir="" run=() overlays=()
+while (($#)); do
+    case "$1" in
+    --sim) mode=sim ;;
+    --robot) mode=robot ;;
+    --isolated) isolated=1 ;;
+    --lockstep) lockstep=1 ;;
+    --surface) surface="$2"; shift ;;
+    --log-dir) log_dir="$2"; shift ;;
+    --params-file) overlays+=("$(realpath "$2")"); shift ;;
+    --run) shift; run=("$@"); break ;;
+    -h | --help) sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "launch: unknown option $1 (see --help)" >&2; exit 2 ;;
+    esac
+    shift
+done
+[[ -n "$mode" ]] || { echo "launch: --sim or --robot" >&2; exit 2; }
+
+if ((isolated)) && [[ -z "${SOFTCONTACT_NETNS:-}" ]]; then
+    command -v unshare >/dev/null || { echo "launch: --isolated needs unshare (util-linux)" >&2; exit 2; }
+    command -v ip >/dev/null || { echo "launch: --isolated needs ip (iproute2)" >&2; exit 2; }
+    args=("--$mode" --isolated)
+    ((lockstep)) && args+=(--lockstep)
+    [[ -n "$surface" ]] && args+=(--surface "$surface")
+    [[ -n "$log_dir" ]] && args+=(--log-dir "$(realpath -m "$log_dir")")
+    for o in "${overlays[@]}"; do args+=(--params-file "$o"); done
+    ((${#run[@]})) && args+=(--run "${run[@]}")
+    # -f: the namespace's first process is this script's copy, so Ctrl-C reaches it as before.
+    exec unshare --map-root-user --net env SOFTCONTACT_NETNS=1 bash "${BASH_SOURCE[0]}" "${args[@]}"
+fi
+if [[ -n "${SOFTCONTACT_NETNS:-}" ]]; then
+    ip link set lo up
+    ip link set lo multicast on
+    ip route add 224.0.0.0/4 dev lo
+fi
+
+bin="${SOFTCONTACT_BIN:-$root/target/release}"
+nodes=(lwr_driver ft_sensor contact_estimator deformation_controller)
+[[ "$mode" == sim ]] && nodes=(sim_arm "${nodes[@]}")
+for n in "${nodes[@]}"; do
+    if [[ ! -x "$bin/$n" ]]; then
+        [[ -z "${SOFTCONTACT_BIN:-}" ]] || { echo "launch: $bin/$n missing" >&2; exit 2; }
+        echo "launch: building the nodes (cargo build --release)…" >&2
+        (cd "$root" && cargo build --release -q -p softcontact-nodes --bins)
+        break
+    fi
+done
+
+log_dir="${log_dir:-$(mktemp -d -t softcontact-graph.XXXXXX)}"
+mkdir -p "$log_dir"
+echo "launch: logs in $log_dir" >&2
+
+# The parameters of one node: its file, the robot overlay, the user's overlays, then the mode's settings.
+params_of() {
+    local n="$1" p=(--params-file "$root/config/$n.yaml")
+    [[ "$mode" == robot ]] && p+=(--params-file "$root/config/robot.yaml")
+    for o in "${overlays[@]}"; do p+=(--params-file "$o"); done
+    if ((lockstep)); then
+        if [[ "$n" == sim_arm ]]; then p+=(-p lockstep:=true); else p+=(-p use_sim_time:=true); fi
+    fi
+    [[ "$n" == sim_arm && -n "$surface" ]] && p+=(-p "surface:=$surface")
+    printf '%s\n' "${p[@]}"
+}
+
+declare -A pid_of=()
+stopping=0
+stop_all() {
+    ((stopping)) && return
+    stopping=1
+    local order=(deformation_controller contact_estimator ft_sensor lwr_driver sim_arm) n
+    for n in "${order[@]}"; do
+        [[ -n "${pid_of[$n]:-}" ]] || continue
+        kill -TERM "${pid_of[$n]}" 2>/dev/null || continue
+        for _ in $(seq 50); do kill -0 "${pid_of[$n]}" 2>/dev/null || break; sleep 0.1; done
+        kill -KILL "${pid_of[$n]}" 2>/dev/null && echo "launch: $n did not stop in 5 s: killed" >&2 || true
+    done
+}
+trap 'echo "launch: stopping" >&2; stop_all' INT TERM
+
+for n in "${nodes[@]}"; do
+    mapfile -t p < <(params_of "$n")
+    "$bin/$n" "${p[@]}" </dev/null >"$log_dir/$n.log" 2>&1 &
+    pid_of[$n]=$!
+done
+
+# Ready when every node has said so; a node that dies first fails the launch.
+deadline=$((SECONDS + 30))
+for n in "${nodes[@]}"; do
+    until grep -q "ready" "$log_dir/$n.log" 2>/dev/null; do
+        if ! kill -0 "${pid_of[$n]}" 2>/dev/null || ((SECONDS > deadline)); then
+            echo "launch: $n did not come up; its log:" >&2
+            sed 's/^/    /' "$log_dir/$n.log" >&2
+            stop_all
+            exit 1
+        fi
+        sleep 0.05
+    done
+done
+echo "launch: up: ${nodes[*]}" >&2
+
+status=0
+if ((${#run[@]})); then
+    # The command runs in the background so that Ctrl-C (trapped above) still stops the graph at once.
+    "${run[@]}" &
+    run_pid=$!
+    while kill -0 "$run_pid" 2>/dev/null; do
+        wait -n || true
+        ((stopping)) && break
+        for n in "${nodes[@]}"; do
+            kill -0 "${pid_of[$n]}" 2>/dev/null || { echo "launch: $n exited while the command ran" >&2; status=1; break 2; }
+        done
+    done
+    if ((stopping || status)); then kill -TERM "$run_pid" 2>/dev/null || true; fi
+    wait "$run_pid" || status=$?
+else
+    wait -n || true
+    ((stopping)) || echo "launch: a node exited; stopping the others" >&2
+fi
+stop_all
+
+for n in "${nodes[@]}"; do
+    code=0
+    wait "${pid_of[$n]}" || code=$?
+    if ((code != 0)); then
+        echo "launch: $n exited with status $code; its log ends:" >&2
+        tail -n 15 "$log_dir/$n.log" | sed 's/^/    /' >&2
+        status=1
+    fi
+    grep -h -E "exit|latency|command age|RSS" "$log_dir/$n.log" | sed 's/^/  /' >&2 || true
+done
+exit "$status"

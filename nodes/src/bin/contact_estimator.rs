@@ -1,0 +1,133 @@
+//! `contact_estimator`: learns the contact model of the surface under the hand online. Pairs each
+//! /ft_sensor/wrench with the newest /lwr/ee_pose and /lwr/ee_twist, detects the onset, keeps the
+//! sliding window, publishes /contact_estimator/state at `state_rate` and, every `refit_period`, every
+//! candidate's cross-validated fit with the chosen model and the surface position on
+//! /contact_estimator/model.
+
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use mio::{Events, Interest, Poll, Token};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
+use softcontact_msgs::softcontact_msgs::ContactState;
+use softcontact_msgs::std_msgs::Header;
+use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ModelMsg, Params};
+use softcontact_nodes::params::{self, ParamArgs};
+use softcontact_nodes::ros::{self, LogLevel};
+
+#[derive(Parser)]
+#[command(
+    version,
+    about = "Online contact-model estimation, as a ROS 2 node (parameters: config/contact_estimator.yaml)"
+)]
+struct Args {
+    #[command(flatten)]
+    params: ParamArgs,
+}
+
+fn main() -> anyhow::Result<()> {
+    let (p, declared) = params::load::<Params>("contact_estimator", &Args::parse().params)?;
+    let stop = ros::shutdown_flag()?;
+    let mut estimator = ContactEstimatorNode::new(p.estimator_config())?;
+    let normal = Vector3::from(p.normal).normalize();
+    let mut node = ros::node_with_parameters("contact_estimator", declared)?;
+    let mut wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
+    let twists = ros::subscription::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
+    let state_pub = ros::publisher::<ContactState>(&mut node, "/contact_estimator/state", ros::sensor_qos())?;
+    let model_pub = ros::publisher::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+    let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
+    let mut poll = Poll::new()?;
+    poll.registry().register(&mut wrenches, Token(0), Interest::READABLE)?;
+    let mut events = Events::with_capacity(8);
+
+    // The sensing frame's rotation in the tool frame, from the URDF.
+    let model = lwr4::model();
+    let mut data = model.data();
+    model.forward_kinematics(&mut data, &[0.0; 7]);
+    let tool_to_sensor = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
+        * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation;
+    ros::log(
+        &node,
+        LogLevel::Info,
+        &format!("ready: window {} × {} s, domain {}", p.window, p.sample_period, node.domain_id()),
+    );
+
+    let mut pose: Option<(Vector3<f64>, UnitQuaternion<f64>, Instant)> = None;
+    let mut velocity = Vector3::zeros();
+    let (mut next_state, mut next_refit) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
+    let mut was_in_contact = false;
+    while !ros::stopping(&stop) {
+        ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
+        while let Ok(Some((m, _))) = poses.take() {
+            let (t, o) = (m.pose.position, m.pose.orientation);
+            let rotation = UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z));
+            pose = Some((Vector3::new(t.x, t.y, t.z), rotation, Instant::now()));
+        }
+        while let Ok(Some((m, _))) = twists.take() {
+            velocity = Vector3::new(m.twist.linear.x, m.twist.linear.y, m.twist.linear.z);
+        }
+        while let Ok(Some((w, _))) = wrenches.take() {
+            let Some((position, rotation, _)) =
+                pose.filter(|(_, _, seen)| seen.elapsed().as_secs_f64() <= p.stale_after)
+            else {
+                unpaired += 1;
+                continue;
+            };
+            let f_sensor = Vector3::new(w.wrench.force.x, w.wrench.force.y, w.wrench.force.z);
+            if !f_sensor.iter().all(|v| v.is_finite()) {
+                unpaired += 1;
+                continue;
+            }
+            // The contact force on the hand in the world, and the normal force f = −F·n ≥ 0.
+            let force = rotation * tool_to_sensor * f_sensor;
+            let f = (-force.dot(&normal)).max(0.0);
+            let t = w.header.stamp.as_secs_f64();
+            let out = match estimator.update(t, &position, &velocity, f) {
+                Ok(out) => out,
+                Err(e) => {
+                    unpaired += 1;
+                    ros::log(&node, LogLevel::Warn, &format!("reading refused: {e}"));
+                    continue;
+                }
+            };
+            samples += 1;
+            if out.in_contact != was_in_contact {
+                was_in_contact = out.in_contact;
+                let what = if out.in_contact { "contact" } else { "contact released" };
+                ros::log(&node, LogLevel::Info, &format!("{what} at t = {t:.3} s"));
+            }
+            if t >= next_state {
+                next_state = t + 1.0 / p.state_rate;
+                state_pub.publish(ContactState {
+                    header: Header { stamp: w.header.stamp, frame_id: "world".into() },
+                    deformation: out.deformation,
+                    deformation_rate: out.deformation_rate,
+                    normal_force: out.normal_force,
+                    in_contact: out.in_contact,
+                })?;
+            }
+            if t >= next_refit && estimator.window_fill() >= p.min_window_fill.max(1e-9) {
+                next_refit = t + p.refit_period;
+                match estimator.refit() {
+                    Ok(m) => {
+                        refits += 1;
+                        model_pub.publish(m.to_msg(Header { stamp: clock.now(), frame_id: "world".into() }))?;
+                    }
+                    Err(e) => {
+                        refit_failures += 1;
+                        ros::log(&node, LogLevel::Warn, &format!("refit failed: {e}"));
+                    }
+                }
+            }
+        }
+    }
+    eprintln!(
+        "contact_estimator: exit: {samples} readings, {unpaired} without a fresh pose, {refits} models published, {refit_failures} refits failed; peak RSS {:.1} MB",
+        ros::peak_rss_mb().unwrap_or(f64::NAN)
+    );
+    Ok(())
+}
