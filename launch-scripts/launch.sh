@@ -97,9 +97,13 @@ stop_all() {
 }
 trap 'echo "launch: stopping" >&2; stop_all' INT TERM
 
+# The FRI path first: the driver (and the cell it answers) keep the normal priority, the controller and
+# the sensor a little less, the estimator's refits least (unprivileged users may lower priority only; on
+# the robot give the driver a real-time priority, see launch-scripts/README.md).
+declare -A nice_of=([sim_arm]=0 [lwr_driver]=0 [deformation_controller]=2 [ft_sensor]=2 [contact_estimator]=10)
 for n in "${nodes[@]}"; do
     mapfile -t p < <(params_of "$n")
-    "$bin/$n" "${p[@]}" </dev/null >"$log_dir/$n.log" 2>&1 &
+    nice -n "${nice_of[$n]}" "$bin/$n" "${p[@]}" </dev/null >"$log_dir/$n.log" 2>&1 &
     pid_of[$n]=$!
 done
 
@@ -146,6 +150,6 @@ for n in "${nodes[@]}"; do
         tail -n 15 "$log_dir/$n.log" | sed 's/^/    /' >&2
         status=1
     fi
-    grep -h -E "exit|latency|command age|RSS" "$log_dir/$n.log" | sed 's/^/  /' >&2 || true
+    grep -h -E "exit|latency|send call|command age|RSS" "$log_dir/$n.log" | sed 's/^/  /' >&2 || true
 done
 exit "$status"

@@ -1,6 +1,7 @@
 //! `softcontact`: the product's command line (design.md section 6).
 
 mod bench;
+mod force_cmd;
 mod model_cmd;
 
 use std::path::PathBuf;
@@ -70,6 +71,9 @@ enum Command {
     /// The robot description as the code sees it: joints, limits, masses, frames, and at a state the
     /// frame poses, the tool Jacobian, M, g and the RNEA torque.
     Model(model_cmd::ModelArgs),
+    /// Send a force command to the running deformation controller (over DDS) and report the force
+    /// reached at the end of the move.
+    Force(force_cmd::ForceArgs),
     /// Benchmarks of the product's hot paths.
     Bench {
         #[command(subcommand)]
@@ -109,6 +113,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Record { .. } => not_built("record", "it needs the ROS 2 nodes and the MCAP writer"),
         Command::Replay { .. } => not_built("replay", "it needs the ROS 2 nodes and the MCAP reader"),
         Command::Model(args) => model_cmd::run(args),
+        Command::Force(args) => force_cmd::run(&args),
         Command::Bench { what } => bench::run(what),
     }
 }

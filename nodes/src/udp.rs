@@ -15,13 +15,20 @@ use crate::stats::Histogram;
 pub struct FriClient {
     socket: UdpSocket,
     pub driver: LwrDriver,
-    /// Time from a measurement's arrival to its answer leaving [s].
+    /// Time from a measurement's arrival to its answer leaving the driver for the kernel [s].
     pub reply_latency: Histogram,
+    /// Time the kernel takes to accept the answer (on loopback it also delivers it) [s].
+    pub send_duration: Histogram,
 }
 
 impl FriClient {
     pub fn bind(addr: SocketAddr, driver: LwrDriver) -> std::io::Result<Self> {
-        Ok(Self { socket: UdpSocket::bind(addr)?, driver, reply_latency: Histogram::new(1e-6, 20_000) })
+        Ok(Self {
+            socket: UdpSocket::bind(addr)?,
+            driver,
+            reply_latency: Histogram::new(1e-6, 20_000),
+            send_duration: Histogram::new(1e-6, 20_000),
+        })
     }
 
     pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
@@ -48,8 +55,11 @@ impl FriClient {
             };
             let arrived = Instant::now();
             if let Ok((reply, output)) = self.driver.handle(&buf[..n]) {
-                self.socket.send_to(&reply.encode(), from)?;
-                self.reply_latency.record(arrived.elapsed().as_secs_f64());
+                let datagram = reply.encode();
+                let sending = Instant::now();
+                self.socket.send_to(&datagram, from)?;
+                self.reply_latency.record((sending - arrived).as_secs_f64());
+                self.send_duration.record(sending.elapsed().as_secs_f64());
                 return Ok(Some(output));
             }
         }

@@ -183,6 +183,7 @@ fn main() -> anyhow::Result<()> {
         client.reply_latency.summary(1e6, "us"),
         client.reply_latency.fraction_within(200e-6) * 100.0
     );
+    eprintln!("lwr_driver: send call {}", client.send_duration.summary(1e6, "us"));
     eprintln!("lwr_driver: command age {}", command_age.summary(1e3, "ms"));
     eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())

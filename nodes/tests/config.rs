@@ -1,0 +1,39 @@
+//! Every parameter file in config/ is valid for its node as shipped, and the robot overlay layers on
+//! top of it: a typo in a shipped file fails here, not on the robot.
+
+use std::path::PathBuf;
+
+use softcontact_nodes::params::{NodeParams, ParamArgs, load};
+
+fn config(file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config").join(file)
+}
+
+fn check<P: NodeParams + Default + PartialEq + std::fmt::Debug>(node: &str) -> P {
+    let args = ParamArgs { files: vec![config(&format!("{node}.yaml"))], ..Default::default() };
+    let (p, declared) = load::<P>(node, &args).unwrap_or_else(|e| panic!("{node}: {e}"));
+    assert!(!declared.is_empty());
+    let robot = ParamArgs { files: vec![config(&format!("{node}.yaml")), config("robot.yaml")], ..Default::default() };
+    load::<P>(node, &robot).unwrap_or_else(|e| panic!("{node} with the robot overlay: {e}"));
+    p
+}
+
+#[test]
+fn shipped_parameter_files_are_valid_and_match_the_defaults() {
+    use softcontact_nodes::*;
+    // The files spell out the defaults, so that what a user reads is what runs.
+    assert_eq!(check::<lwr_driver::Params>("lwr_driver"), Default::default());
+    assert_eq!(check::<ft_sensor::Params>("ft_sensor"), Default::default());
+    assert_eq!(check::<contact_estimator::Params>("contact_estimator"), Default::default());
+    assert_eq!(check::<sim_arm::Params>("sim_arm"), Default::default());
+    assert_eq!(check::<deformation_controller::Params>("deformation_controller"), Default::default());
+}
+
+#[test]
+fn unsafe_controller_settings_are_refused() {
+    use softcontact_nodes::deformation_controller::Params;
+    for bad in ["approach_speed:=0.5", "max_force:=-1", "normal:=[0,0,0]", "torque_rate:=.nan", "onset_confirm:=0"] {
+        let args = ParamArgs { overrides: vec![bad.into()], ..Default::default() };
+        assert!(load::<Params>("deformation_controller", &args).is_err(), "{bad} accepted");
+    }
+}
