@@ -197,3 +197,86 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
         "joint states stamped in sim time: {latest_stamp}"
     );
 }
+
+/// Calls a service until it answers (the server is discovered a little after the process starts).
+fn call<Req: ros2_client::Message + Clone + 'static, Resp: ros2_client::Message + 'static>(
+    client: &ros2_client::Client<Req, Resp>,
+    request: Req,
+) -> Resp {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(10) {
+        let id = client.send_request(request.clone()).unwrap();
+        let sent = Instant::now();
+        while sent.elapsed() < Duration::from_millis(500) {
+            if let Ok(Some((rid, response))) = client.receive_response()
+                && rid == id
+            {
+                return response;
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+    panic!("no answer in 10 s");
+}
+
+#[test]
+fn parameters_are_served_by_the_standard_services() {
+    use ros2_client::rcl_interfaces::*;
+    if std::env::var(INNER).is_err() {
+        in_isolated_namespace("parameters_are_served_by_the_standard_services");
+        return;
+    }
+    let mut node = ros::node("parameter_test").unwrap();
+    let service = |service: &str, ty: &str| {
+        (Name::new("/lwr_driver", service).unwrap(), ServiceTypeName::new("rcl_interfaces", ty))
+    };
+    let (list_name, list_type) = service("list_parameters", "ListParameters");
+    let (get_name, get_type) = service("get_parameters", "GetParameters");
+    let (set_name, set_type) = service("set_parameters", "SetParameters");
+    // ros2-client serves parameters with the Enhanced (Fast DDS) request/reply mapping.
+    let mapping = ros::service_mapping("enhanced").unwrap();
+    let qos = ros::reliable_qos;
+    let list = node
+        .create_client::<ListParametersRequest, ListParametersResponse>(mapping, &list_name, &list_type, qos(), qos())
+        .unwrap();
+    let get = node
+        .create_client::<GetParametersRequest, GetParametersResponse>(mapping, &get_name, &get_type, qos(), qos())
+        .unwrap();
+    let set = node
+        .create_client::<SetParametersRequest, SetParametersResponse>(mapping, &set_name, &set_type, qos(), qos())
+        .unwrap();
+    let _driver = Processes(vec![spawn(
+        env!("CARGO_BIN_EXE_lwr_driver"),
+        &[
+            "--params-file",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../config/lwr_driver.yaml"),
+            "-p",
+            "watchdog_cycles:=7",
+            "-p",
+            "exit_after_silence:=8",
+        ],
+    )]);
+
+    let names = call(&list, ListParametersRequest { prefixes: vec![], depth: 0 }).result.names;
+    for expected in ["fri_bind", "watchdog_cycles", "hold_stiffness", "use_sim_time"] {
+        assert!(names.iter().any(|n| n == expected), "{expected} not in {names:?}");
+    }
+    let values = call(
+        &get,
+        GetParametersRequest { names: vec!["watchdog_cycles".into(), "fri_bind".into(), "hold_stiffness".into()] },
+    )
+    .values;
+    assert_eq!(values[0].int_value, 7, "the override is what the node runs with");
+    assert_eq!(values[1].string_value, "127.0.0.1:49938");
+    assert_eq!(values[2].double_array, vec![800.0, 800.0, 500.0, 500.0, 200.0, 100.0, 100.0]);
+    let mut changed = values[0].clone();
+    changed.int_value = 3;
+    let results = call(
+        &set,
+        SetParametersRequest {
+            parameter: vec![ros2_client::parameters::raw::Parameter { name: "watchdog_cycles".into(), value: changed }],
+        },
+    )
+    .results;
+    assert!(!results[0].successful && results[0].reason.contains("start-up"), "{results:?}");
+}
