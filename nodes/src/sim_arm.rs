@@ -155,16 +155,7 @@ impl SimArmServer {
                         }
                         Err(_) => self.stats.malformed += 1,
                     },
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            std::io::ErrorKind::WouldBlock
-                                | std::io::ErrorKind::TimedOut
-                                | std::io::ErrorKind::Interrupted
-                        ) =>
-                    {
-                        break;
-                    }
+                    Err(e) if crate::udp::no_datagram(&e) => break,
                     Err(e) => return Err(e),
                 }
             }

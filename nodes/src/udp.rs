@@ -11,6 +11,11 @@ use crate::ft_sensor::{FtOutput, FtSensorNode};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
 use crate::stats::Histogram;
 
+/// A receive that ended without a datagram: the timeout passed, or a signal (shutdown) interrupted it.
+pub(crate) fn no_datagram(e: &std::io::Error) -> bool {
+    matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted)
+}
+
 /// The remote end of FRI: listens where the KRC sends, answers the sender of each measurement.
 pub struct FriClient {
     socket: UdpSocket,
@@ -43,14 +48,7 @@ impl FriClient {
         loop {
             let (n, from) = match self.socket.recv_from(&mut buf) {
                 Ok(r) => r,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
-                    ) =>
-                {
-                    return Ok(None);
-                }
+                Err(e) if no_datagram(&e) => return Ok(None),
                 Err(e) => return Err(e),
             };
             let arrived = Instant::now();
@@ -108,14 +106,7 @@ impl RdtClient {
         loop {
             let n = match self.socket.recv(&mut buf) {
                 Ok(n) => n,
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted
-                    ) =>
-                {
-                    return Ok(None);
-                }
+                Err(e) if no_datagram(&e) => return Ok(None),
                 Err(e) => return Err(e),
             };
             if let Ok(out) = self.node.handle(&buf[..n], orientation) {
