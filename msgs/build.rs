@@ -28,8 +28,86 @@ fn rust_type(ros: &str) -> String {
     }
 }
 
+/// Message types a .msg field refers to, as `pkg/Name` (constants and primitives skipped).
+fn field_types(package: &str, text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    for line in text.lines() {
+        let field = line.split('#').next().unwrap_or("");
+        let mut parts = field.split_whitespace();
+        let (Some(ty), Some(name)) = (parts.next(), parts.next()) else { continue };
+        let base = ty.split('[').next().unwrap_or(ty);
+        if name.contains('=') || base.contains('<') || is_primitive(base) {
+            continue;
+        }
+        out.push(if base.contains('/') { base.to_string() } else { format!("{package}/{base}") });
+    }
+    out
+}
+
+fn is_primitive(ty: &str) -> bool {
+    matches!(
+        ty,
+        "bool" | "byte" | "char" | "int8" | "uint8" | "int16" | "uint16" | "int32" | "uint32" | "int64" | "uint64"
+            | "float32" | "float64" | "string" | "wstring"
+    )
+}
+
+/// The definition text ROS 2 stores with a recording (rosbag2, MCAP schema encoding `ros2msg`): the
+/// message's own .msg, then each message type it depends on, depth first, once, after a separator line.
+fn full_definition(root: &str, texts: &std::collections::BTreeMap<String, String>) -> String {
+    fn visit(ty: &str, texts: &std::collections::BTreeMap<String, String>, seen: &mut Vec<String>) {
+        let package = ty.split('/').next().unwrap();
+        let text = texts.get(ty).unwrap_or_else(|| panic!("no .msg for `{ty}`"));
+        for dep in field_types(package, text) {
+            if !seen.contains(&dep) {
+                seen.push(dep.clone());
+                visit(&dep, texts, seen);
+            }
+        }
+    }
+    let mut deps = Vec::new();
+    visit(root, texts, &mut deps);
+    let mut out = texts[root].trim_end().to_string();
+    out.push('\n');
+    for dep in deps {
+        out.push_str(&"=".repeat(80));
+        write!(out, "\nMSG: {dep}\n{}\n", texts[&dep].trim_end()).unwrap();
+    }
+    out
+}
+
+/// Every message definition: std/<package>/<Name>.msg (standard ROS 2 types, as common_interfaces
+/// defines them) and msg/<Name>.msg (this package), keyed `pkg/Name`.
+fn definitions() -> std::collections::BTreeMap<String, String> {
+    let mut texts = std::collections::BTreeMap::new();
+    let mut add = |package: &str, dir: &std::path::Path| {
+        for entry in std::fs::read_dir(dir).expect("message folder") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "msg") {
+                let name = path.file_stem().unwrap().to_str().unwrap().to_string();
+                texts.insert(format!("{package}/{name}"), std::fs::read_to_string(&path).unwrap());
+            }
+        }
+    };
+    for entry in std::fs::read_dir("std").expect("std/") {
+        let dir = entry.expect("entry").path();
+        add(dir.file_name().unwrap().to_str().unwrap(), &dir);
+    }
+    add("softcontact_msgs", std::path::Path::new("msg"));
+    texts
+}
+
 fn main() {
     println!("cargo:rerun-if-changed=msg");
+    println!("cargo:rerun-if-changed=std");
+    let texts = definitions();
+    let mut table = String::from("/// Full ROS 2 definitions (`ros2msg`), keyed by `pkg/msg/Name`.\npub static DEFINITIONS: &[(&str, &str)] = &[\n");
+    for ty in texts.keys() {
+        let (package, name) = ty.split_once('/').unwrap();
+        writeln!(table, "    ({:?}, {:?}),", format!("{package}/msg/{name}"), full_definition(ty, &texts)).unwrap();
+    }
+    table.push_str("];\n");
+    std::fs::write(std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("definitions.rs"), table).unwrap();
     let mut files: Vec<_> = std::fs::read_dir("msg").expect("msg/").map(|e| e.expect("entry").path()).collect();
     files.sort();
     let mut out = String::new();

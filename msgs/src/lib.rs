@@ -12,6 +12,26 @@ pub trait RosType {
     fn type_name() -> MessageTypeName {
         MessageTypeName::new(Self::PACKAGE, Self::NAME)
     }
+    /// `pkg/msg/Name`, as recordings name the type.
+    fn type_path() -> String {
+        format!("{}/msg/{}", Self::PACKAGE, Self::NAME)
+    }
+    /// The full definition text (`ros2msg`) recordings carry for this type.
+    fn definition() -> &'static str {
+        let path = Self::type_path();
+        definition(&path).unwrap_or_else(|| panic!("{path} has no .msg in msgs/std or msgs/msg"))
+    }
+}
+
+include!(concat!(env!("OUT_DIR"), "/definitions.rs"));
+
+/// The full ROS 2 definition of a type named `pkg/msg/Name` (or `pkg/Name`), if the project knows it.
+pub fn definition(type_name: &str) -> Option<&'static str> {
+    let path = match type_name.split('/').collect::<Vec<_>>()[..] {
+        [package, name] => format!("{package}/msg/{name}"),
+        _ => type_name.to_string(),
+    };
+    DEFINITIONS.iter().find(|(t, _)| *t == path).map(|(_, d)| *d)
 }
 
 macro_rules! ros_type {
@@ -252,4 +272,25 @@ pub mod std_srvs {
 /// The project's own messages, generated from msg/*.msg by build.rs.
 pub mod softcontact_msgs {
     include!(concat!(env!("OUT_DIR"), "/softcontact_msgs.rs"));
+}
+
+/// Calls `$callback! { Variant: path::Type, … }` with every message type the nodes publish or take:
+/// one list for the code that must handle "any of them" (recording, replay, decoding by type name).
+#[macro_export]
+macro_rules! with_message_types {
+    ($callback:ident) => {
+        $callback! {
+            JointState: $crate::sensor_msgs::JointState,
+            PoseStamped: $crate::geometry_msgs::PoseStamped,
+            TwistStamped: $crate::geometry_msgs::TwistStamped,
+            WrenchStamped: $crate::geometry_msgs::WrenchStamped,
+            TFMessage: $crate::tf2_msgs::TFMessage,
+            DiagnosticArray: $crate::diagnostic_msgs::DiagnosticArray,
+            Clock: $crate::rosgraph_msgs::Clock,
+            ContactModel: $crate::softcontact_msgs::ContactModel,
+            ContactState: $crate::softcontact_msgs::ContactState,
+            ControllerState: $crate::softcontact_msgs::ControllerState,
+            ForceCommand: $crate::softcontact_msgs::ForceCommand,
+        }
+    };
 }

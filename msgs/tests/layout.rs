@@ -57,3 +57,47 @@ fn every_project_message_round_trips_through_cdr() {
     let state = ControllerState { f_cmd: 140.0, z: 0.03, contact_lost: true, ..Default::default() };
     assert_eq!(from_bytes::<ControllerState, Le>(&to_vec::<_, Le>(&state).unwrap()).unwrap().0, state);
 }
+
+#[test]
+fn definitions_append_dependencies_depth_first_as_rosbag2_does() {
+    use softcontact_msgs::RosType;
+    use softcontact_msgs::geometry_msgs::WrenchStamped;
+    let sep = "=".repeat(80);
+    let want = format!(
+        "std_msgs/Header header\nWrench wrench\n{sep}\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n\
+         {sep}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n{sep}\nMSG: geometry_msgs/Wrench\n\
+         Vector3  force\nVector3  torque\n{sep}\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+    );
+    assert_eq!(WrenchStamped::definition(), want);
+    assert_eq!(WrenchStamped::type_path(), "geometry_msgs/msg/WrenchStamped");
+    assert_eq!(softcontact_msgs::definition("geometry_msgs/WrenchStamped"), Some(want.as_str()));
+    assert_eq!(softcontact_msgs::definition("geometry_msgs/msg/Nonexistent"), None);
+}
+
+#[test]
+fn every_message_type_has_a_definition_naming_each_dependency_once() {
+    use ::softcontact_msgs::*;
+    fn check<T: RosType>() {
+        let text = T::definition();
+        let blocks: Vec<&str> = text.lines().filter(|l| l.starts_with("MSG: ")).collect();
+        let mut unique = blocks.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(blocks.len(), unique.len(), "{}", T::type_path());
+    }
+    check::<builtin_interfaces::Time>();
+    check::<std_msgs::Header>();
+    check::<geometry_msgs::PoseStamped>();
+    check::<geometry_msgs::TwistStamped>();
+    check::<geometry_msgs::WrenchStamped>();
+    check::<sensor_msgs::JointState>();
+    check::<tf2_msgs::TFMessage>();
+    check::<diagnostic_msgs::DiagnosticArray>();
+    check::<rosgraph_msgs::Clock>();
+    check::<::softcontact_msgs::softcontact_msgs::ContactModel>();
+    check::<::softcontact_msgs::softcontact_msgs::ContactState>();
+    check::<::softcontact_msgs::softcontact_msgs::ControllerState>();
+    check::<::softcontact_msgs::softcontact_msgs::ForceCommand>();
+    // TFMessage → TransformStamped → Header → Time, Transform → Vector3, Quaternion: Header once.
+    assert_eq!(tf2_msgs::TFMessage::definition().matches("MSG: ").count(), 6);
+}
