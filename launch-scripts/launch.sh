@@ -2,7 +2,7 @@
 # The node graph, started, watched and stopped as one: the implementation behind sim.sh and robot.sh.
 #
 #   launch.sh --sim|--robot [--isolated] [--lockstep] [--surface sponge|dice|none] [--log-dir DIR]
-#             [--params-file FILE]... [--run COMMAND [ARGS...]]
+#             [--params-file FILE]... [--nodes N1,N2...] [--run COMMAND [ARGS...]]
 #
 # Starts the nodes with the parameter files of config/ (plus any --params-file overlays, later ones win),
 # waits until every node has said it is ready, then either runs COMMAND (and stops the graph when it
@@ -11,6 +11,7 @@
 # 5 s. The exit status is non-zero if a node failed or was killed, or COMMAND failed. Each node's log
 # (its exit report included) is in the log folder.
 #
+# --nodes starts only the nodes named (e.g. --nodes contact_estimator to replay a recording into it).
 # --isolated runs everything in a new network namespace with only loopback (DDS never leaves the machine;
 # needs unprivileged user namespaces). Binaries: $SOFTCONTACT_BIN (default target/release, built with
 # `cargo build --release` when missing).
@@ -18,7 +19,7 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(dirname "$here")"
-mode="" isolated=0 lockstep=0 surface="" log_dir="" run=() overlays=()
+mode="" isolated=0 lockstep=0 surface="" log_dir="" only="" run=() overlays=()
 while (($#)); do
     case "$1" in
     --sim) mode=sim ;;
@@ -28,8 +29,9 @@ while (($#)); do
     --surface) surface="$2"; shift ;;
     --log-dir) log_dir="$2"; shift ;;
     --params-file) overlays+=("$(realpath "$2")"); shift ;;
+    --nodes) only="$2"; shift ;;
     --run) shift; run=("$@"); break ;;
-    -h | --help) sed -n '2,18p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,19p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "launch: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     shift
@@ -44,6 +46,7 @@ if ((isolated)) && [[ -z "${SOFTCONTACT_NETNS:-}" ]]; then
     [[ -n "$surface" ]] && args+=(--surface "$surface")
     [[ -n "$log_dir" ]] && args+=(--log-dir "$(realpath -m "$log_dir")")
     for o in "${overlays[@]}"; do args+=(--params-file "$o"); done
+    [[ -n "$only" ]] && args+=(--nodes "$only")
     ((${#run[@]})) && args+=(--run "${run[@]}")
     # -f: the namespace's first process is this script's copy, so Ctrl-C reaches it as before.
     exec unshare --map-root-user --net env SOFTCONTACT_NETNS=1 bash "${BASH_SOURCE[0]}" "${args[@]}"
@@ -57,6 +60,12 @@ fi
 bin="${SOFTCONTACT_BIN:-$root/target/release}"
 nodes=(lwr_driver ft_sensor contact_estimator deformation_controller)
 [[ "$mode" == sim ]] && nodes=(sim_arm "${nodes[@]}")
+if [[ -n "$only" ]]; then
+    for n in ${only//,/ }; do
+        [[ " ${nodes[*]} " == *" $n "* ]] || { echo "launch: no node $n (nodes: ${nodes[*]})" >&2; exit 2; }
+    done
+    IFS=, read -r -a nodes <<<"$only"
+fi
 for n in "${nodes[@]}"; do
     if [[ ! -x "$bin/$n" ]]; then
         [[ -z "${SOFTCONTACT_BIN:-}" ]] || { echo "launch: $bin/$n missing" >&2; exit 2; }

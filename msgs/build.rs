@@ -47,8 +47,21 @@ fn field_types(package: &str, text: &str) -> Vec<String> {
 fn is_primitive(ty: &str) -> bool {
     matches!(
         ty,
-        "bool" | "byte" | "char" | "int8" | "uint8" | "int16" | "uint16" | "int32" | "uint32" | "int64" | "uint64"
-            | "float32" | "float64" | "string" | "wstring"
+        "bool"
+            | "byte"
+            | "char"
+            | "int8"
+            | "uint8"
+            | "int16"
+            | "uint16"
+            | "int32"
+            | "uint32"
+            | "int64"
+            | "uint64"
+            | "float32"
+            | "float64"
+            | "string"
+            | "wstring"
     )
 }
 
@@ -101,7 +114,9 @@ fn main() {
     println!("cargo:rerun-if-changed=msg");
     println!("cargo:rerun-if-changed=std");
     let texts = definitions();
-    let mut table = String::from("/// Full ROS 2 definitions (`ros2msg`), keyed by `pkg/msg/Name`.\npub static DEFINITIONS: &[(&str, &str)] = &[\n");
+    let mut table = String::from(
+        "/// Full ROS 2 definitions (`ros2msg`), keyed by `pkg/msg/Name`.\npub static DEFINITIONS: &[(&str, &str)] = &[\n",
+    );
     for ty in texts.keys() {
         let (package, name) = ty.split_once('/').unwrap();
         writeln!(table, "    ({:?}, {:?}),", format!("{package}/msg/{name}"), full_definition(ty, &texts)).unwrap();

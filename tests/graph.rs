@@ -14,6 +14,9 @@ use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCom
 use softcontact_nodes::ros;
 
 const INSIDE: &str = "SOFTCONTACT_GRAPH_CLIENT";
+const REPLAY_INSIDE: &str = "SOFTCONTACT_REPLAY_CLIENT";
+/// Where the client records the graph with `softcontact record`.
+const RECORDING: &str = "SOFTCONTACT_GRAPH_RECORDING";
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
@@ -24,8 +27,13 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
     if std::env::var(INSIDE).is_ok() {
         return client();
     }
+    if let Ok(recording) = std::env::var(REPLAY_INSIDE) {
+        return replay_client(Path::new(&recording));
+    }
     let logs = std::env::temp_dir().join(format!("softcontact-graph-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&logs);
+    std::fs::create_dir_all(&logs).unwrap();
+    let recording = logs.join("graph_recording");
     let bin = Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap();
     let out = Command::new(root().join("launch-scripts/sim.sh"))
         .args(["--isolated", "--log-dir"])
@@ -34,6 +42,7 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
         .arg(std::env::current_exe().unwrap())
         .args(["--exact", "the_graph_reaches_force_commands_on_the_sponge", "--nocapture", "--test-threads=1"])
         .env(INSIDE, "1")
+        .env(RECORDING, &recording)
         .env("SOFTCONTACT_BIN", bin)
         .output()
         .expect("sim.sh runs");
@@ -52,7 +61,132 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
     let driver = log("lwr_driver");
     let within = number_after(&driver, "within 200 us: ").expect("reply latency reported");
     assert!(within >= 99.9, "FRI answers within 200 us in {within} % of cycles");
+
+    check_recording(&recording, &logs);
+
+    // The recording replayed into a contact estimator alone (its own namespace) learns the same model.
+    let replay_logs = logs.join("replay");
+    let out = Command::new(root().join("launch-scripts/sim.sh"))
+        .args(["--isolated", "--nodes", "contact_estimator", "--log-dir"])
+        .arg(&replay_logs)
+        .arg("--run")
+        .arg(std::env::current_exe().unwrap())
+        .args(["--exact", "the_graph_reaches_force_commands_on_the_sponge", "--nocapture", "--test-threads=1"])
+        .env(REPLAY_INSIDE, &recording)
+        .env("SOFTCONTACT_BIN", bin)
+        .output()
+        .expect("sim.sh runs");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    eprintln!("{text}");
+    assert!(
+        out.status.success() && text.contains("1 passed"),
+        "the replay run failed (logs in {})",
+        replay_logs.display()
+    );
     let _ = std::fs::remove_dir_all(&logs);
+}
+
+/// The recording the client made: complete, read by both Python peers as the project reads it, and
+/// `softcontact identify` chooses the simulator's model kind from it.
+fn check_recording(recording: &Path, logs: &Path) {
+    let rec = softcontact_bag::Recording::open(recording).unwrap();
+    assert!(rec.warnings().is_empty(), "{:?}", rec.warnings());
+    for topic in ["/ft_sensor/wrench", "/lwr/ee_pose", "/lwr/ee_twist", "/lwr/joint_states", "/tf_static"] {
+        assert!(rec.topic(topic).is_some_and(|t| t.message_count > 0), "{topic} recorded");
+    }
+    let wrenches = rec.topic("/ft_sensor/wrench").unwrap().message_count as f64;
+    let (t0, t1) = rec.time_range().unwrap();
+    let rate = wrenches / ((t1 - t0) as f64 * 1e-9);
+    eprintln!("recording: {} messages, /ft_sensor/wrench at {rate:.0} Hz", rec.message_count());
+    assert!(rate > 900.0, "the wrench recorded at {rate} Hz (published at 1 kHz)");
+
+    let json = logs.join("identify.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .arg("identify")
+        .arg(recording)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    eprint!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "identify ran");
+    let id: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let sponge = softcontact_sim::sponge();
+    let truth = softcontact_sim::SimConfig::above_surface(sponge.clone(), 1).surface.unwrap().point;
+    assert_eq!(id["selected"], sponge.kind.id(), "identify chooses the simulator's kind");
+    assert!((id["contact_position"][2].as_f64().unwrap() - truth.z).abs() < 1e-3, "surface within 1 mm");
+    let k = id["selected_at_contact_position"]["stiffness"].as_f64().unwrap();
+    assert!((k / sponge.stiffness - 1.0).abs() < 0.1, "k {k} within 10 % of {}", sponge.stiffness);
+
+    // Both Python peers: the same messages per topic, and the models value for value.
+    let decoded = logs.join("peers.json");
+    let out = Command::new("python3")
+        .arg(root().join("crates/bag/tests/peers.py"))
+        .args(["decode"])
+        .arg(recording)
+        .arg(&decoded)
+        .args(["/contact_estimator/model", "/tf_static"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "peers.py: {}", String::from_utf8_lossy(&out.stderr));
+    let decoded: serde_json::Value = serde_json::from_slice(&std::fs::read(&decoded).unwrap()).unwrap();
+    let models: Vec<serde_json::Value> = rec
+        .messages()
+        .map(Result::unwrap)
+        .filter(|m| m.topic() == "/contact_estimator/model" || m.topic() == "/tf_static")
+        .map(|m| serde_json::to_value(softcontact_bag::AnyMessage::decode(&m).unwrap().unwrap()).unwrap())
+        .collect();
+    assert!(models.len() > 5, "models recorded");
+    for peer in ["mcap_ros2", "rosbags"] {
+        for t in rec.topics() {
+            assert_eq!(decoded["counts"][peer][&t.name], t.message_count, "{peer} {}", t.name);
+        }
+        let got: Vec<&serde_json::Value> = decoded[peer].as_array().unwrap().iter().map(|m| &m[3]).collect();
+        assert_eq!(got, models.iter().collect::<Vec<_>>(), "{peer}");
+    }
+}
+
+/// Inside the replay namespace, where only contact_estimator runs: `softcontact replay` the sensor
+/// and pose topics into it; its last model equals the last one recorded.
+fn replay_client(recording: &Path) {
+    let rec = softcontact_bag::Recording::open(recording).unwrap();
+    let recorded: ContactModel = rec
+        .messages()
+        .map(Result::unwrap)
+        .filter(|m| m.topic() == "/contact_estimator/model")
+        .map(|m| m.decode::<ContactModel>().unwrap())
+        .last()
+        .expect("a model recorded");
+    let mut node = ros::node("replay_test").unwrap();
+    let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos()).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .arg("replay")
+        .arg(recording)
+        .args(["--topics", "/ft_sensor/wrench,/lwr/ee_pose,/lwr/ee_twist,/tf_static"])
+        .output()
+        .unwrap();
+    eprint!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "replay ran");
+    std::thread::sleep(Duration::from_millis(1500)); // the last refit
+    let mut last = None;
+    while let Ok(Some((m, _))) = models.take() {
+        last = Some(m);
+    }
+    let learned = last.expect("the estimator published models during the replay");
+    eprintln!(
+        "replayed: {} k {:.0} λ {:.0} z {:.4}; recorded: {} k {:.0} λ {:.0} z {:.4}",
+        learned.kind,
+        learned.stiffness,
+        learned.damping,
+        learned.contact_position.z,
+        recorded.kind,
+        recorded.stiffness,
+        recorded.damping,
+        recorded.contact_position.z
+    );
+    assert_eq!(learned.kind, recorded.kind);
+    assert!((learned.stiffness / recorded.stiffness - 1.0).abs() < 0.02, "k within 2 %");
+    assert!((learned.contact_position.z - recorded.contact_position.z).abs() < 5e-4, "surface within 0.5 mm");
 }
 
 /// The number that follows `key` in `text` (its last occurrence).
@@ -63,6 +197,13 @@ fn number_after(text: &str, key: &str) -> Option<f64> {
 
 /// Inside the namespace, with the graph up.
 fn client() {
+    // Everything the graph says, recorded as a user would (stopped after the identification pushes).
+    let mut recorder = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .arg("record")
+        .arg("-o")
+        .arg(std::env::var(RECORDING).unwrap())
+        .spawn()
+        .unwrap();
     let mut node = ros::node("graph_test").unwrap();
     let states =
         ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
@@ -112,6 +253,8 @@ fn client() {
     // One more refit on the full window.
     std::thread::sleep(Duration::from_millis(1100));
     drain(&mut latest_model, &mut latest_state);
+    let stopped = Command::new("kill").args(["-INT", &recorder.id().to_string()]).status().unwrap();
+    assert!(stopped.success() && recorder.wait().unwrap().success(), "the recorder stopped cleanly on SIGINT");
     let m = latest_model.unwrap();
     let sponge = softcontact_sim::sponge();
     let truth = softcontact_sim::SimConfig::above_surface(sponge.clone(), 1).surface.unwrap().point;

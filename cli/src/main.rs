@@ -1,8 +1,11 @@
 //! `softcontact`: the product's command line (design.md section 6).
 
+mod any_topic;
 mod bench;
 mod force_cmd;
+mod identify_cmd;
 mod model_cmd;
+mod record_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -36,14 +39,7 @@ enum Command {
         graph: bool,
     },
     /// Fit every contact model to a recording (5-fold cross-validated fitness) and choose one.
-    Identify {
-        file: PathBuf,
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Contact direction in world, the way the hand moves to compress the surface.
-        #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
-        normal: Vec<f64>,
-    },
+    Identify(identify_cmd::IdentifyArgs),
     /// Find where simulation and measurement disagree, name the missing effect, add it, show the gap.
     Discrepancy {
         file: PathBuf,
@@ -55,19 +51,9 @@ enum Command {
         out: Option<PathBuf>,
     },
     /// Record ROS 2 topics to MCAP (like `ros2 bag record`).
-    Record {
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-        topics: Vec<String>,
-    },
+    Record(record_cmd::RecordArgs),
     /// Publish a recording with its recorded timing (like `ros2 bag play`).
-    Replay {
-        file: PathBuf,
-        #[arg(long, default_value_t = 1.0)]
-        rate: f64,
-        #[arg(long = "loop")]
-        looping: bool,
-    },
+    Replay(record_cmd::ReplayArgs),
     /// The robot description as the code sees it: joints, limits, masses, frames, and at a state the
     /// frame poses, the tool Jacobian, M, g and the RNEA torque.
     Model(model_cmd::ModelArgs),
@@ -106,12 +92,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
-        Command::Identify { .. } => not_built("identify", "it needs the contact-model estimator and the MCAP reader"),
+        Command::Identify(args) => identify_cmd::run(&args),
         Command::Discrepancy { .. } => {
             not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader")
         }
-        Command::Record { .. } => not_built("record", "it needs the ROS 2 nodes and the MCAP writer"),
-        Command::Replay { .. } => not_built("replay", "it needs the ROS 2 nodes and the MCAP reader"),
+        Command::Record(args) => record_cmd::record(&args),
+        Command::Replay(args) => record_cmd::replay(&args),
         Command::Model(args) => model_cmd::run(args),
         Command::Force(args) => force_cmd::run(&args),
         Command::Bench { what } => bench::run(what),

@@ -3,7 +3,7 @@
 //! (seed 001: 1200 samples at 10 ms), and on `refit` chooses the best kind by cross-validated fitness
 //! and estimates where the surface really is (the onset threshold fires late on a soft surface).
 
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_contact::{
     ContactError, ContactModel, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample, WindowEstimator,
     estimate_contact_offset,
@@ -123,6 +123,11 @@ impl ContactEstimatorNode {
             }
         }
         Ok(out)
+    }
+
+    /// Samples in the window.
+    pub fn samples(&self) -> usize {
+        self.window.len()
     }
 
     /// The fraction of the window filled.
@@ -280,4 +285,77 @@ pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), Co
         return Err(ContactError::InvalidConfig("contact position is not finite".into()));
     }
     Ok((model, position))
+}
+
+/// One force reading made into what the estimator takes (design.md section 4): the sensor's force
+/// rotated into the world through the newest tool pose, its normal component f = −F·n ≥ 0, and the
+/// tool's position and velocity. The node and `softcontact identify` pair readings the same way.
+#[derive(Debug, Clone)]
+pub struct ForcePairing {
+    /// The sensor frame's rotation in the tool frame (/tf_static, or the URDF).
+    pub tool_to_sensor: UnitQuaternion<f64>,
+    normal: Vector3<f64>,
+    stale_after: f64,
+    /// Tool position, rotation and the time they were taken [s].
+    pose: Option<(Vector3<f64>, UnitQuaternion<f64>, f64)>,
+    velocity: Vector3<f64>,
+    /// Without twists the velocity is the difference of successive poses.
+    twists_seen: bool,
+}
+
+/// A force reading paired with the tool's state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Paired {
+    pub position: Vector3<f64>,
+    pub velocity: Vector3<f64>,
+    pub normal_force: f64,
+}
+
+impl ForcePairing {
+    pub fn new(tool_to_sensor: UnitQuaternion<f64>, normal: Vector3<f64>, stale_after: f64) -> Self {
+        Self {
+            tool_to_sensor,
+            normal: normal.normalize(),
+            stale_after,
+            pose: None,
+            velocity: Vector3::zeros(),
+            twists_seen: false,
+        }
+    }
+
+    /// The sensor's rotation in the tool frame as the URDF gives it.
+    pub fn urdf_tool_to_sensor() -> Result<UnitQuaternion<f64>, softcontact_dynamics::Error> {
+        use softcontact_dynamics::lwr4;
+        let model = lwr4::model();
+        let mut data = model.data();
+        model.forward_kinematics(&mut data, &[0.0; 7]);
+        Ok(model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
+            * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation)
+    }
+
+    pub fn pose(&mut self, t: f64, position: Vector3<f64>, rotation: UnitQuaternion<f64>) {
+        if !self.twists_seen
+            && let Some((previous, _, t0)) = self.pose
+            && t > t0
+        {
+            self.velocity = (position - previous) / (t - t0);
+        }
+        self.pose = Some((position, rotation, t));
+    }
+
+    pub fn twist(&mut self, linear: Vector3<f64>) {
+        self.twists_seen = true;
+        self.velocity = linear;
+    }
+
+    /// The reading at `t` of the force on the sensor in its frame; `None` without a pose at most
+    /// `stale_after` old, or for a non-finite force.
+    pub fn force(&self, t: f64, force_in_sensor: Vector3<f64>) -> Option<Paired> {
+        let (position, rotation, seen) = self.pose?;
+        if t - seen > self.stale_after || !force_in_sensor.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let force = rotation * self.tool_to_sensor * force_in_sensor;
+        Some(Paired { position, velocity: self.velocity, normal_force: (-force.dot(&self.normal)).max(0.0) })
+    }
 }

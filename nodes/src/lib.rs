@@ -5,6 +5,8 @@
 pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
+pub mod geometry;
+pub mod identify;
 pub mod lwr_driver;
 pub mod params;
 pub mod ros;

@@ -213,3 +213,11 @@ pub fn wait(poll: &mut mio::Poll, events: &mut mio::Events, timeout: std::time::
         r => r,
     }
 }
+
+/// A recorder's or a replayer's QoS: as offered (reliability, durability), with a deep history so
+/// that nothing is dropped between two drains.
+pub fn qos(reliable: bool, transient_local: bool, depth: usize) -> QosProfile {
+    let base = if reliable { reliable_qos() } else { sensor_qos() };
+    base.durability(if transient_local { Durability::TransientLocal } else { Durability::Volatile })
+        .history(History::KeepLast { depth })
+}

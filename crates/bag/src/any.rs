@@ -35,6 +35,13 @@ macro_rules! any_message {
                 false $(|| path == <$ty>::type_path())+
             }
 
+            /// Writes the message on a channel added for its type.
+            pub fn write_to_channel(&self, writer: &mut BagWriter, channel: u16, log_time: u64) -> Result<()> {
+                match self {
+                    $(Self::$variant(m) => writer.write(channel, log_time, m)),+
+                }
+            }
+
             /// Adds `topic` with this message's type (if new) and writes the message.
             pub fn write(&self, writer: &mut BagWriter, topic: &str, qos: crate::Qos, log_time: u64) -> Result<()> {
                 match self {

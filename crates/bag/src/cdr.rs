@@ -44,7 +44,10 @@ mod tests {
     fn wrench() -> WrenchStamped {
         WrenchStamped {
             header: Header { stamp: Time { sec: 1, nanosec: 2 }, frame_id: "ft_sensor".into() },
-            wrench: Wrench { force: Vector3 { x: 1.0, y: -2.0, z: -140.5 }, torque: Vector3 { x: 0.1, y: 0.2, z: 0.3 } },
+            wrench: Wrench {
+                force: Vector3 { x: 1.0, y: -2.0, z: -140.5 },
+                torque: Vector3 { x: 0.1, y: 0.2, z: 0.3 },
+            },
         }
     }
 

@@ -77,7 +77,10 @@ impl BagMessage<'_> {
             });
         }
         if self.channel.message_encoding != "cdr" {
-            return Err(BagError::NotCdr { topic: self.topic().into(), encoding: self.channel.message_encoding.clone() });
+            return Err(BagError::NotCdr {
+                topic: self.topic().into(),
+                encoding: self.channel.message_encoding.clone(),
+            });
         }
         cdr::decode(&self.data).map_err(|message| BagError::Cdr {
             topic: self.topic().into(),
@@ -95,7 +98,8 @@ fn read_file(path: &Path) -> Result<File> {
     if !bytes.starts_with(mcap::MAGIC) {
         return Err(BagError::NotMcap(path.into()));
     }
-    let complete = bytes.len() >= 2 * mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC) && mcap::read::footer(&bytes).is_ok();
+    let complete =
+        bytes.len() >= 2 * mcap::MAGIC.len() && bytes.ends_with(mcap::MAGIC) && mcap::read::footer(&bytes).is_ok();
     Ok(File { path: path.into(), bytes, complete })
 }
 
@@ -184,7 +188,8 @@ impl Recording {
                         return Err(BagError::Truncated { path: file.path.clone(), reason });
                     }
                     if !file.complete {
-                        let why = damaged.map_or("it has no end".to_string(), |e| format!("it ends in a broken record: {e}"));
+                        let why =
+                            damaged.map_or("it has no end".to_string(), |e| format!("it ends in a broken record: {e}"));
                         self.warnings.push(format!(
                             "{}: not closed by its writer ({why}); recovered {count} messages, everything up to its \
                              last complete chunk",

@@ -7,9 +7,7 @@ use mcap::records::MessageHeader;
 use serde::Serialize;
 use softcontact_msgs::RosType;
 
-use crate::metadata::{
-    BagInfo, MetadataFile, Nanoseconds, NanosecondsSinceEpoch, Qos, TopicMetadata, TopicWithCount,
-};
+use crate::metadata::{BagInfo, MetadataFile, Nanoseconds, NanosecondsSinceEpoch, Qos, TopicMetadata, TopicWithCount};
 use crate::{BagError, Result, cdr};
 
 /// Chunks close at this uncompressed size (and at every [`BagWriter::flush`]).
@@ -53,7 +51,10 @@ impl BagWriter {
             let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("recording");
             (path.join(format!("{name}_0.mcap")), Some(path.to_path_buf()))
         };
-        let handle = File::options().write(true).create_new(true).open(&file)
+        let handle = File::options()
+            .write(true)
+            .create_new(true)
+            .open(&file)
             .map_err(|source| BagError::Io { path: file.clone(), source })?;
         let mcap = mcap::WriteOptions::new()
             .profile("ros2")
@@ -75,7 +76,13 @@ impl BagWriter {
     }
 
     /// Adds a topic of any type, given its full `ros2msg` definition.
-    pub fn add_topic_with_definition(&mut self, topic: &str, type_name: &str, definition: &str, qos: Qos) -> Result<u16> {
+    pub fn add_topic_with_definition(
+        &mut self,
+        topic: &str,
+        type_name: &str,
+        definition: &str,
+        qos: Qos,
+    ) -> Result<u16> {
         let type_name = crate::type_path(type_name);
         if let Some(c) = self.channels.iter().find(|c| c.topic == topic) {
             return if c.type_name == type_name {

@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Recordings checked by peers no one here wrote (pip: mcap, mcap-ros2-support, rosbags).
 
-    peers.py decode RECORDING OUT.json   both peers decode a recording the project wrote
+    peers.py decode RECORDING OUT.json [TOPIC...]
+                                         both peers decode a recording the project wrote (every
+                                         message, or only TOPICs'; all are counted per topic)
     peers.py write DIR                   both peers write recordings the project must read, and the
                                          values they wrote (DIR/expected.json)
 
@@ -46,19 +48,25 @@ def mcap_files(path):
     return sorted(path.glob("*.mcap")) if path.is_dir() else [path]
 
 
-def decode(recording, out):
+def decode(recording, out, topics):
+    counts = {"mcap_ros2": {}, "rosbags": {}}
     with_mcap = []
     for file in mcap_files(recording):
         with open(file, "rb") as f:
             reader = make_reader(f, decoder_factories=[DecoderFactory()])
             for schema, channel, message, decoded in reader.iter_decoded_messages():
-                with_mcap.append([channel.topic, message.log_time, schema.name, plain(decoded)])
+                counts["mcap_ros2"][channel.topic] = counts["mcap_ros2"].get(channel.topic, 0) + 1
+                if not topics or channel.topic in topics:
+                    with_mcap.append([channel.topic, message.log_time, schema.name, plain(decoded)])
     with_rosbags = []
     with AnyReader([pathlib.Path(recording)]) as reader:
         for connection, timestamp, raw in reader.messages():
             msg = reader.deserialize(raw, connection.msgtype)
-            with_rosbags.append([connection.topic, timestamp, connection.msgtype, plain(msg)])
-    pathlib.Path(out).write_text(json.dumps({"mcap_ros2": with_mcap, "rosbags": with_rosbags}))
+            counts["rosbags"][connection.topic] = counts["rosbags"].get(connection.topic, 0) + 1
+            if not topics or connection.topic in topics:
+                with_rosbags.append([connection.topic, timestamp, connection.msgtype, plain(msg)])
+    result = {"mcap_ros2": with_mcap, "rosbags": with_rosbags, "counts": counts}
+    pathlib.Path(out).write_text(json.dumps(result))
 
 
 def samples(ts, i):
@@ -149,8 +157,8 @@ def write(folder):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) == 4 and sys.argv[1] == "decode":
-        decode(sys.argv[2], sys.argv[3])
+    if len(sys.argv) >= 4 and sys.argv[1] == "decode":
+        decode(sys.argv[2], sys.argv[3], set(sys.argv[4:]))
     elif len(sys.argv) == 3 and sys.argv[1] == "write":
         write(sys.argv[2])
     else:

@@ -45,8 +45,11 @@ fn both_peers_decode_what_the_project_writes() {
 fn the_project_reads_what_both_peers_write() {
     let dir = tempfile::tempdir().unwrap();
     peers(&[Path::new("write"), dir.path()]);
-    let expected: Vec<Value> = serde_json::from_slice(&std::fs::read(dir.path().join("expected.json")).unwrap()).unwrap();
-    for (source, path) in [("by_rosbags", dir.path().join("by_rosbags")), ("by_mcap_ros2", dir.path().join("by_mcap_ros2.mcap"))] {
+    let expected: Vec<Value> =
+        serde_json::from_slice(&std::fs::read(dir.path().join("expected.json")).unwrap()).unwrap();
+    for (source, path) in
+        [("by_rosbags", dir.path().join("by_rosbags")), ("by_mcap_ros2", dir.path().join("by_mcap_ros2.mcap"))]
+    {
         let recording = Recording::open(&path).unwrap();
         assert!(recording.warnings().is_empty(), "{source}: {:?}", recording.warnings());
         let want: Vec<&Value> = expected.iter().filter(|e| e[0] == source).collect();

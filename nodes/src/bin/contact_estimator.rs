@@ -8,12 +8,12 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use mio::{Events, Interest, Poll, Token};
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
-use softcontact_dynamics::lwr4;
+use nalgebra::Vector3;
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::softcontact_msgs::ContactState;
 use softcontact_msgs::std_msgs::Header;
-use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ModelMsg, Params};
+use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ForcePairing, ModelMsg, Params};
+use softcontact_nodes::geometry;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 
@@ -43,50 +43,35 @@ fn main() -> anyhow::Result<()> {
     poll.registry().register(&mut wrenches, Token(0), Interest::READABLE)?;
     let mut events = Events::with_capacity(8);
 
-    // The sensing frame's rotation in the tool frame, from the URDF.
-    let model = lwr4::model();
-    let mut data = model.data();
-    model.forward_kinematics(&mut data, &[0.0; 7]);
-    let tool_to_sensor = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
-        * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation;
+    let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, p.stale_after);
+    let start = Instant::now();
     ros::log(
         &node,
         LogLevel::Info,
         &format!("ready: window {} × {} s, domain {}", p.window, p.sample_period, node.domain_id()),
     );
 
-    let mut pose: Option<(Vector3<f64>, UnitQuaternion<f64>, Instant)> = None;
-    let mut velocity = Vector3::zeros();
     let (mut next_state, mut next_refit) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
     let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
     let mut was_in_contact = false;
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
+        // Pairing by arrival, aged by this process's clock (stamps of other processes may differ).
         while let Ok(Some((m, _))) = poses.take() {
-            let (t, o) = (m.pose.position, m.pose.orientation);
-            let rotation = UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z));
-            pose = Some((Vector3::new(t.x, t.y, t.z), rotation, Instant::now()));
+            let (position, rotation) = geometry::pose_of(&m.pose);
+            pairing.pose(start.elapsed().as_secs_f64(), position, rotation);
         }
         while let Ok(Some((m, _))) = twists.take() {
-            velocity = Vector3::new(m.twist.linear.x, m.twist.linear.y, m.twist.linear.z);
+            pairing.twist(geometry::vector_of(&m.twist.linear));
         }
         while let Ok(Some((w, _))) = wrenches.take() {
-            let Some((position, rotation, _)) =
-                pose.filter(|(_, _, seen)| seen.elapsed().as_secs_f64() <= p.stale_after)
+            let Some(paired) = pairing.force(start.elapsed().as_secs_f64(), geometry::vector_of(&w.wrench.force))
             else {
                 unpaired += 1;
                 continue;
             };
-            let f_sensor = Vector3::new(w.wrench.force.x, w.wrench.force.y, w.wrench.force.z);
-            if !f_sensor.iter().all(|v| v.is_finite()) {
-                unpaired += 1;
-                continue;
-            }
-            // The contact force on the hand in the world, and the normal force f = −F·n ≥ 0.
-            let force = rotation * tool_to_sensor * f_sensor;
-            let f = (-force.dot(&normal)).max(0.0);
             let t = w.header.stamp.as_secs_f64();
-            let out = match estimator.update(t, &position, &velocity, f) {
+            let out = match estimator.update(t, &paired.position, &paired.velocity, paired.normal_force) {
                 Ok(out) => out,
                 Err(e) => {
                     unpaired += 1;

@@ -6,7 +6,7 @@
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
@@ -14,7 +14,9 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{self as geo, PoseStamped, WrenchStamped};
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
+use softcontact_nodes::geometry;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 use softcontact_nodes::udp::RdtClient;
@@ -61,12 +63,7 @@ fn main() -> anyhow::Result<()> {
         ros::reliable_qos(),
     )?;
 
-    // The sensing frame's rotation relative to the tool frame, from the URDF.
-    let model = lwr4::model();
-    let mut data = model.data();
-    model.forward_kinematics(&mut data, &[0.0; 7]);
-    let tool_to_sensor = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
-        * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation;
+    let tool_to_sensor = ForcePairing::urdf_tool_to_sensor()?;
 
     client.start()?;
     ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
@@ -80,8 +77,7 @@ fn main() -> anyhow::Result<()> {
     let mut tare_due: Option<Instant> = None;
     while !ros::stopping(&stop) {
         while let Ok(Some((pose, _))) = poses.take() {
-            let o = pose.pose.orientation;
-            orientation = Some(UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z)) * tool_to_sensor);
+            orientation = Some(geometry::pose_of(&pose.pose).1 * tool_to_sensor);
         }
         if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
             last_record = Instant::now();

@@ -35,7 +35,11 @@ pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
         ),
         (
             "/lwr/joint_torque_command",
-            AnyMessage::JointState(JointState { header: header(i, ""), effort: vec![0.5 * x; 7], ..Default::default() }),
+            AnyMessage::JointState(JointState {
+                header: header(i, ""),
+                effort: vec![0.5 * x; 7],
+                ..Default::default()
+            }),
         ),
         (
             "/lwr/ee_pose",
@@ -99,7 +103,7 @@ pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
                 candidate_fitness_std: vec![0.01, 0.001, 0.0005],
                 window_fill: 1.0,
                 stiffness_excited: true,
-                damping_excited: i % 2 == 0,
+                damping_excited: i.is_multiple_of(2),
             }),
         ),
         (
@@ -127,7 +131,10 @@ pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
                 contact_lost: false,
             }),
         ),
-        ("/deformation_controller/force_command", AnyMessage::ForceCommand(ForceCommand { force: 140.0, duration: 2.0 })),
+        (
+            "/deformation_controller/force_command",
+            AnyMessage::ForceCommand(ForceCommand { force: 140.0, duration: 2.0 }),
+        ),
     ]
 }
 

@@ -1,0 +1,197 @@
+//! `softcontact identify FILE`: every contact model fitted to a recording, with 5-fold cross-validated
+//! fitness (seed 001 Table I), the best chosen; JSON per design.md section 6.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use serde_json::json;
+use softcontact_bag::Recording;
+use softcontact_contact::{FitConfig, Kind};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
+use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_nodes::contact_estimator::EstimatorConfig;
+use softcontact_nodes::identify::{FramesFrom, Identification, Identifier};
+
+pub const WRENCH: &str = "/ft_sensor/wrench";
+pub const POSE: &str = "/lwr/ee_pose";
+pub const TWIST: &str = "/lwr/ee_twist";
+pub const TF_STATIC: &str = "/tf_static";
+
+#[derive(Debug, clap::Args)]
+pub struct IdentifyArgs {
+    /// A ROS 2 recording: an .mcap file or a rosbag2 folder with /ft_sensor/wrench and /lwr/ee_pose.
+    pub file: PathBuf,
+    /// Write the result as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Contact direction in the world, the way the hand moves to compress the surface.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
+    pub normal: Vec<f64>,
+    /// Onset threshold of the normal force [N] (seed 001: 1 N).
+    #[arg(long, default_value_t = 1.0)]
+    pub onset: f64,
+    /// Time between the samples fitted [s] (seed 001: 10 ms).
+    #[arg(long, default_value_t = 0.01)]
+    pub sample_period: f64,
+}
+
+/// Reads the recording and identifies; `progress` is told the messages read so far.
+pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u64)) -> anyhow::Result<Identification> {
+    for topic in [WRENCH, POSE] {
+        anyhow::ensure!(
+            recording.topic(topic).is_some(),
+            "the recording has no {topic} (it has: {})",
+            recording.topics().iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+        );
+    }
+    let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers, e.g. 0,0,-1") };
+    let (start, end) = recording.time_range().unwrap_or((0, 0));
+    let config = EstimatorConfig {
+        normal: Vector3::new(x, y, z),
+        sample_period: args.sample_period,
+        // Room for every sample of the recording: the whole contact is fitted.
+        window: ((end - start) as f64 * 1e-9 / args.sample_period.max(1e-6)) as usize + 2,
+        onset: softcontact_contact::OnsetConfig { threshold: args.onset, ..Default::default() },
+        fit: FitConfig::default(),
+        ..Default::default()
+    };
+    let mut identifier = Identifier::new(config, 0.05)?;
+    // /tf_static first, wherever it was recorded (latched, it is normally among the first messages):
+    // it sets the frames for every reading.
+    if recording.topic(TF_STATIC).is_some() {
+        for m in recording.messages() {
+            let m = m?;
+            if m.topic() == TF_STATIC {
+                identifier.tf_static(&m.decode::<TFMessage>()?);
+                break;
+            }
+        }
+    }
+    for (i, m) in recording.messages().enumerate() {
+        let m = m?;
+        match m.topic() {
+            WRENCH => identifier.wrench(&m.decode::<WrenchStamped>()?)?,
+            POSE => identifier.pose(&m.decode::<PoseStamped>()?),
+            TWIST => identifier.twist(&m.decode::<TwistStamped>()?),
+            _ => {}
+        }
+        if i.is_multiple_of(16384) {
+            progress(i as u64);
+        }
+    }
+    Ok(identifier.finish()?)
+}
+
+pub fn to_json(id: &Identification) -> serde_json::Value {
+    let p = id.contact_position();
+    let m = &id.model.model;
+    json!({
+        "selected": id.selected().id(),
+        "contact_position": [p.x, p.y, p.z],
+        "models": id.model.estimate.fits.iter().map(|f| json!({
+            "kind": f.kind.id(),
+            "stiffness": f.stiffness,
+            "damping": f.damping,
+            "exponents": {"a": f.exponents.a, "b": f.exponents.b, "c": f.exponents.c},
+            "fitness_mean": f.fitness_mean,
+            "fitness_std": f.fitness_std,
+        })).collect::<Vec<_>>(),
+        "selected_at_contact_position": {
+            "kind": m.kind.id(), "stiffness": m.stiffness, "damping": m.damping,
+            "exponents": {"a": m.exponents.a, "b": m.exponents.b, "c": m.exponents.c},
+        },
+        "samples": id.samples,
+        "frames": match id.frames { FramesFrom::TfStatic => "tf_static", FramesFrom::Urdf => "urdf" },
+    })
+}
+
+/// Seed 001's Table I layout (fitness mean ± std per kind), then each kind's parameters.
+pub fn print_table(id: &Identification, name: &str) {
+    let short = |k: Kind| match k {
+        Kind::KelvinVoigt => "linear K/V",
+        Kind::HuntCrossley => "non-linear H/C",
+        Kind::AzadFeatherstone => "non-linear A/F",
+        other => other.id(),
+    };
+    let fits = &id.model.estimate.fits;
+    println!("Fitness (seed 001 eq. 18), 5-fold cross-validated, mean ± std over folds:");
+    print!("{:<16}", "");
+    for f in fits {
+        print!("{:>18}", short(f.kind));
+    }
+    println!();
+    print!("{name:<16}");
+    for f in fits {
+        let mark = if f.kind == id.selected() { "*" } else { " " };
+        print!("{:>17}{mark}", format!("{:.3} ± {:.3}", f.fitness_mean, f.fitness_std));
+    }
+    println!("\n");
+    println!("{:<22}{:>12}{:>12}{:>7}{:>7}{:>7}", "model", "k", "λ", "a", "b", "c");
+    for f in fits {
+        let held = match (f.stiffness_held, f.damping_held) {
+            (false, false) => "",
+            (true, false) => "  (k not excited: held)",
+            (false, true) => "  (λ not excited: held)",
+            (true, true) => "  (k, λ not excited: held)",
+        };
+        println!(
+            "{:<22}{:>12.1}{:>12.1}{:>7.2}{:>7.2}{:>7.2}{held}",
+            f.kind.label(),
+            f.stiffness,
+            f.damping,
+            f.exponents.a,
+            f.exponents.b,
+            f.exponents.c
+        );
+    }
+    let m = &id.model.model;
+    let p = id.contact_position();
+    println!(
+        "\nselected: {} (* above); at the estimated surface [{:.4}, {:.4}, {:.4}] m: k = {:.1}, λ = {:.1}",
+        id.selected().label(),
+        p.x,
+        p.y,
+        p.z,
+        m.stiffness,
+        m.damping
+    );
+    println!(
+        "{} samples in contact from t = {:.3} s; {} readings paired, {} without a fresh pose; frames from {}",
+        id.samples,
+        id.contact_time,
+        id.readings,
+        id.unpaired,
+        match id.frames {
+            FramesFrom::TfStatic => "/tf_static",
+            FramesFrom::Urdf => "the URDF (no /tf_static in the recording)",
+        }
+    );
+}
+
+pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
+    let recording = Recording::open(&args.file)?;
+    for w in recording.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let bar = indicatif::ProgressBar::new(recording.message_count());
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} messages ({eta})")
+            .expect("template")
+            .progress_chars("=> "),
+    );
+    bar.set_message("identify");
+    let id = identify(&recording, args, |n| bar.set_position(n))?;
+    bar.finish_and_clear();
+    let name = args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    print_table(&id, name);
+    if let Some(path) = &args.json {
+        write_json(path, &to_json(&id))?;
+    }
+    Ok(())
+}
+
+pub fn write_json(path: &Path, value: &serde_json::Value) -> anyhow::Result<()> {
+    std::fs::write(path, serde_json::to_string_pretty(value)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))
+}

@@ -1,0 +1,214 @@
+//! `softcontact record` and `softcontact replay`: like `ros2 bag record` and `ros2 bag play`, in MCAP.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use softcontact_bag::{AnyMessage, BagWriter, Qos, Recording};
+use softcontact_nodes::ros;
+
+use crate::any_topic::{AnyPublisher, AnySubscription, GRAPH_TOPICS};
+
+#[derive(Debug, clap::Args)]
+pub struct RecordArgs {
+    /// Where to write: NAME.mcap for one file, anything else for a rosbag2 folder
+    /// (default: softcontact_YYYY_MM_DD-HH_MM_SS, a folder).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Topics to record, as NAME (a topic of the graph) or NAME:pkg/msg/Type (default: every topic of
+    /// the graph).
+    pub topics: Vec<String>,
+    /// Stop after this many seconds (default: at Ctrl-C / SIGTERM).
+    #[arg(long)]
+    pub duration: Option<f64>,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// A recording: an .mcap file or a rosbag2 folder.
+    pub file: PathBuf,
+    /// Speed factor of the recorded timing.
+    #[arg(long, default_value_t = 1.0)]
+    pub rate: f64,
+    /// Start again at the end, until Ctrl-C.
+    #[arg(long = "loop")]
+    pub looping: bool,
+    /// Replay only these topics (default: all whose type the project knows).
+    #[arg(long, value_delimiter = ',')]
+    pub topics: Vec<String>,
+    /// Seconds to wait for subscribers to match before the first message.
+    #[arg(long, default_value_t = 1.0)]
+    pub wait: f64,
+}
+
+fn now_ns() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
+/// `softcontact_YYYY_MM_DD-HH_MM_SS` (UTC), as `ros2 bag record` names its folders.
+fn default_name() -> PathBuf {
+    let secs = now_ns() / 1_000_000_000;
+    let (days, rest) = ((secs / 86_400) as i64, secs % 86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    PathBuf::from(format!(
+        "softcontact_{year:04}_{month:02}_{day:02}-{:02}_{:02}_{:02}",
+        rest / 3600,
+        rest / 60 % 60,
+        rest % 60
+    ))
+}
+
+/// The topics asked for, with types and QoS.
+fn resolve(topics: &[String]) -> anyhow::Result<Vec<(String, String, Qos)>> {
+    if topics.is_empty() {
+        return Ok(GRAPH_TOPICS.iter().map(|(n, t, q)| (n.to_string(), t.to_string(), *q)).collect());
+    }
+    topics
+        .iter()
+        .map(|spec| {
+            let (name, ty) = spec.split_once(':').map_or((spec.as_str(), None), |(n, t)| (n, Some(t)));
+            anyhow::ensure!(name.starts_with('/'), "topic `{name}`: names start with /");
+            let known = GRAPH_TOPICS.iter().find(|(n, _, _)| *n == name);
+            match (ty, known) {
+                (Some(ty), _) => {
+                    anyhow::ensure!(AnyMessage::is_known(ty), "{name}: type {ty} is not one the project knows");
+                    Ok((name.to_string(), softcontact_bag::type_path(ty), known.map_or(Qos::SENSOR, |k| k.2)))
+                }
+                (None, Some((_, ty, qos))) => Ok((name.to_string(), ty.to_string(), *qos)),
+                (None, None) => anyhow::bail!(
+                    "{name} is not a topic of the graph; give its type as {name}:pkg/msg/Type (graph topics: {})",
+                    GRAPH_TOPICS.iter().map(|t| t.0).collect::<Vec<_>>().join(" ")
+                ),
+            }
+        })
+        .collect()
+}
+
+pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
+    let topics = resolve(&args.topics)?;
+    let output = args.output.clone().unwrap_or_else(default_name);
+    let stop = ros::shutdown_flag()?;
+    let mut node = ros::node("softcontact_record")?;
+    let mut writer = BagWriter::create(&output)?;
+    let mut subscriptions = Vec::new();
+    for (name, ty, qos) in &topics {
+        let sub = AnySubscription::new(&mut node, name, ty, *qos)?;
+        let channel = writer.add_topic_with_definition(
+            name,
+            ty,
+            softcontact_msgs::definition(ty).expect("known types have definitions"),
+            *qos,
+        )?;
+        subscriptions.push((sub, channel, name.as_str(), *qos));
+        println!("recording {name} ({ty})");
+    }
+    println!("to {} (Ctrl-C stops)", writer.file().display());
+    let start = Instant::now();
+    let mut next_flush = start + Duration::from_secs(1);
+    let mut total = 0u64;
+    while !ros::stopping(&stop) && args.duration.is_none_or(|d| start.elapsed().as_secs_f64() < d) {
+        let mut got = 0;
+        for (sub, channel, _, _) in &subscriptions {
+            while let Some(msg) = sub.take() {
+                msg.write_to_channel(&mut writer, *channel, now_ns())?;
+                got += 1;
+            }
+        }
+        total += got;
+        if Instant::now() >= next_flush {
+            // A chunk a second: a recorder killed now loses at most the last second.
+            writer.flush()?;
+            next_flush += Duration::from_secs(1);
+            print!("\rrecorded {total} messages in {:.0} s", start.elapsed().as_secs_f64());
+            std::io::stdout().flush()?;
+        }
+        if got == 0 {
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    }
+    let counts: Vec<String> = writer.counts().filter(|(_, n)| *n > 0).map(|(t, n)| format!("{t} {n}")).collect();
+    let stats = writer.finish()?;
+    println!(
+        "\nrecorded {} messages, {:.1} MB in {:.1} s to {}: {}",
+        stats.messages,
+        stats.bytes as f64 / 1e6,
+        start.elapsed().as_secs_f64(),
+        output.display(),
+        counts.join(", ")
+    );
+    Ok(())
+}
+
+pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.rate.is_finite() && args.rate > 0.0, "--rate must be positive");
+    let recording = Recording::open(&args.file)?;
+    for w in recording.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let stop = ros::shutdown_flag()?;
+    let mut node = ros::node("softcontact_replay")?;
+    let mut publishers = Vec::new();
+    for topic in recording.topics() {
+        if !args.topics.is_empty() && !args.topics.contains(&topic.name) {
+            continue;
+        }
+        if !AnyMessage::is_known(&topic.type_name) {
+            eprintln!("skipping {} ({}): not a type the project knows", topic.name, topic.type_name);
+            continue;
+        }
+        let qos = topic.qos.or_else(|| GRAPH_TOPICS.iter().find(|t| t.0 == topic.name).map(|t| t.2));
+        let publisher = AnyPublisher::new(&mut node, &topic.name, &topic.type_name, qos.unwrap_or(Qos::SENSOR))?;
+        println!("replaying {} ({}, {} messages)", topic.name, topic.type_name, topic.message_count);
+        publishers.push((topic.name.clone(), publisher));
+    }
+    for wanted in &args.topics {
+        anyhow::ensure!(publishers.iter().any(|(n, _)| n == wanted), "the recording has no {wanted} to replay");
+    }
+    anyhow::ensure!(!publishers.is_empty(), "nothing to replay");
+    let (t0, t1) = recording.time_range().unwrap_or((0, 0));
+    std::thread::sleep(Duration::from_secs_f64(args.wait.max(0.0)));
+    let mut sent = 0u64;
+    'replay: loop {
+        let start = Instant::now();
+        for m in recording.messages() {
+            let m = m?;
+            let Some((_, publisher)) = publishers.iter().find(|(n, _)| n == m.topic()) else { continue };
+            let due = start + Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / args.rate);
+            loop {
+                if ros::stopping(&stop) {
+                    break 'replay;
+                }
+                let now = Instant::now();
+                if now >= due {
+                    break;
+                }
+                std::thread::sleep((due - now).min(Duration::from_millis(50)));
+            }
+            let Some(msg) = AnyMessage::decode(&m)? else { continue };
+            publisher.publish(msg)?;
+            sent += 1;
+            if sent.is_multiple_of(1000) {
+                print!(
+                    "\rreplayed {sent} messages, {:.1} of {:.1} s",
+                    (m.log_time - t0) as f64 * 1e-9,
+                    (t1 - t0) as f64 * 1e-9
+                );
+                std::io::stdout().flush()?;
+            }
+        }
+        if !args.looping {
+            break;
+        }
+    }
+    println!("\nreplayed {sent} messages");
+    Ok(())
+}

@@ -1,0 +1,69 @@
+//! geometry_msgs ↔ nalgebra, and the fixed frames below the tool from /tf_static.
+
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use softcontact_msgs::geometry_msgs::{Pose, Vector3 as Vector3Msg};
+use softcontact_msgs::tf2_msgs::TFMessage;
+
+pub fn vector_of(v: &Vector3Msg) -> Vector3<f64> {
+    Vector3::new(v.x, v.y, v.z)
+}
+
+/// Position and rotation of a pose (the quaternion is normalised).
+pub fn pose_of(p: &Pose) -> (Vector3<f64>, UnitQuaternion<f64>) {
+    let o = p.orientation;
+    (
+        Vector3::new(p.position.x, p.position.y, p.position.z),
+        UnitQuaternion::from_quaternion(Quaternion::new(o.w, o.x, o.y, o.z)),
+    )
+}
+
+/// The rotation of frame `child` in frame `ancestor` through the chain of static transforms, if the
+/// transforms connect them.
+pub fn static_rotation(transforms: &[&TFMessage], ancestor: &str, child: &str) -> Option<UnitQuaternion<f64>> {
+    let parent_of = |frame: &str| {
+        transforms.iter().flat_map(|m| &m.transforms).find(|t| t.child_frame_id == frame).map(|t| {
+            let r = t.transform.rotation;
+            (t.header.frame_id.as_str(), UnitQuaternion::from_quaternion(Quaternion::new(r.w, r.x, r.y, r.z)))
+        })
+    };
+    let mut rotation = UnitQuaternion::identity();
+    let mut frame = child;
+    for _ in 0..32 {
+        if frame == ancestor {
+            return Some(rotation);
+        }
+        let (parent, r) = parent_of(frame)?;
+        rotation = r * rotation;
+        frame = parent;
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use softcontact_msgs::geometry_msgs::{Quaternion as Q, Transform, TransformStamped};
+    use softcontact_msgs::std_msgs::Header;
+
+    fn tf(parent: &str, child: &str, r: UnitQuaternion<f64>) -> TransformStamped {
+        TransformStamped {
+            header: Header { frame_id: parent.into(), ..Default::default() },
+            child_frame_id: child.into(),
+            transform: Transform { rotation: Q { x: r.i, y: r.j, z: r.k, w: r.w }, ..Default::default() },
+        }
+    }
+
+    #[test]
+    fn chains_compose_parent_first() {
+        let a = UnitQuaternion::from_euler_angles(0.3, 0.0, 0.0);
+        let b = UnitQuaternion::from_euler_angles(0.0, 0.0, 0.7);
+        let m1 = TFMessage { transforms: vec![tf("tool", "hand", a)] };
+        let m2 = TFMessage { transforms: vec![tf("hand", "sensor", b)] };
+        let r = static_rotation(&[&m1, &m2], "tool", "sensor").unwrap();
+        assert!((r.angle_to(&(a * b))) < 1e-12);
+        let v = Vector3::new(0.1, 0.2, 0.3);
+        assert!((r * v - a * (b * v)).norm() < 1e-12);
+        assert_eq!(static_rotation(&[&m1], "tool", "sensor"), None);
+        assert_eq!(static_rotation(&[&m1, &m2], "sensor", "sensor"), Some(UnitQuaternion::identity()));
+    }
+}
