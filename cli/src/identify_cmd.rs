@@ -51,7 +51,7 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
         normal: Vector3::new(x, y, z),
         sample_period: args.sample_period,
         // Room for every sample of the recording: the whole contact is fitted.
-        window: ((end - start) as f64 * 1e-9 / args.sample_period.max(1e-6)) as usize + 2,
+        window: (((end - start) as f64 * 1e-9 / args.sample_period.max(1e-6)) as usize + 2).max(1200),
         onset: softcontact_contact::OnsetConfig { threshold: args.onset, ..Default::default() },
         fit: FitConfig::default(),
         ..Default::default()

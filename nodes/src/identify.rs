@@ -117,3 +117,95 @@ impl Identification {
         self.model.contact_position
     }
 }
+
+/// One reading of [`synthetic_pushes`]: what the driver and the F/T node would publish at time `t`.
+#[derive(Debug, Clone)]
+pub struct SyntheticReading {
+    /// Seconds since the start.
+    pub t: f64,
+    pub joint_state: softcontact_msgs::sensor_msgs::JointState,
+    pub pose: PoseStamped,
+    pub twist: TwistStamped,
+    pub wrench: WrenchStamped,
+}
+
+/// Seed 001-style identification data made from a contact model alone, with an exactly known truth
+/// (for the offline tools' tests and benchmarks): the tool faces down 5 mm above a horizontal surface
+/// at height `surface_z`, approaches at 1 cm/s, then pushes at 1 Hz between 2 mm and `depth` of
+/// deformation; `rate` readings a second, the force on the sensor in its own frame (through the URDF's
+/// tool→sensor rotation) with Gaussian noise of `noise` N per axis.
+pub fn synthetic_pushes(
+    model: &softcontact_contact::ContactModel,
+    surface_z: f64,
+    depth: f64,
+    seconds: f64,
+    rate: f64,
+    noise: f64,
+    seed: u64,
+) -> anyhow::Result<Vec<SyntheticReading>> {
+    use rand::{Rng, SeedableRng};
+    use softcontact_msgs::builtin_interfaces::Time;
+    use softcontact_msgs::geometry_msgs as geo;
+    use softcontact_msgs::std_msgs::Header;
+
+    let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+    let mut gauss = move || {
+        // Box-Muller.
+        let (u, v): (f64, f64) = (rng.random_range(f64::EPSILON..1.0), rng.random());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let tool = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+    let to_sensor = (tool * ForcePairing::urdf_tool_to_sensor()?).inverse();
+    let (approach, speed, (lo, hi)) = (0.005, 0.01, (0.002, depth));
+    let touch = approach / speed;
+    let n = (seconds * rate) as usize;
+    let mut out = Vec::with_capacity(n);
+    for i in 0..n {
+        let t = i as f64 / rate;
+        // Deformation z (positive into the surface) and its rate: the ramp, then 1 Hz pushes from z = 0
+        // that swing between lo and hi (a smooth start: the cosine begins at its minimum).
+        let (z, zdot) = if t < touch {
+            (speed * t - approach, speed)
+        } else {
+            let s = t - touch;
+            let w = std::f64::consts::TAU;
+            let blend = (s / 0.5).min(1.0);
+            let mid = (lo + hi) / 2.0;
+            let amp = (hi - lo) / 2.0;
+            let target = mid - amp * (w * s).cos();
+            (blend * target + (1.0 - blend) * speed * s, blend * amp * w * (w * s).sin() + (1.0 - blend) * speed)
+        };
+        let f = if z > 0.0 { model.force(z, zdot)? } else { 0.0 };
+        let stamp = Time::from_secs_f64(1.7e9 + t);
+        let header = |frame: &str| Header { stamp, frame_id: frame.into() };
+        let force_world = Vector3::new(0.0, 0.0, f);
+        let fs = to_sensor * force_world + Vector3::new(gauss(), gauss(), gauss()) * noise;
+        let v = |v: Vector3<f64>| geo::Vector3 { x: v.x, y: v.y, z: v.z };
+        out.push(SyntheticReading {
+            t,
+            joint_state: softcontact_msgs::sensor_msgs::JointState {
+                header: header(""),
+                name: (1..=7).map(|j| format!("lwr_joint_{j}")).collect(),
+                position: vec![0.0, 0.5, 0.0, -1.2, 0.0, 0.8 + z, 0.0],
+                velocity: vec![0.0, 0.0, 0.0, 0.0, 0.0, zdot, 0.0],
+                effort: vec![0.0, 10.0, 0.0, 5.0, 0.0, f * 0.1, 0.0],
+            },
+            pose: PoseStamped {
+                header: header("world"),
+                pose: geo::Pose {
+                    position: geo::Point { x: 0.5, y: 0.0, z: surface_z - z },
+                    orientation: geo::Quaternion { x: tool.i, y: tool.j, z: tool.k, w: tool.w },
+                },
+            },
+            twist: TwistStamped {
+                header: header("world"),
+                twist: geo::Twist { linear: v(Vector3::new(0.0, 0.0, -zdot)), angular: v(Vector3::zeros()) },
+            },
+            wrench: WrenchStamped {
+                header: header(softcontact_dynamics::lwr4::FT_SENSOR_FRAME),
+                wrench: geo::Wrench { force: v(fs), torque: v(Vector3::zeros()) },
+            },
+        });
+    }
+    Ok(out)
+}

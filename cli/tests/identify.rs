@@ -1,0 +1,143 @@
+//! `softcontact identify` on recordings made from a contact model alone, whose truth is exact: the
+//! right kind is chosen and its parameters and the surface are found; frames from /tf_static or the
+//! URDF; damaged, foreign and wrong-schema input is refused with a clear message.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use softcontact_bag::{BagWriter, Qos};
+use softcontact_contact::{ContactModel, Kind};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
+use softcontact_msgs::sensor_msgs::JointState;
+use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_nodes::identify::synthetic_pushes;
+
+const SURFACE_Z: f64 = 0.3;
+
+fn tf_static() -> TFMessage {
+    let r = softcontact_nodes::contact_estimator::ForcePairing::urdf_tool_to_sensor().unwrap();
+    let mut t = softcontact_msgs::geometry_msgs::TransformStamped::default();
+    t.header.frame_id = "lwr_tool".into();
+    t.child_frame_id = "ft_sensor".into();
+    t.transform.rotation = softcontact_msgs::geometry_msgs::Quaternion { x: r.i, y: r.j, z: r.k, w: r.w };
+    TFMessage { transforms: vec![t] }
+}
+
+fn write(path: &Path, model: &ContactModel, with_tf: bool) {
+    let readings = synthetic_pushes(model, SURFACE_Z, 0.03, 15.0, 1000.0, 0.2, 7).unwrap();
+    let mut w = BagWriter::create(path).unwrap();
+    let tf = w.add_topic::<TFMessage>("/tf_static", Qos::LATCHED).unwrap();
+    let js = w.add_topic::<JointState>("/lwr/joint_states", Qos::SENSOR).unwrap();
+    let pose = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR).unwrap();
+    let twist = w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR).unwrap();
+    let wrench = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR).unwrap();
+    let ns = |t: f64| (1.7e18 + t * 1e9) as u64;
+    if with_tf {
+        w.write(tf, ns(0.0), &tf_static()).unwrap();
+    }
+    for r in &readings {
+        w.write(js, ns(r.t), &r.joint_state).unwrap();
+        w.write(pose, ns(r.t), &r.pose).unwrap();
+        w.write(twist, ns(r.t), &r.twist).unwrap();
+        w.write(wrench, ns(r.t), &r.wrench).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+fn identify(path: &Path, json: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_softcontact")).arg("identify").arg(path).arg("--json").arg(json).output().unwrap()
+}
+
+fn text(out: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
+}
+
+#[test]
+fn each_kind_is_chosen_and_found_with_frames_from_tf_static_or_the_urdf() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1100.0).unwrap(), true),
+        (ContactModel::new(Kind::HuntCrossley, 30_000.0, 40_000.0).unwrap(), false),
+        (ContactModel::new(Kind::KelvinVoigt, 9000.0, 250.0).unwrap(), true),
+    ];
+    for (i, (model, with_tf)) in cases.iter().enumerate() {
+        let (path, json) = (dir.path().join(format!("run{i}.mcap")), dir.path().join(format!("run{i}.json")));
+        write(&path, model, *with_tf);
+        let out = identify(&path, &json);
+        let shown = text(&out);
+        assert!(out.status.success(), "{shown}");
+        assert!(shown.contains("Fitness") && shown.contains("selected: "), "{shown}");
+        let id: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        assert_eq!(id["selected"], model.kind.id(), "{shown}");
+        assert_eq!(id["frames"], if *with_tf { "tf_static" } else { "urdf" });
+        assert_eq!(id["models"].as_array().unwrap().len(), 3);
+        for m in id["models"].as_array().unwrap() {
+            let (mean, std) = (m["fitness_mean"].as_f64().unwrap(), m["fitness_std"].as_f64().unwrap());
+            assert!(mean <= 1.0 && std >= 0.0 && m["exponents"]["a"].is_number(), "{m}");
+        }
+        let p = &id["contact_position"];
+        assert!((p[2].as_f64().unwrap() - SURFACE_Z).abs() < 5e-4, "surface {p} vs {SURFACE_Z}");
+        assert!((p[0].as_f64().unwrap() - 0.5).abs() < 1e-9, "{p}");
+        let chosen = &id["selected_at_contact_position"];
+        let k = chosen["stiffness"].as_f64().unwrap();
+        let lambda = chosen["damping"].as_f64().unwrap();
+        assert!((k / model.stiffness - 1.0).abs() < 0.03, "{}: k {k} vs {}", model.kind.id(), model.stiffness);
+        assert!((lambda / model.damping - 1.0).abs() < 0.1, "{}: λ {lambda} vs {}", model.kind.id(), model.damping);
+    }
+}
+
+#[test]
+fn damaged_foreign_and_wrong_input_is_refused_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("out.json");
+    let run = |path: &Path| {
+        let out = identify(path, &json);
+        (out.status.success(), text(&out))
+    };
+    let empty = dir.path().join("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    let (ok, msg) = run(&empty);
+    assert!(!ok && msg.contains("the file is empty"), "{msg}");
+
+    let foreign = dir.path().join("notes.mcap");
+    std::fs::write(&foreign, b"k: 25000\n").unwrap();
+    let (ok, msg) = run(&foreign);
+    assert!(!ok && msg.contains("not an MCAP file"), "{msg}");
+
+    let good = dir.path().join("good.mcap");
+    write(&good, &ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1100.0).unwrap(), true);
+    let bytes = std::fs::read(&good).unwrap();
+    let stub = dir.path().join("stub.mcap");
+    std::fs::write(&stub, &bytes[..40]).unwrap();
+    let (ok, msg) = run(&stub);
+    assert!(!ok && msg.contains("truncated with nothing to recover"), "{msg}");
+    // Cut in the middle: a warning, and the first half identified.
+    let half = dir.path().join("half.mcap");
+    std::fs::write(&half, &bytes[..bytes.len() / 2]).unwrap();
+    let (ok, msg) = run(&half);
+    assert!(ok && msg.contains("warning:") && msg.contains("not closed by its writer"), "{msg}");
+    assert!(msg.contains("selected: Azad-Featherstone"), "{msg}");
+
+    // /ft_sensor/wrench recorded with another type; a recording without poses.
+    let wrong = dir.path().join("wrong.mcap");
+    let mut w = BagWriter::create(&wrong).unwrap();
+    let c = w.add_topic::<PoseStamped>("/ft_sensor/wrench", Qos::SENSOR).unwrap();
+    let p = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR).unwrap();
+    w.write(c, 1, &PoseStamped::default()).unwrap();
+    w.write(p, 1, &PoseStamped::default()).unwrap();
+    w.finish().unwrap();
+    let (ok, msg) = run(&wrong);
+    assert!(
+        !ok && msg.contains(
+            "topic /ft_sensor/wrench: recorded as geometry_msgs/msg/PoseStamped, read as geometry_msgs/msg/WrenchStamped"
+        ),
+        "{msg}"
+    );
+    let no_pose = dir.path().join("no_pose.mcap");
+    let mut w = BagWriter::create(&no_pose).unwrap();
+    let c = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR).unwrap();
+    w.write(c, 1, &WrenchStamped::default()).unwrap();
+    w.finish().unwrap();
+    let (ok, msg) = run(&no_pose);
+    assert!(!ok && msg.contains("the recording has no /lwr/ee_pose (it has: /ft_sensor/wrench)"), "{msg}");
+}
