@@ -71,6 +71,15 @@ pub enum BenchCommand {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Recordings: writing a 1 kHz, 6-topic recording (as `softcontact record` does, a flush a second)
+    /// and reading it back with `softcontact identify`'s whole work (decode, pair, fit every kind).
+    Recording {
+        /// Recorded seconds.
+        #[arg(long, default_value_t = 60.0)]
+        seconds: f64,
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+    },
 }
 
 /// Name, what Pinocchio calls it, and the goal ratio (ours / Pinocchio) where the project set one.
@@ -180,7 +189,100 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Sim { seconds, reps } => run_sim(seconds, reps),
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
+        BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
     }
+}
+
+/// Writes `seconds` of 1 kHz data on the six 1 kHz topics of the graph, flushing every second.
+fn write_recording(
+    path: &std::path::Path,
+    readings: &[softcontact_nodes::identify::SyntheticReading],
+) -> anyhow::Result<u64> {
+    use softcontact_bag::{BagWriter, Qos};
+    use softcontact_msgs::geometry_msgs::{PoseStamped, TransformStamped, TwistStamped, WrenchStamped};
+    use softcontact_msgs::sensor_msgs::JointState;
+    use softcontact_msgs::tf2_msgs::TFMessage;
+    let mut w = BagWriter::create(path)?;
+    let js = w.add_topic::<JointState>("/lwr/joint_states", Qos::SENSOR)?;
+    let pose = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR)?;
+    let twist = w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR)?;
+    let tf = w.add_topic::<TFMessage>("/tf", Qos::SENSOR)?;
+    let raw = w.add_topic::<WrenchStamped>("/ft_sensor/wrench_raw", Qos::SENSOR)?;
+    let wrench = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR)?;
+    let mut next_flush = 1.0;
+    let mut transform = TFMessage { transforms: vec![TransformStamped::default()] };
+    for r in readings {
+        let ns = (1.7e18 + r.t * 1e9) as u64;
+        w.write(js, ns, &r.joint_state)?;
+        w.write(pose, ns, &r.pose)?;
+        w.write(twist, ns, &r.twist)?;
+        let t = &mut transform.transforms[0];
+        t.header = r.pose.header.clone();
+        t.child_frame_id.clear();
+        t.child_frame_id.push_str("lwr_tool");
+        t.transform.translation = softcontact_msgs::geometry_msgs::Vector3 {
+            x: r.pose.pose.position.x,
+            y: r.pose.pose.position.y,
+            z: r.pose.pose.position.z,
+        };
+        t.transform.rotation = r.pose.pose.orientation;
+        w.write(tf, ns, &transform)?;
+        w.write(raw, ns, &r.wrench)?;
+        w.write(wrench, ns, &r.wrench)?;
+        if r.t >= next_flush {
+            w.flush()?;
+            next_flush += 1.0;
+        }
+    }
+    Ok(w.finish()?.messages)
+}
+
+fn run_recording(seconds: f64, reps: usize) -> anyhow::Result<()> {
+    anyhow::ensure!(seconds > 1.0 && reps > 0, "--seconds > 1 and --reps > 0");
+    let model = softcontact_sim::sponge();
+    let readings = softcontact_nodes::identify::synthetic_pushes(&model, 0.3, 0.03, seconds, 1000.0, 0.2, 1)?;
+    let dir = std::env::temp_dir().join(format!("softcontact-bench-recording-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    let (mut write_s, mut read_s) = (f64::INFINITY, f64::INFINITY);
+    let mut messages = 0;
+    let mut selected = String::new();
+    for rep in 0..reps {
+        let path = dir.join(format!("run{rep}.mcap"));
+        let start = Instant::now();
+        messages = write_recording(&path, &readings)?;
+        write_s = write_s.min(start.elapsed().as_secs_f64());
+        let args = crate::identify_cmd::IdentifyArgs {
+            file: path.clone(),
+            json: None,
+            normal: vec![0.0, 0.0, -1.0],
+            onset: 1.0,
+            sample_period: 0.01,
+        };
+        let start = Instant::now();
+        let recording = softcontact_bag::Recording::open(&path)?;
+        let id = crate::identify_cmd::identify(&recording, &args, |_| {})?;
+        read_s = read_s.min(start.elapsed().as_secs_f64());
+        selected = id.selected().id().to_string();
+    }
+    let bytes = std::fs::metadata(dir.join("run0.mcap"))?.len();
+    std::fs::remove_dir_all(&dir)?;
+    println!(
+        "recording: {seconds} s at 1 kHz on 6 topics = {messages} messages, {:.1} MB (zstd chunks), best of {reps}",
+        bytes as f64 / 1e6
+    );
+    println!(
+        "  write (encode CDR, chunk, compress, index, flush a second): {:.3} s = {:.0} messages/s; \
+         at 1 kHz that is {:.2} % of one core (goal < 2 %)",
+        write_s,
+        messages as f64 / write_s,
+        100.0 * write_s / seconds
+    );
+    println!(
+        "  read + identify (open, decompress, decode, pair, fit every kind with 5-fold CV): {read_s:.3} s (goal < 0.5 s \
+         for 60 s); chose {selected} (the data's: {})",
+        model.kind.id()
+    );
+    Ok(())
 }
 
 /// Times `DeformationController::tick` on states of a hand pressing the simulated sponge.

@@ -67,6 +67,14 @@ fn default_name() -> PathBuf {
     ))
 }
 
+/// User + system CPU time of this process so far (Linux /proc, clock ticks of 10 ms).
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
+    let ticks: f64 = fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
 /// The topics asked for, with types and QoS.
 fn resolve(topics: &[String]) -> anyhow::Result<Vec<(String, String, Qos)>> {
     if topics.is_empty() {
@@ -135,16 +143,19 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             std::thread::sleep(Duration::from_micros(500));
         }
     }
+    let elapsed = start.elapsed().as_secs_f64();
     let counts: Vec<String> = writer.counts().filter(|(_, n)| *n > 0).map(|(t, n)| format!("{t} {n}")).collect();
     let stats = writer.finish()?;
     println!(
-        "\nrecorded {} messages, {:.1} MB in {:.1} s to {}: {}",
+        "\nrecorded {} messages, {:.1} MB in {elapsed:.1} s to {}: {}",
         stats.messages,
         stats.bytes as f64 / 1e6,
-        start.elapsed().as_secs_f64(),
         output.display(),
         counts.join(", ")
     );
+    if let Some(cpu) = cpu_seconds() {
+        println!("CPU {cpu:.2} s: {:.1} % of one core (DDS reception included)", 100.0 * cpu / elapsed.max(1e-9));
+    }
     Ok(())
 }
 

@@ -28,10 +28,25 @@ fn help_lists_every_contract_command() {
 
 #[test]
 fn commands_not_built_yet_say_so_and_fail() {
-    for args in [&["identify", "x.mcap"][..], &["discrepancy", "x.mcap"], &["record"], &["replay", "x.mcap"]] {
+    let o = softcontact(&["discrepancy", "x.mcap"]);
+    assert!(!o.status.success() && text(&o).contains("not built yet"), "{}", text(&o));
+}
+
+#[test]
+fn recording_commands_refuse_bad_arguments_before_touching_the_network() {
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["record", "/lwr/not_a_topic"],
+            "is not a topic of the graph; give its type as /lwr/not_a_topic:pkg/msg/Type",
+        ),
+        (&["record", "/x:foo_msgs/msg/Bar"], "type foo_msgs/msg/Bar is not one the project knows"),
+        (&["record", "lwr/ee_pose"], "names start with /"),
+        (&["replay", "/nonexistent/run.mcap"], "/nonexistent/run.mcap: No such file"),
+        (&["replay", "x.mcap", "--rate", "0"], "--rate must be positive"),
+    ];
+    for (args, want) in cases {
         let o = softcontact(args);
-        assert!(!o.status.success(), "{args:?} must exit non-zero");
-        assert!(text(&o).contains("not built yet"), "{args:?}: {}", text(&o));
+        assert!(!o.status.success() && text(&o).contains(want), "{args:?}: {}", text(&o));
     }
 }
 
