@@ -145,6 +145,20 @@ pub fn print_table(id: &Identification, name: &str) {
             f.exponents.c
         );
     }
+    let mut ranked: Vec<_> = fits.iter().filter(|f| f.fitness_mean.is_finite()).collect();
+    ranked.sort_by(|a, b| b.fitness_mean.total_cmp(&a.fitness_mean));
+    if let [best, second, ..] = ranked[..]
+        && best.fitness_mean - second.fitness_mean < best.fitness_std.max(second.fitness_std)
+    {
+        println!(
+            "\nnote: {} and {} fit equally well here (fitness {:.4} vs {:.4}, within one std over folds): \
+             the recording does not tell them apart (more, faster pushes would)",
+            best.kind.label(),
+            second.kind.label(),
+            best.fitness_mean,
+            second.fitness_mean
+        );
+    }
     let m = &id.model.model;
     let p = id.contact_position();
     println!(

@@ -114,6 +114,11 @@ impl Moments {
         if self.n > 0.0 { (self.sff - self.sf * self.sf / self.n).max(0.0) } else { 0.0 }
     }
 
+    /// Sum of squares of the forces about a given mean.
+    pub fn sst_about(&self, mean: f64) -> f64 {
+        (self.sff - 2.0 * mean * self.sf + self.n * mean * mean).max(0.0)
+    }
+
     /// Standard errors of (k, λ) of an unconstrained fit: σ̂² (XᵀX)⁻¹ with σ̂² = SSE / (n − 2).
     pub fn standard_errors(&self, k: f64, l: f64) -> (f64, f64) {
         let det = self.s11 * self.s22 - self.s12 * self.s12;
@@ -219,6 +224,10 @@ pub fn fit_folds(
     let all = folds.iter().fold(Moments::default(), |acc, m| acc.plus(m));
     let (k, l, stiffness_held, damping_held, ek, el) =
         guarded_solve(&all, prior, cfg).ok_or(ContactError::NotEnoughData { kind: kind.id() })?;
+    // σ̄ of eq. 18 is the mean force of all the data, for every fold: a fold that is a quasi-static hold
+    // has next to no spread about its own mean, and its score against that would say nothing about the
+    // model (hugely negative for a good fit), so recordings with holds could not be compared.
+    let mean_force = if all.n > 0.0 { all.sf / all.n } else { 0.0 };
     let mut scores = Vec::with_capacity(folds.len());
     for (i, test) in folds.iter().enumerate() {
         let train =
@@ -230,7 +239,7 @@ pub fn fit_folds(
             (true, _) => Some((k, l)),
         };
         if let Some((kt, lt)) = params {
-            let score = fitness(test.sse(kt, lt), test.sst());
+            let score = fitness(test.sse(kt, lt), test.sst_about(mean_force));
             if score.is_finite() {
                 scores.push(score);
             }

@@ -263,3 +263,23 @@ fn the_stiffness_exponent_is_estimated_when_damping_follows_it() {
     assert!((fit.exponents.a - a).abs() < 0.01 && fit.exponents.b == fit.exponents.a, "{:?}", fit.exponents);
     assert!(rel(fit.stiffness, k) < 0.05 && rel(fit.damping, l) < 0.05, "k {} λ {}", fit.stiffness, fit.damping);
 }
+
+#[test]
+fn folds_that_are_holds_still_score_against_the_mean_force_of_all_the_data() {
+    // Pushes, then a long hold at one depth (as a recording of a control run has): the hold folds have
+    // next to no spread of their own, but every kind must still score sensibly, the true one best.
+    let mut rng = SmallRng::seed_from_u64(9);
+    for kind in Kind::CANDIDATES {
+        let (k, l) = common::parameters(kind, 0.05, 280.0, 0.15);
+        let mut traj = common::identification(0.05, 6);
+        traj.extend((0..2400).map(|_| (0.03, 0.0)));
+        let mut window = WindowEstimator::new(traj.len(), FitConfig::default()).unwrap();
+        for s in common::samples(kind, k, l, &traj, 0.2, &mut rng) {
+            window.push(s).unwrap();
+        }
+        let e = window.refit().unwrap();
+        let truth = e.fit(kind).unwrap();
+        assert!(truth.fitness_mean > 0.9, "{kind:?}: fitness {} with hold folds", truth.fitness_mean);
+        assert_eq!(e.selected, kind);
+    }
+}
