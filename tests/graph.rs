@@ -34,22 +34,8 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
     let _ = std::fs::remove_dir_all(&logs);
     std::fs::create_dir_all(&logs).unwrap();
     let recording = logs.join("graph_recording");
-    let bin = Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap();
-    let out = Command::new(root().join("launch-scripts/sim.sh"))
-        .args(["--isolated", "--log-dir"])
-        .arg(&logs)
-        .arg("--run")
-        .arg(std::env::current_exe().unwrap())
-        .args(["--exact", "the_graph_reaches_force_commands_on_the_sponge", "--nocapture", "--test-threads=1"])
-        .env(INSIDE, "1")
-        .env(RECORDING, &recording)
-        .env("SOFTCONTACT_BIN", bin)
-        .output()
-        .expect("sim.sh runs");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    eprintln!("{text}");
-    assert!(out.status.success(), "the graph run failed (logs in {})", logs.display());
-    assert!(text.contains("1 passed"), "the client ran and passed");
+    let passed = sim_sh(&[], &logs, &[(INSIDE, Path::new("1")), (RECORDING, &recording)]);
+    assert!(passed, "the graph run failed (logs in {})", logs.display());
 
     let log = |n: &str| std::fs::read_to_string(logs.join(format!("{n}.log"))).unwrap();
     for n in ["sim_arm", "lwr_driver", "ft_sensor", "contact_estimator", "deformation_controller"] {
@@ -66,24 +52,29 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
 
     // The recording replayed into a contact estimator alone (its own namespace) learns the same model.
     let replay_logs = logs.join("replay");
+    let passed = sim_sh(&["--nodes", "contact_estimator"], &replay_logs, &[(REPLAY_INSIDE, &recording)]);
+    assert!(passed, "the replay run failed (logs in {})", replay_logs.display());
+    let _ = std::fs::remove_dir_all(&logs);
+}
+
+/// `sim.sh --isolated [options] --run <this test, as the client the environment selects>`; whether the
+/// graph ran and the client passed.
+fn sim_sh(options: &[&str], logs: &Path, env: &[(&str, &Path)]) -> bool {
     let out = Command::new(root().join("launch-scripts/sim.sh"))
-        .args(["--isolated", "--nodes", "contact_estimator", "--log-dir"])
-        .arg(&replay_logs)
+        .arg("--isolated")
+        .args(options)
+        .arg("--log-dir")
+        .arg(logs)
         .arg("--run")
         .arg(std::env::current_exe().unwrap())
         .args(["--exact", "the_graph_reaches_force_commands_on_the_sponge", "--nocapture", "--test-threads=1"])
-        .env(REPLAY_INSIDE, &recording)
-        .env("SOFTCONTACT_BIN", bin)
+        .envs(env.iter().copied())
+        .env("SOFTCONTACT_BIN", Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap())
         .output()
         .expect("sim.sh runs");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     eprintln!("{text}");
-    assert!(
-        out.status.success() && text.contains("1 passed"),
-        "the replay run failed (logs in {})",
-        replay_logs.display()
-    );
-    let _ = std::fs::remove_dir_all(&logs);
+    out.status.success() && text.contains("1 passed")
 }
 
 /// The recording the client made: complete, read by both Python peers as the project reads it, and
