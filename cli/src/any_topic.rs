@@ -42,6 +42,13 @@ macro_rules! any_topic {
                 anyhow::bail!("{topic}: type {type_name} is not one the project knows")
             }
 
+            /// Wakes `poll` when messages arrive (edge-triggered: drain with [`Self::take`]).
+            pub fn register(&mut self, registry: &mio::Registry, token: mio::Token) -> std::io::Result<()> {
+                match self {
+                    $(Self::$variant(s) => registry.register(s, token, mio::Interest::READABLE)),+
+                }
+            }
+
             /// The next message received, if any.
             pub fn take(&self) -> Option<AnyMessage> {
                 match self {

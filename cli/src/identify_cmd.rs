@@ -53,7 +53,8 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
         // Room for every sample of the recording: the whole contact is fitted.
         window: (((end - start) as f64 * 1e-9 / args.sample_period.max(1e-6)) as usize + 2).max(1200),
         onset: softcontact_contact::OnsetConfig { threshold: args.onset, ..Default::default() },
-        fit: FitConfig::default(),
+        // A whole recording has holds: every fold scored about the mean of all the data.
+        fit: FitConfig { score_about_overall_mean: true, ..Default::default() },
         ..Default::default()
     };
     let mut identifier = Identifier::new(config, 0.05)?;

@@ -108,8 +108,11 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
     let mut node = ros::node("softcontact_record")?;
     let mut writer = BagWriter::create(&output)?;
     let mut subscriptions = Vec::new();
-    for (name, ty, qos) in &topics {
-        let sub = AnySubscription::new(&mut node, name, ty, *qos)?;
+    let mut poll = mio::Poll::new()?;
+    let mut events = mio::Events::with_capacity(64);
+    for (i, (name, ty, qos)) in topics.iter().enumerate() {
+        let mut sub = AnySubscription::new(&mut node, name, ty, *qos)?;
+        sub.register(poll.registry(), mio::Token(i))?;
         let channel = writer.add_topic_with_definition(
             name,
             ty,
@@ -140,7 +143,8 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
             std::io::stdout().flush()?;
         }
         if got == 0 {
-            std::thread::sleep(Duration::from_micros(500));
+            // Until a subscription has news (or the next flush is due).
+            ros::wait(&mut poll, &mut events, Duration::from_millis(100))?;
         }
     }
     let elapsed = start.elapsed().as_secs_f64();

@@ -214,7 +214,7 @@ impl Params {
             sample_period: self.sample_period,
             window: self.window,
             onset: OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm },
-            fit: FitConfig { folds: self.folds, max_relative_error: self.max_relative_error },
+            fit: FitConfig { folds: self.folds, max_relative_error: self.max_relative_error, ..Default::default() },
             offset_range: (self.offset_range[0], self.offset_range[1]),
         }
     }

@@ -4,8 +4,9 @@
 //! - [`BagWriter`] writes one `.mcap` file, or a rosbag2 folder (`metadata.yaml` + `<name>_0.mcap`) as
 //!   `ros2 bag record` does; chunked, zstd, with message/chunk indexes and the summary. [`BagWriter::flush`]
 //!   closes the chunk in progress: a writer killed after it loses nothing written before it.
-//! - [`Recording`] reads any ROS 2 MCAP file or rosbag2 folder whoever wrote it; a file without its end
-//!   (a killed writer) is recovered up to its last complete chunk, with a warning, not an error.
+//! - [`Recording`] reads any ROS 2 MCAP file (zstd, lz4 or plain chunks) or rosbag2 folder whoever wrote
+//!   it; a file without its end (a killed writer) is recovered up to its last complete chunk, with a
+//!   warning, not an error.
 //! - [`cdr`] encodes and decodes the message types of `softcontact-msgs`.
 //!
 //! Pure: files in, files out; no sockets, threads or clocks (times are given by the caller).

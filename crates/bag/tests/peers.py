@@ -16,6 +16,7 @@ import pathlib
 import sys
 
 from mcap.reader import make_reader
+from mcap.writer import CompressionType
 from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as McapRos2Writer
 from rosbags.highlevel import AnyReader
@@ -140,9 +141,10 @@ def write(folder):
                 t = 1_700_000_000_000_000_000 + i * 1_000_000
                 writer.write(connections[topic], t, ts.serialize_cdr(msg, msg.__msgtype__))
                 expected.append(["by_rosbags", topic, t, msg.__msgtype__, plain(msg)])
-    # mcap-ros2-support: one .mcap file, messages given as dicts, definitions rosbags generates.
+    # mcap-ros2-support: one .mcap file of small lz4 chunks, messages given as dicts, definitions rosbags
+    # generates.
     with open(folder / "by_mcap_ros2.mcap", "wb") as f:
-        writer = McapRos2Writer(f)
+        writer = McapRos2Writer(f, chunk_size=4096, compression=CompressionType.LZ4)
         schemas = {}
         for i in range(20):
             for topic, msg in samples(ts, i):

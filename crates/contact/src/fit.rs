@@ -153,11 +153,16 @@ pub struct FitConfig {
     /// A parameter whose relative standard error exceeds this is not identified by the data: it is
     /// held at its prior instead of following the noise (the excitation guard).
     pub max_relative_error: f64,
+    /// Score every fold about the mean force of all the data (σ̄ of eq. 18 taken over the whole data
+    /// set) instead of the fold's own mean. For long recordings with quasi-static holds (offline
+    /// identification): a hold fold has next to no spread about its own mean, and its own-mean score
+    /// says nothing about the model. The sliding window of the online estimator keeps own-mean scores.
+    pub score_about_overall_mean: bool,
 }
 
 impl Default for FitConfig {
     fn default() -> Self {
-        Self { folds: 5, max_relative_error: 0.25 }
+        Self { folds: 5, max_relative_error: 0.25, score_about_overall_mean: false }
     }
 }
 
@@ -224,10 +229,7 @@ pub fn fit_folds(
     let all = folds.iter().fold(Moments::default(), |acc, m| acc.plus(m));
     let (k, l, stiffness_held, damping_held, ek, el) =
         guarded_solve(&all, prior, cfg).ok_or(ContactError::NotEnoughData { kind: kind.id() })?;
-    // σ̄ of eq. 18 is the mean force of all the data, for every fold: a fold that is a quasi-static hold
-    // has next to no spread about its own mean, and its score against that would say nothing about the
-    // model (hugely negative for a good fit), so recordings with holds could not be compared.
-    let mean_force = if all.n > 0.0 { all.sf / all.n } else { 0.0 };
+    let overall_mean = if all.n > 0.0 { all.sf / all.n } else { 0.0 };
     let mut scores = Vec::with_capacity(folds.len());
     for (i, test) in folds.iter().enumerate() {
         let train =
@@ -239,7 +241,8 @@ pub fn fit_folds(
             (true, _) => Some((k, l)),
         };
         if let Some((kt, lt)) = params {
-            let score = fitness(test.sse(kt, lt), test.sst_about(mean_force));
+            let sst = if cfg.score_about_overall_mean { test.sst_about(overall_mean) } else { test.sst() };
+            let score = fitness(test.sse(kt, lt), sst);
             if score.is_finite() {
                 scores.push(score);
             }

@@ -265,7 +265,7 @@ fn the_stiffness_exponent_is_estimated_when_damping_follows_it() {
 }
 
 #[test]
-fn folds_that_are_holds_still_score_against_the_mean_force_of_all_the_data() {
+fn folds_that_are_holds_score_sensibly_about_the_mean_force_of_all_the_data() {
     // Pushes, then a long hold at one depth (as a recording of a control run has): the hold folds have
     // next to no spread of their own, but every kind must still score sensibly, the true one best.
     let mut rng = SmallRng::seed_from_u64(9);
@@ -273,13 +273,22 @@ fn folds_that_are_holds_still_score_against_the_mean_force_of_all_the_data() {
         let (k, l) = common::parameters(kind, 0.05, 280.0, 0.15);
         let mut traj = common::identification(0.05, 6);
         traj.extend((0..2400).map(|_| (0.03, 0.0)));
-        let mut window = WindowEstimator::new(traj.len(), FitConfig::default()).unwrap();
-        for s in common::samples(kind, k, l, &traj, 0.2, &mut rng) {
-            window.push(s).unwrap();
+        let samples = common::samples(kind, k, l, &traj, 0.2, &mut rng);
+        let overall = FitConfig { score_about_overall_mean: true, ..Default::default() };
+        let mut window = WindowEstimator::new(traj.len(), overall).unwrap();
+        for s in &samples {
+            window.push(*s).unwrap();
         }
         let e = window.refit().unwrap();
         let truth = e.fit(kind).unwrap();
         assert!(truth.fitness_mean > 0.9, "{kind:?}: fitness {} with hold folds", truth.fitness_mean);
         assert_eq!(e.selected, kind);
+        // Scored about each fold's own mean, the hold folds drag the true kind's score down.
+        let mut own = WindowEstimator::new(traj.len(), FitConfig::default()).unwrap();
+        for s in &samples {
+            own.push(*s).unwrap();
+        }
+        let own_score = own.refit().unwrap().fit(kind).unwrap().fitness_mean;
+        assert!(own_score < truth.fitness_mean, "{kind:?}: own-mean {own_score} vs {}", truth.fitness_mean);
     }
 }
