@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The node graph, started, watched and stopped as one: the implementation behind sim.sh and robot.sh.
 #
-#   launch.sh --sim|--robot [--isolated] [--lockstep] [--surface sponge|dice|none] [--log-dir DIR]
+#   launch.sh --sim|--robot [--isolated] [--lockstep] [--surface sponge|dice|lab_sponge|lab_dice|none] [--log-dir DIR]
 #             [--params-file FILE]... [--nodes N1,N2...] [--run COMMAND [ARGS...]]
 #
 # Starts the nodes with the parameter files of config/ (plus any --params-file overlays, later ones win),

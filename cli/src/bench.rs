@@ -18,6 +18,12 @@ use softcontact_dynamics::{Axes, Model, lwr4};
 
 #[derive(clap::Subcommand)]
 pub enum BenchCommand {
+    /// `softcontact demo` in-process: both surfaces' full experiments one after the other on one
+    /// thread, without and with the recording (goal: the demo < 30 s wall).
+    Demo {
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+    },
     /// Rigid-body dynamics: FK + Jacobian, RNEA, CRBA, g, h, forward dynamics and a whole control tick.
     Dynamics {
         /// Calls per repetition.
@@ -190,6 +196,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
+        BenchCommand::Demo { reps } => crate::demo::bench(reps),
     }
 }
 

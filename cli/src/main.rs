@@ -2,6 +2,7 @@
 
 mod any_topic;
 mod bench;
+mod demo;
 mod force_cmd;
 mod identify_cmd;
 mod model_cmd;
@@ -27,17 +28,7 @@ struct Cli {
 enum Command {
     /// The main job without hardware: the simulated LWR pushes a simulated sponge and dice, runs seed
     /// 001's identification and control experiments, prints its tables and writes recording and figures.
-    Demo {
-        /// Output folder for the recording, figures and tables.
-        #[arg(long, default_value = "out/demo")]
-        out: PathBuf,
-        /// Also write every table as JSON here.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Run the real node processes over DDS in real time instead of in-process lockstep.
-        #[arg(long)]
-        graph: bool,
-    },
+    Demo(demo::DemoArgs),
     /// Fit every contact model to a recording (5-fold cross-validated fitness) and choose one.
     Identify(identify_cmd::IdentifyArgs),
     /// Find where simulation and measurement disagree, name the missing effect, add it, show the gap.
@@ -73,25 +64,7 @@ fn not_built(command: &str, plan: &str) -> anyhow::Result<()> {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Demo { out, json, graph } => {
-            println!("softcontact demo: the closed loop (deformation controller, estimator node) is not built yet.");
-            println!("When it is, this command will, for a simulated sponge and dice:");
-            println!("  1. run seed 001's identification (approach ramp, 1 Hz sine pushes, retreat; 10 runs),");
-            println!("     fit Kelvin-Voigt, Hunt-Crossley and Azad-Featherstone with 5-fold CV (Table I);");
-            println!("  2. run its 30-command force control experiment with online re-estimation (Tables II, III);");
-            println!(
-                "  3. write the MCAP recording and figures to {}{}.",
-                out.display(),
-                json.map(|j| format!(" and the tables to {}", j.display())).unwrap_or_default()
-            );
-            if graph {
-                println!("  (--graph: as the real node processes over DDS, in real time)");
-            }
-            println!(
-                "Available now: `softcontact model` (the robot as the dynamics sees it) and `softcontact bench dynamics`."
-            );
-            Ok(())
-        }
+        Command::Demo(args) => demo::run(&args),
         Command::Identify(args) => identify_cmd::run(&args),
         Command::Discrepancy { .. } => {
             not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader")

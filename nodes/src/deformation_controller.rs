@@ -10,8 +10,8 @@
 use nalgebra::{DVector, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
-    Damping, DeformationGains, LimitError, Limits, Quintic, Reference, TaskTorque, TorqueLimiter,
-    deformation_acceleration,
+    Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque, TorqueLimiter,
+    Trajectory, deformation_acceleration,
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 
@@ -103,7 +103,7 @@ pub struct DeformationController {
     offset: f64,
     start: Option<(Vector3<f64>, UnitQuaternion<f64>, [f64; 7])>,
     time: f64,
-    plan: Option<(Quintic, f64)>,
+    plan: Option<(Trajectory, f64)>,
     f_cmd: f64,
     contact_lost: bool,
     limiter: TorqueLimiter,
@@ -157,11 +157,8 @@ impl DeformationController {
             Some(level) => surface.dot(&self.config.normal) - level,
             None => self.offset,
         };
-        let shift = offset - self.offset;
-        if let Some((q, t0)) = self.plan {
-            let moved = |r: Reference| Reference { position: r.position - shift, ..r };
-            let shifted = Quintic::new(moved(q.at(0.0)), moved(q.at(q.duration())), q.duration());
-            self.plan = Some((shifted.ok_or(ControlError::Duration)?, t0));
+        if let Some((plan, _)) = self.plan.as_mut() {
+            plan.offset -= offset - self.offset;
         }
         self.set_contact_model(model, offset);
         match retarget {
@@ -175,7 +172,58 @@ impl DeformationController {
     }
 
     fn reference(&self) -> Reference {
-        self.plan.map(|(q, t0)| q.at(self.time - t0)).unwrap_or_default()
+        self.plan.as_ref().map(|(q, t0)| q.at(self.time - t0)).unwrap_or_default()
+    }
+
+    /// Follows `segments` from now on; the first must start at the present reference.
+    fn follow(&mut self, segments: Vec<Segment>) -> Result<(), ControlError> {
+        self.plan = Some((Trajectory::new(segments).ok_or(ControlError::Duration)?, self.time));
+        Ok(())
+    }
+
+    /// Holds deformation z from now on.
+    fn hold(&mut self, z: f64) -> Result<(), ControlError> {
+        let hold = Reference { position: z, ..Default::default() };
+        self.follow(vec![Segment::Move(Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?)])
+    }
+
+    fn move_to(&self, to: Reference, duration: f64) -> Result<Segment, ControlError> {
+        if !(duration.is_finite() && duration > 0.0) {
+            return Err(ControlError::Duration);
+        }
+        Ok(Segment::Move(Quintic::new(self.reference(), to, duration).ok_or(ControlError::Duration)?))
+    }
+
+    /// A deformation command (position control along n, seed 001's identification ramps): a quintic of
+    /// `duration` seconds to rest at deformation z; negative z lifts the hand off the surface. Cancels
+    /// any force command.
+    pub fn command_deformation(&mut self, z: f64, duration: f64) -> Result<(), ControlError> {
+        if self.contact_level.is_none() {
+            return Err(ControlError::NoContact);
+        }
+        let z = self.config.limits.check_deformation(z)?;
+        let to = self.move_to(Reference { position: z, ..Default::default() }, duration)?;
+        self.follow(vec![to])?;
+        self.f_cmd = 0.0;
+        Ok(())
+    }
+
+    /// Seed 001's identification pushes: a quintic of one period into the lowest point, then `periods`
+    /// sinusoidal periods between deformations `low` and `high` at `frequency`; it ends at `low`.
+    pub fn command_pushes(&mut self, low: f64, high: f64, frequency: f64, periods: u32) -> Result<(), ControlError> {
+        if self.contact_level.is_none() {
+            return Err(ControlError::NoContact);
+        }
+        let limits = &self.config.limits;
+        let (low, high) = (limits.check_deformation(low)?, limits.check_deformation(high)?);
+        if !(frequency.is_finite() && frequency > 0.0 && high >= low && periods > 0) {
+            return Err(ControlError::Duration);
+        }
+        let push = Oscillation { mean: (low + high) / 2.0, amplitude: (high - low) / 2.0, frequency, periods };
+        let ramp = self.move_to(push.start(), 1.0 / frequency)?;
+        self.follow(vec![ramp, Segment::Oscillate(push)])?;
+        self.f_cmd = 0.0;
+        Ok(())
     }
 
     /// A new force command, reached by a quintic of `duration` seconds from the present reference.
@@ -188,9 +236,8 @@ impl DeformationController {
             return Err(ControlError::NoContact);
         }
         let z = self.config.limits.check_deformation(self.contact_model.deformation_for_force(force)?)?;
-        let from = self.reference();
-        let to = Reference { position: z, ..Default::default() };
-        self.plan = Some((Quintic::new(from, to, duration).ok_or(ControlError::Duration)?, self.time));
+        let to = self.move_to(Reference { position: z, ..Default::default() }, duration)?;
+        self.follow(vec![to])?;
         self.f_cmd = force;
         self.contact_lost = false;
         Ok(())
@@ -219,9 +266,7 @@ impl DeformationController {
         {
             self.contact_level = Some(position);
             // Hold where contact was made until a force is commanded.
-            let z = along - position - self.offset;
-            let hold = Reference { position: z, ..Default::default() };
-            self.plan = Some((Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?, self.time));
+            self.hold(along - position - self.offset)?;
         }
 
         let mut state = ControllerState { f: normal_force, f_cmd: self.f_cmd, ..Default::default() };
@@ -236,11 +281,15 @@ impl DeformationController {
                 state.in_contact = true;
                 state.z = along - level - self.offset;
                 state.zdot = v.dot(&n);
-                if self.f_cmd > 0.0 && normal_force < self.config.limits.contact_lost_below && !self.contact_lost {
-                    // The surface is gone while we push: stop pushing, hold here.
+                // The surface is gone while we push: the model expects a clear force at this deformation
+                // (four times the threshold) and the sensor reads less than the threshold. (At the start
+                // of a push from a light touch the force may legitimately read below the threshold.)
+                let lost_below = self.config.limits.contact_lost_below;
+                let expected = self.contact_model.force(state.z.max(0.0), 0.0).unwrap_or(0.0);
+                if self.f_cmd > 0.0 && normal_force < lost_below && expected > 4.0 * lost_below && !self.contact_lost {
+                    // Stop pushing, hold here.
                     self.contact_lost = true;
-                    let hold = Reference { position: state.z, ..Default::default() };
-                    self.plan = Some((Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?, self.time));
+                    self.hold(state.z)?;
                     self.f_cmd = 0.0;
                 }
                 let reference = self.reference();

@@ -2,12 +2,14 @@
 //! ([`lwr_driver::LwrDriver`], [`ft_sensor::FtSensorNode`]); [`udp`] and [`sim_arm`] are the socket
 //! ends, kept thin, so the same logic runs against the real KRC and Net F/T box or the simulator.
 
+pub mod cell;
 pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod geometry;
 pub mod identify;
 pub mod lwr_driver;
+pub mod messages;
 pub mod params;
 pub mod ros;
 pub mod sim_arm;

@@ -9,5 +9,5 @@ pub mod task;
 
 pub use law::{DeformationGains, deformation_acceleration, force_to_deformation};
 pub use limits::{LimitError, Limits, TorqueLimiter};
-pub use quintic::{Quintic, Reference, SetpointSequence};
+pub use quintic::{Oscillation, Quintic, Reference, Segment, SetpointSequence, Trajectory};
 pub use task::{Damping, TaskTorque, task_space_torque};

@@ -95,3 +95,97 @@ impl SetpointSequence {
         (self.moves[i].at(t - i as f64 * self.segment), i)
     }
 }
+
+/// A sinusoid about `mean` that starts at its lowest point, mean − amplitude, at rest: seed 001's
+/// identification pushes. The start has acceleration amplitude·ω², so a quintic that ends in
+/// [`Oscillation::start`] joins it without a jump in any derivative.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Oscillation {
+    pub mean: f64,
+    pub amplitude: f64,
+    /// [Hz]
+    pub frequency: f64,
+    pub periods: u32,
+}
+
+impl Oscillation {
+    fn omega(&self) -> f64 {
+        std::f64::consts::TAU * self.frequency
+    }
+
+    pub fn duration(&self) -> f64 {
+        f64::from(self.periods) / self.frequency
+    }
+
+    pub fn start(&self) -> Reference {
+        self.at(0.0)
+    }
+
+    /// The reference at time t after the start, clamped to the oscillation's span (whole periods: the
+    /// end state equals the start state).
+    pub fn at(&self, t: f64) -> Reference {
+        let w = self.omega();
+        let phase = w * t.clamp(0.0, self.duration());
+        Reference {
+            position: self.mean - self.amplitude * phase.cos(),
+            velocity: self.amplitude * w * phase.sin(),
+            acceleration: self.amplitude * w * w * phase.cos(),
+        }
+    }
+}
+
+/// One part of a [`Trajectory`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Segment {
+    Move(Quintic),
+    Oscillate(Oscillation),
+}
+
+impl Segment {
+    pub fn duration(&self) -> f64 {
+        match self {
+            Segment::Move(q) => q.duration(),
+            Segment::Oscillate(o) => o.duration(),
+        }
+    }
+
+    pub fn at(&self, t: f64) -> Reference {
+        match self {
+            Segment::Move(q) => q.at(t),
+            Segment::Oscillate(o) => o.at(t),
+        }
+    }
+}
+
+/// Segments played one after another, all positions shifted by `offset` (so that a re-estimated surface
+/// moves the whole plan without re-planning it). Past its end it holds the last segment's end.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    segments: Vec<Segment>,
+    pub offset: f64,
+}
+
+impl Trajectory {
+    /// `None` for a segment of non-positive or non-finite duration, or none at all.
+    pub fn new(segments: Vec<Segment>) -> Option<Self> {
+        let valid = |s: &Segment| s.duration().is_finite() && s.duration() > 0.0;
+        (!segments.is_empty() && segments.iter().all(valid)).then_some(Self { segments, offset: 0.0 })
+    }
+
+    pub fn duration(&self) -> f64 {
+        self.segments.iter().map(Segment::duration).sum()
+    }
+
+    pub fn at(&self, t: f64) -> Reference {
+        let mut start = 0.0;
+        for (i, s) in self.segments.iter().enumerate() {
+            let end = start + s.duration();
+            if t < end || i + 1 == self.segments.len() {
+                let r = s.at(t - start);
+                return Reference { position: r.position + self.offset, ..r };
+            }
+            start = end;
+        }
+        unreachable!("a trajectory has at least one segment")
+    }
+}

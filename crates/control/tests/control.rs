@@ -6,8 +6,8 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use softcontact_contact::{ContactModel, Kind};
 use softcontact_control::{
-    Damping, DeformationGains, Quintic, Reference, SetpointSequence, deformation_acceleration, force_to_deformation,
-    task_space_torque,
+    Damping, DeformationGains, Oscillation, Quintic, Reference, Segment, SetpointSequence, Trajectory,
+    deformation_acceleration, force_to_deformation, task_space_torque,
 };
 use softcontact_dynamics::{ExternalWrench, lwr4};
 
@@ -54,6 +54,37 @@ fn a_setpoint_sequence_moves_two_seconds_each_and_joins_smoothly() {
     let (after, j) = seq.at(2.0 + 1e-9);
     assert_eq!((i, j), (0, 1));
     assert!((before.position - after.position).abs() < 1e-9 && (before.acceleration - after.acceleration).abs() < 1e-6);
+}
+
+#[test]
+fn pushes_joined_by_quintics_are_smooth_in_position_velocity_and_acceleration() {
+    // Seed 001's identification: a ramp into the sine's lowest point, 3 periods at 1 Hz, a retreat.
+    let push = Oscillation { mean: 0.03, amplitude: 0.02, frequency: 1.0, periods: 3 };
+    let ramp = Quintic::new(Reference::default(), push.start(), 1.0).unwrap();
+    let retreat = Quintic::new(push.start(), Reference { position: -0.02, ..Default::default() }, 1.0).unwrap();
+    let mut plan =
+        Trajectory::new(vec![Segment::Move(ramp), Segment::Oscillate(push), Segment::Move(retreat)]).unwrap();
+    assert!(close(plan.duration(), 5.0, 1e-12));
+    // The sine analytically: lowest at whole periods, highest half-way, ẋ and ẍ its derivatives.
+    assert!(close(plan.at(1.0).position, 0.01, 1e-12) && close(plan.at(1.5).position, 0.05, 1e-12));
+    assert!(close(plan.at(1.25).velocity, 0.02 * std::f64::consts::TAU, 1e-12));
+    // Derivatives are the finite differences of the level below, across both junctions.
+    let h = 1e-6;
+    for k in 1..5000 {
+        let t = k as f64 * 1e-3;
+        let (a, b) = (plan.at(t - h), plan.at(t + h));
+        let r = plan.at(t);
+        assert!(close((b.position - a.position) / (2.0 * h), r.velocity, 1e-6), "velocity at {t}");
+        assert!(close((b.velocity - a.velocity) / (2.0 * h), r.acceleration, 1e-4), "acceleration at {t}");
+    }
+    // Past the end it holds the retreat point; an offset moves every position and nothing else.
+    let end = plan.at(9.0);
+    assert!(close(end.position, -0.02, 1e-12) && end.velocity.abs() < 1e-12 && end.acceleration == 0.0);
+    let before = plan.at(2.3);
+    plan.offset = 0.004;
+    let after = plan.at(2.3);
+    assert!(close(after.position - before.position, 0.004, 1e-15) && after.velocity == before.velocity);
+    assert!(Trajectory::new(vec![]).is_none());
 }
 
 #[test]

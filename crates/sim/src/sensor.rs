@@ -30,6 +30,12 @@ impl FtSensorConfig {
         }
     }
 
+    /// A Gamma in a lab session: as [`Self::gamma`], with its offsets drifting as it warms up (a few
+    /// tenths of a newton over minutes: what a tare at the start of each experiment is for).
+    pub fn gamma_drifting() -> Self {
+        Self { drift: [0.003, -0.002, 0.004, 1e-4, -1e-4, 5e-5], ..Self::gamma() }
+    }
+
     /// No noise, bias or drift: for tests that compare against exact physics.
     pub fn ideal() -> Self {
         Self { calibration: Calibration::gamma_si_130_10(), noise: [0.0; 6], bias: [0.0; 6], drift: [0.0; 6] }

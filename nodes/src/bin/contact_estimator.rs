@@ -87,13 +87,7 @@ fn main() -> anyhow::Result<()> {
             }
             if t >= next_state {
                 next_state = t + 1.0 / p.state_rate;
-                state_pub.publish(ContactState {
-                    header: Header { stamp: w.header.stamp, frame_id: "world".into() },
-                    deformation: out.deformation,
-                    deformation_rate: out.deformation_rate,
-                    normal_force: out.normal_force,
-                    in_contact: out.in_contact,
-                })?;
+                state_pub.publish(out.to_msg(w.header.stamp))?;
             }
             if t >= next_refit && estimator.window_fill() >= p.min_window_fill.max(1e-9) {
                 next_refit = t + p.refit_period;

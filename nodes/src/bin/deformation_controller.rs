@@ -14,9 +14,9 @@ use softcontact_dynamics::lwr4;
 use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ControllerState as StateMsg, ForceCommand};
-use softcontact_msgs::std_msgs::Header;
 use softcontact_nodes::contact_estimator::{ModelMsg, model_from_msg};
 use softcontact_nodes::deformation_controller::{DeformationController, ModelUpdate, Params};
+use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 
@@ -133,13 +133,7 @@ fn main() -> anyhow::Result<()> {
                     continue;
                 }
             };
-            torque_pub.publish(JointState {
-                header: js.header.clone(),
-                name: names.clone(),
-                position: Vec::new(),
-                velocity: Vec::new(),
-                effort: tau.to_vec(),
-            })?;
+            torque_pub.publish(messages::torque_command(&names, &tau, &js.header))?;
             ticks += 1;
             if s.in_contact != was_in_contact {
                 was_in_contact = s.in_contact;
@@ -150,18 +144,7 @@ fn main() -> anyhow::Result<()> {
                 );
             }
             if ticks % state_every == 0 {
-                state_pub.publish(StateMsg {
-                    header: Header { stamp: js.header.stamp, frame_id: "world".into() },
-                    f_cmd: s.f_cmd,
-                    z_cmd: s.z_cmd,
-                    zdot_cmd: s.zdot_cmd,
-                    z: s.z,
-                    zdot: s.zdot,
-                    f: s.f,
-                    f_predicted: s.f_predicted,
-                    in_contact: s.in_contact,
-                    contact_lost: s.contact_lost,
-                })?;
+                state_pub.publish(s.to_msg(js.header.stamp))?;
             }
         }
     }

@@ -9,14 +9,13 @@ use clap::Parser;
 use nalgebra::{UnitQuaternion, Vector3};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
-use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
-use softcontact_msgs::geometry_msgs::{self as geo, PoseStamped, WrenchStamped};
-use softcontact_msgs::std_msgs::Header;
+use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
 use softcontact_nodes::geometry;
+use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 use softcontact_nodes::udp::RdtClient;
@@ -26,16 +25,6 @@ use softcontact_nodes::udp::RdtClient;
 struct Args {
     #[command(flatten)]
     params: ParamArgs,
-}
-
-fn wrench(frame: &str, w: &[f64; 6], stamp: Time) -> WrenchStamped {
-    WrenchStamped {
-        header: Header { stamp, frame_id: frame.into() },
-        wrench: geo::Wrench {
-            force: geo::Vector3 { x: w[0], y: w[1], z: w[2] },
-            torque: geo::Vector3 { x: w[3], y: w[4], z: w[5] },
-        },
-    }
 }
 
 fn main() -> anyhow::Result<()> {
@@ -84,9 +73,9 @@ fn main() -> anyhow::Result<()> {
             last_status = out.status.0;
             if !out.invalid {
                 let stamp = clock.now();
-                raw_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &out.raw, stamp))?;
+                raw_pub.publish(messages::wrench(&out.raw, stamp))?;
                 if let Some(c) = out.compensated.filter(|_| tared) {
-                    wrench_pub.publish(wrench(lwr4::FT_SENSOR_FRAME, &c, stamp))?;
+                    wrench_pub.publish(messages::wrench(&c, stamp))?;
                 }
             }
         }

@@ -6,17 +6,14 @@
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use nalgebra::Isometry3;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
-use softcontact_msgs::geometry_msgs::{
-    Point, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Twist, TwistStamped, Vector3,
-};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
 use softcontact_msgs::sensor_msgs::JointState;
-use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params};
+use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 use softcontact_nodes::stats::Histogram;
@@ -31,25 +28,6 @@ use softcontact_wire::fri::InterfaceState;
 struct Args {
     #[command(flatten)]
     params: ParamArgs,
-}
-
-fn header(frame: &str, stamp: Time) -> Header {
-    Header { stamp, frame_id: frame.into() }
-}
-
-fn pose_parts(p: &Isometry3<f64>) -> (Vector3, Quaternion) {
-    let t = p.translation.vector;
-    let q = p.rotation;
-    (Vector3 { x: t.x, y: t.y, z: t.z }, Quaternion { x: q.i, y: q.j, z: q.k, w: q.w })
-}
-
-fn transform(parent: &str, child: &str, p: &Isometry3<f64>, stamp: Time) -> TransformStamped {
-    let (translation, rotation) = pose_parts(p);
-    TransformStamped {
-        header: header(parent, stamp),
-        child_frame_id: child.into(),
-        transform: Transform { translation, rotation },
-    }
 }
 
 fn diagnostics(
@@ -106,18 +84,7 @@ fn main() -> anyhow::Result<()> {
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
     let model = lwr4::model();
-    let mut data = model.data();
-    model.forward_kinematics(&mut data, &[0.0; 7]);
-    let tool_pose0 = model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?);
-    let sensor_pose0 = model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?);
-    tf_static.publish(TFMessage {
-        transforms: vec![transform(
-            lwr4::TOOL_FRAME,
-            lwr4::FT_SENSOR_FRAME,
-            &(tool_pose0.inverse() * sensor_pose0),
-            clock.now(),
-        )],
-    })?;
+    tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     ros::log(&node, LogLevel::Info, &format!("ready: FRI on {}, domain {}", client.local_addr()?, node.domain_id()));
 
@@ -143,28 +110,11 @@ fn main() -> anyhow::Result<()> {
             if let Some(t) = command_stamp.filter(|_| out.state == InterfaceState::Command && !out.holding) {
                 command_age.record(stamp.as_secs_f64() - t);
             }
-            let h = header("world", stamp);
-            joint_states.publish(JointState {
-                header: h.clone(),
-                name: names.clone(),
-                position: out.q.to_vec(),
-                velocity: out.dq.to_vec(),
-                effort: out.effort.to_vec(),
-            })?;
-            let (t, q) = pose_parts(&out.tool_pose);
-            ee_pose.publish(PoseStamped {
-                header: h.clone(),
-                pose: Pose { position: Point { x: t.x, y: t.y, z: t.z }, orientation: q },
-            })?;
-            let v = out.tool_twist;
-            ee_twist.publish(TwistStamped {
-                header: h,
-                twist: Twist {
-                    linear: Vector3 { x: v[0], y: v[1], z: v[2] },
-                    angular: Vector3 { x: v[3], y: v[4], z: v[5] },
-                },
-            })?;
-            tf.publish(TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &out.tool_pose, stamp)] })?;
+            let m = out.messages(&names, stamp);
+            joint_states.publish(m.joint_state)?;
+            ee_pose.publish(m.ee_pose)?;
+            ee_twist.publish(m.ee_twist)?;
+            tf.publish(m.tf)?;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
             ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));

@@ -27,10 +27,19 @@ fn main() -> anyhow::Result<()> {
     let (p, declared) = params::load::<Params>("sim_arm", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut config = SimConfig::above_surface(softcontact_sim::sponge(), p.seed);
-    match p.surface {
-        SurfaceKind::Sponge => {}
-        SurfaceKind::Dice => config.surface.as_mut().expect("preset has a surface").model = softcontact_sim::dice(),
-        SurfaceKind::None => config.surface = None,
+    let model = match p.surface {
+        SurfaceKind::Sponge => Some(softcontact_sim::sponge()),
+        SurfaceKind::Dice => Some(softcontact_sim::dice()),
+        SurfaceKind::LabSponge => Some(softcontact_sim::lab_sponge()),
+        SurfaceKind::LabDice => Some(softcontact_sim::lab_dice()),
+        SurfaceKind::None => None,
+    };
+    match model {
+        Some(m) => config.surface.as_mut().expect("preset has a surface").model = m,
+        None => config.surface = None,
+    }
+    if matches!(p.surface, SurfaceKind::LabSponge | SurfaceKind::LabDice) {
+        config.sensor = softcontact_sim::FtSensorConfig::gamma_drifting();
     }
     let sim = Simulator::new(config)?;
     let mut server = SimArmServer::bind(

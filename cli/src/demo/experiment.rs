@@ -1,0 +1,273 @@
+//! Seed 001's two experiments on one simulated surface, in lockstep with the simulator: the same node
+//! structs as the graph, no DDS. Identification: 10 runs of a ramp into contact, 1 Hz sinusoidal
+//! pushes and a retreat; every kind fitted to all of it with 5-fold cross-validation. Control: 30 force
+//! commands reached by 2 s quintics, cycle 1 through the identified model, then the estimator's model
+//! of the last 1200 samples (12 s at 10 ms) adopted at each command.
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use softcontact_contact::{ContactModel, Fit, Kind};
+use softcontact_nodes::cell::{Cell, Tick};
+use softcontact_nodes::contact_estimator::{self, ContactEstimatorNode, ModelOut};
+use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
+use softcontact_sim::{FtSensorConfig, SimConfig};
+
+/// The ratios of the maximum identified force that seed 001 commands: 4 cycles of the first six,
+/// then one of the second six.
+pub const RATIOS: [[f64; 6]; 2] = [[0.8, 0.4, 0.7, 0.3, 0.5, 0.6], [0.75, 0.35, 0.65, 0.25, 0.45, 0.55]];
+pub const CYCLES: usize = 5;
+
+/// One surface and how the experiments treat it.
+#[derive(Debug, Clone)]
+pub struct SurfaceSpec {
+    pub name: &'static str,
+    /// What the simulator's surface is made of (the truth, effects included).
+    pub truth: ContactModel,
+    /// Identification pushes between these deformations [m] (seed 001: up to 5 cm sponge, 7 cm dice).
+    pub push: (f64, f64),
+    /// Identification pushes of the `--graph` run, by force commands: high and low [N].
+    pub push_forces: (f64, f64),
+    /// The controller's limits on this surface: force [N], deformation [m].
+    pub max_force: f64,
+    pub max_deformation: f64,
+}
+
+/// How much of the experiments to run (the full set is seed 001's).
+#[derive(Debug, Clone, Copy)]
+pub struct Plan {
+    pub identification_runs: usize,
+    pub push_periods: u32,
+    /// Control commands (30: five cycles of six).
+    pub commands: usize,
+    pub move_duration: f64,
+}
+
+impl Plan {
+    pub const SEED_001: Plan = Plan { identification_runs: 10, push_periods: 5, commands: 30, move_duration: 2.0 };
+}
+
+/// One control command and what was reached.
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+pub struct CommandResult {
+    pub cycle: usize,
+    pub ratio: f64,
+    pub command: f64,
+    /// Normal force at the end of the move [N].
+    pub reached: f64,
+    pub error: f64,
+    /// The stiffness of the model the command went through.
+    pub model_stiffness: f64,
+}
+
+/// Samples for the figures, every 10 ms.
+#[derive(Debug, Clone, Default)]
+pub struct Series {
+    pub time: Vec<f64>,
+    /// Identification: reference and actual deformation (one run).
+    pub z_cmd: Vec<f64>,
+    pub z: Vec<f64>,
+    /// Control: actual, predicted and commanded normal force.
+    pub force: Vec<f64>,
+    pub predicted: Vec<f64>,
+    pub command: Vec<f64>,
+}
+
+/// Everything one surface's experiments produced.
+pub struct SurfaceRun {
+    pub spec: SurfaceSpec,
+    pub identified: ModelOut,
+    pub identification_samples: usize,
+    pub max_force: f64,
+    pub commands: Vec<CommandResult>,
+    pub identification: Series,
+    pub control: Series,
+    /// Times [s] at which the control commands were sent.
+    pub command_times: Vec<f64>,
+    /// Simulated seconds of the whole run.
+    pub simulated: f64,
+}
+
+impl SurfaceRun {
+    pub fn selected(&self) -> Kind {
+        self.identified.estimate.selected
+    }
+
+    pub fn fits(&self) -> &[Fit] {
+        &self.identified.estimate.fits
+    }
+}
+
+/// Receives every tick and every model, to record them (or not).
+pub trait Observer {
+    fn tick(&mut self, tick: &Tick) -> anyhow::Result<()>;
+    fn model(&mut self, time: f64, model: &ModelOut) -> anyhow::Result<()>;
+    fn force_command(&mut self, time: f64, force: f64, duration: f64) -> anyhow::Result<()>;
+}
+
+pub struct NoObserver;
+
+impl Observer for NoObserver {
+    fn tick(&mut self, _: &Tick) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn model(&mut self, _: f64, _: &ModelOut) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn force_command(&mut self, _: f64, _: f64, _: f64) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+const CYCLE: f64 = 1e-3;
+const RETREAT: f64 = -0.01;
+
+/// The cell driven tick by tick, the estimator refitted on the node's schedule.
+struct Runner<'a, O: Observer> {
+    cell: Cell,
+    observer: &'a mut O,
+    params: contact_estimator::Params,
+    next_refit: f64,
+    newest: Option<ModelOut>,
+    last: Tick,
+}
+
+impl<O: Observer> Runner<'_, O> {
+    fn tick(&mut self) -> anyhow::Result<&Tick> {
+        let tick = self.cell.cycle()?.context("the KRC left command mode")?;
+        anyhow::ensure!(!tick.controller.contact_lost, "contact lost at t = {:.3} s", tick.time);
+        self.observer.tick(&tick)?;
+        if tick.time >= self.next_refit && self.cell.estimator.window_fill() >= self.params.min_window_fill {
+            self.next_refit = tick.time + self.params.refit_period;
+            let model = self.cell.estimator.refit()?;
+            self.observer.model(tick.time, &model)?;
+            self.newest = Some(model);
+        }
+        self.last = tick;
+        Ok(&self.last)
+    }
+
+    fn run(&mut self, seconds: f64, mut each: impl FnMut(&Tick)) -> anyhow::Result<()> {
+        for _ in 0..(seconds / CYCLE).round() as usize {
+            each(self.tick()?);
+        }
+        Ok(())
+    }
+}
+
+/// Runs both experiments on one surface.
+pub fn run_surface(
+    spec: &SurfaceSpec,
+    plan: Plan,
+    seed: u64,
+    observer: &mut impl Observer,
+) -> anyhow::Result<SurfaceRun> {
+    let normal = Vector3::new(0.0, 0.0, -1.0);
+    let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
+    sim.sensor = FtSensorConfig::gamma_drifting();
+    let params = contact_estimator::Params::default();
+    // Identification keeps every sample of every run (seed 001 fits all of them at once).
+    let identification = contact_estimator::EstimatorConfig { window: 100_000, ..params.estimator_config() };
+    // The controller knows nothing of the surface yet: it only moves the hand during identification.
+    let guess = ContactModel::new(Kind::KelvinVoigt, 5000.0, 0.0)?;
+    let controller = DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), guess)?;
+    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(identification)?, normal)?;
+    let last = cell.start(5000)?;
+    let mut r = Runner { cell, observer, params: params.clone(), next_refit: f64::INFINITY, newest: None, last };
+
+    // Approach: the hand descends at 1 cm/s until the controller's onset fires.
+    let mut waited = 0.0;
+    while !r.tick()?.controller.in_contact {
+        waited += CYCLE;
+        anyhow::ensure!(waited < 20.0, "{}: no contact after 20 s", spec.name);
+    }
+
+    // Identification: ramp into the lowest push point, 1 Hz pushes, retreat, rest; 10 times.
+    let mut id_series = Series::default();
+    let mut max_force: f64 = 0.0;
+    let (low, high) = spec.push;
+    for run in 0..plan.identification_runs {
+        let mut k = 0usize;
+        let mut watch = |t: &Tick| {
+            max_force = max_force.max(t.controller.f);
+            if run == 0 && k.is_multiple_of(10) {
+                id_series.time.push(t.time);
+                id_series.z_cmd.push(t.controller.z_cmd);
+                id_series.z.push(t.controller.z);
+            }
+            k += 1;
+        };
+        r.cell.controller.command_pushes(low, high, 1.0, plan.push_periods)?;
+        r.run(1.0 + f64::from(plan.push_periods), &mut watch)?;
+        r.cell.controller.command_deformation(RETREAT, 1.0)?;
+        r.run(1.5, &mut watch)?;
+    }
+    let identification_samples = r.cell.estimator.samples();
+    let identified = r.cell.estimator.refit().context("identification fit")?;
+    r.observer.model(r.last.time, &identified)?;
+
+    // Control: a fresh estimator (its window: the last 1200 samples of the control run), the sensor
+    // tared out of contact, and the identified model for cycle 1.
+    r.cell.tare()?;
+    r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?;
+    r.next_refit = r.last.time;
+    r.newest = None;
+    r.cell.controller.adopt_estimate(identified.model.clone(), &identified.contact_position, None)?;
+    r.cell.controller.command_deformation(0.005, 2.0)?;
+    r.run(3.0, |_| {})?;
+
+    let mut control = Series::default();
+    let mut commands = Vec::with_capacity(plan.commands);
+    let mut command_times = Vec::with_capacity(plan.commands);
+    let mut k = 0usize;
+    for i in 0..plan.commands {
+        let cycle = i / 6 + 1;
+        let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
+        let command = ratio * max_force;
+        if cycle > 1
+            && let Some(m) = r.newest.take()
+        {
+            // Seed 001: from cycle 2 on, the newest model of the last 12 s at each command.
+            r.cell.controller.adopt_estimate(m.model, &m.contact_position, None)?;
+        }
+        let stiffness = r.cell.controller.contact_model().stiffness;
+        r.cell.controller.command_force(command, plan.move_duration)?;
+        r.observer.force_command(r.last.time, command, plan.move_duration)?;
+        command_times.push(r.last.time);
+        let cycles = (plan.move_duration / CYCLE).round() as usize;
+        let mut end = Vec::with_capacity(10);
+        for j in 0..cycles {
+            let t = r.tick()?;
+            if k.is_multiple_of(10) {
+                control.time.push(t.time);
+                control.force.push(t.controller.f);
+                control.predicted.push(t.controller.f_predicted);
+                control.command.push(t.controller.f_cmd);
+            }
+            k += 1;
+            if j + 10 >= cycles {
+                end.push(t.controller.f);
+            }
+        }
+        // The force at the end of the move (the last 10 ms, one sample of seed 001's 100 Hz).
+        let reached = end.iter().sum::<f64>() / end.len() as f64;
+        commands.push(CommandResult {
+            cycle,
+            ratio,
+            command,
+            reached,
+            error: (reached - command).abs(),
+            model_stiffness: stiffness,
+        });
+    }
+    Ok(SurfaceRun {
+        spec: spec.clone(),
+        identified,
+        identification_samples,
+        max_force,
+        commands,
+        identification: id_series,
+        control,
+        command_times,
+        simulated: r.last.time,
+    })
+}

@@ -1,0 +1,213 @@
+//! The demo's tables: seed 001's Table I (fitness) and Tables II/III (errors per command and cycle),
+//! ours beside the paper's, and the same as JSON.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+use softcontact_contact::{ContactModel, Effect, Exponents};
+
+use super::experiment::{CYCLES, CommandResult, RATIOS, SurfaceRun};
+use super::paper::{self, PaperSurface};
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Report {
+    /// Always true: these are simulated surfaces, not the paper's robot.
+    pub simulation: bool,
+    /// `in-process` (lockstep) or `graph` (node processes over DDS).
+    pub mode: String,
+    pub surfaces: Vec<SurfaceReport>,
+}
+
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Fitness {
+    pub mean: f64,
+    pub std: f64,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Identified {
+    pub kind: String,
+    pub stiffness: f64,
+    pub damping: f64,
+    pub exponents: Exponents,
+    pub contact_position: [f64; 3],
+    pub samples: usize,
+}
+
+/// One surface: the JSON of design.md's demo contract, and what the tables print.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SurfaceReport {
+    pub name: String,
+    /// Cross-validated fitness of every kind, by kind id.
+    pub fitness: BTreeMap<String, Fitness>,
+    pub selected: String,
+    pub identified: Identified,
+    /// The largest normal force of the identification [N]: commands are ratios of it.
+    pub max_force: f64,
+    pub commands: Vec<CommandResult>,
+    pub simulated_surface: ContactModel,
+}
+
+impl SurfaceReport {
+    pub fn of(run: &SurfaceRun) -> Self {
+        let m = &run.identified.model;
+        let p = run.identified.contact_position;
+        Self {
+            name: run.spec.name.into(),
+            fitness: run
+                .fits()
+                .iter()
+                .map(|f| (f.kind.id().into(), Fitness { mean: f.fitness_mean, std: f.fitness_std }))
+                .collect(),
+            selected: run.selected().id().into(),
+            identified: Identified {
+                kind: m.kind.id().into(),
+                stiffness: m.stiffness,
+                damping: m.damping,
+                exponents: m.exponents,
+                contact_position: [p.x, p.y, p.z],
+                samples: run.identification_samples,
+            },
+            max_force: run.max_force,
+            commands: run.commands.clone(),
+            simulated_surface: run.spec.truth.clone(),
+        }
+    }
+
+    fn paper(&self) -> &'static PaperSurface {
+        if self.name == "dice" { &paper::DICE } else { &paper::SPONGE }
+    }
+
+    /// The largest relative error of each cycle.
+    pub fn worst_per_cycle(&self) -> Vec<f64> {
+        (1..=CYCLES)
+            .map(|c| {
+                self.commands.iter().filter(|x| x.cycle == c).map(|x| x.error / x.command).fold(f64::NAN, f64::max)
+            })
+            .collect()
+    }
+}
+
+/// The effects a simulated surface carries beyond its law, in words.
+pub fn describe(model: &ContactModel) -> String {
+    let mut parts = vec![format!("{} law, k {:.0}, λ {:.0}", model.kind.id(), model.stiffness, model.damping)];
+    for e in &model.effects {
+        parts.push(match *e {
+            Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
+                format!("viscoelastic relaxation ({stiffness:.0} N/m, τ {time_constant} s)")
+            }
+            Effect::Hysteresis { fraction, velocity_scale } => {
+                format!("hysteresis (±{:.0} % of the elastic force at {velocity_scale} m/s)", fraction * 100.0)
+            }
+            ref other => other.id().to_string(),
+        });
+    }
+    parts.join(" + ")
+}
+
+const KINDS: [(&str, &str); 3] =
+    [("kelvin_voigt", "linear K/V"), ("hunt_crossley", "non-linear H/C"), ("azad_featherstone", "non-linear A/F")];
+
+fn short(id: &str) -> &str {
+    KINDS.iter().find(|(k, _)| *k == id).map_or(id, |(_, s)| s)
+}
+
+pub fn print_table_one(surfaces: &[SurfaceReport], source: &str) {
+    println!("TABLE I — fitness (eq. 18) of three contact models, 5-fold cross-validated, mean ± std");
+    print!("{:<8} {:<7}", "", "");
+    for (_, name) in KINDS {
+        print!(" {name:>16}");
+    }
+    println!("   chosen");
+    for s in surfaces {
+        print!("{:<8} {:<7}", s.name, "ours");
+        for (k, _) in KINDS {
+            match s.fitness.get(k) {
+                Some(f) => print!("  {:>6.3} ± {:<5.3}", f.mean, f.std),
+                None => print!(" {:>16}", "—"),
+            }
+        }
+        println!("   {}", short(&s.selected));
+        let paper = s.paper();
+        print!("{:<8} {:<7}", "", "paper");
+        for (m, sd) in paper.fitness {
+            print!("  {m:>6.3} ± {sd:<5.3}");
+        }
+        let best = (0..3).max_by(|&a, &b| paper.fitness[a].0.total_cmp(&paper.fitness[b].0)).unwrap_or(0);
+        println!("   {}", KINDS[best].1);
+    }
+    println!("  ours: {source}; paper: the real LWR IV.");
+    for s in surfaces {
+        let m = &s.identified;
+        println!(
+            "  {}: {} samples; chosen {} with k {:.0}, λ {:.1}, surface at z = {:.4} m; maximum force {:.1} N (paper {:.0} N)",
+            s.name,
+            m.samples,
+            s.selected,
+            m.stiffness,
+            m.damping,
+            m.contact_position[2],
+            s.max_force,
+            s.paper().max_force,
+        );
+    }
+    println!();
+}
+
+pub fn print_errors(s: &SurfaceReport, table: &str, source: &str) {
+    let paper = s.paper();
+    println!(
+        "TABLE {table} — |command − actual| at the end of each 2 s move, {} [N] (ours: {source}; paper: the real LWR IV)",
+        s.name
+    );
+    for (block, ratios) in RATIOS.iter().enumerate() {
+        let cycles: Vec<usize> = if block == 0 { (1..CYCLES).collect() } else { vec![CYCLES] };
+        if !s.commands.iter().any(|c| cycles.contains(&c.cycle)) {
+            continue;
+        }
+        let row = |label: &str, cells: &mut dyn Iterator<Item = String>| {
+            print!("{label:<18}");
+            for c in cells {
+                print!(" {c:>14}");
+            }
+            println!();
+        };
+        row("ratios", &mut ratios.iter().map(|r| r.to_string()));
+        row("commands ours", &mut ratios.iter().map(|r| format!("{:.1}", r * s.max_force)));
+        row("commands paper", &mut ratios.iter().map(|r| format!("{:.1}", r * paper.max_force)));
+        for cycle in cycles {
+            let ours: Vec<_> = s.commands.iter().filter(|c| c.cycle == cycle).collect();
+            if ours.is_empty() {
+                continue;
+            }
+            let pct = |e: f64, c: f64| format!("{e:.2} ({:.1}%)", e / c * 100.0);
+            row(&format!("cycle #{cycle} ours"), &mut ours.iter().map(|c| pct(c.error, c.command)));
+            let paper_ratios = RATIOS[usize::from(cycle == CYCLES)];
+            row(
+                &format!("cycle #{cycle} paper"),
+                &mut paper.errors[cycle - 1].iter().zip(paper_ratios).map(|(e, r)| pct(*e, r * paper.max_force)),
+            );
+        }
+    }
+    print!("largest error per cycle:");
+    for (i, w) in s.worst_per_cycle().iter().enumerate().filter(|(_, w)| w.is_finite()) {
+        let paper_ratios = RATIOS[usize::from(i + 1 == CYCLES)];
+        let paper_worst =
+            paper.errors[i].iter().zip(paper_ratios).map(|(e, r)| e / (r * paper.max_force)).fold(0.0, f64::max);
+        print!("  #{} {:.1} % (paper {:.0} %)", i + 1, w * 100.0, paper_worst * 100.0);
+    }
+    println!("\n");
+}
+
+/// Both tables for every surface.
+pub fn print(report: &Report) {
+    let source = if report.mode == "graph" {
+        "simulation, node processes over DDS in real time"
+    } else {
+        "simulation, in-process lockstep"
+    };
+    print_table_one(&report.surfaces, source);
+    for s in &report.surfaces {
+        print_errors(s, if s.name == "dice" { "III" } else { "II" }, source);
+    }
+}

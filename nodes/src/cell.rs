@@ -1,0 +1,162 @@
+//! The robot cell in-process, in lockstep with the simulator: the very driver and F/T node code
+//! exchanges real FRI and RDT bytes with the simulated arm and sensor each 1 ms cycle, the deformation
+//! controller closes the loop and the contact estimator watches, exactly as their node binaries wire
+//! them over DDS — without DDS, clocks or threads, so runs are fast and deterministic (tests, the demo).
+
+use nalgebra::{UnitQuaternion, Vector3};
+use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+use softcontact_sim::{SimConfig, SimError, Simulator};
+use softcontact_wire::fri::InterfaceState;
+
+use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
+use crate::deformation_controller::{ControlError, ControllerState, DeformationController};
+use crate::ft_sensor::{FtConfig, FtOutput, FtSensorNode};
+use crate::lwr_driver::{DriverConfig, DriverError, DriverOutput, LwrDriver};
+
+#[derive(Debug, thiserror::Error)]
+pub enum CellError {
+    #[error("simulator: {0}")]
+    Sim(#[from] SimError),
+    #[error("LWR driver: {0}")]
+    Driver(#[from] DriverError),
+    #[error("F/T node: {0}")]
+    Ft(String),
+    #[error("controller: {0}")]
+    Control(#[from] ControlError),
+    #[error("estimator: {0}")]
+    Estimator(#[from] softcontact_contact::ContactError),
+}
+
+/// What one cycle produced, once the KRC is in command mode.
+#[derive(Debug, Clone)]
+pub struct Tick {
+    /// Simulated time [s].
+    pub time: f64,
+    pub driver: DriverOutput,
+    pub ft: FtOutput,
+    /// The F/T node has tared: it publishes /ft_sensor/wrench.
+    pub tared: bool,
+    /// The contact force on the hand in the world, from the sensor (zero until tared) [N].
+    pub force_world: Vector3<f64>,
+    pub controller: ControllerState,
+    pub torque: [f64; 7],
+    pub estimator: ContactStateOut,
+}
+
+/// The simulated cell and the nodes, wired as `launch-scripts/sim.sh` wires their processes.
+pub struct Cell {
+    pub sim: Simulator,
+    pub driver: LwrDriver,
+    pub ft: FtSensorNode,
+    pub controller: DeformationController,
+    pub estimator: ContactEstimatorNode,
+    normal: Vector3<f64>,
+    model: Model,
+    data: Data,
+    sensor: FrameId,
+    orientation: Option<UnitQuaternion<f64>>,
+    /// Command cycles before the F/T node tares itself (the ft_sensor node's `tare_after`).
+    tare_after: usize,
+    tared: bool,
+    commanding: usize,
+}
+
+impl Cell {
+    /// The cell with the F/T node set up for the LWR's hand (tared after 100 command cycles, as the
+    /// ft_sensor node does at start-up) and the estimator and controller given.
+    pub fn new(
+        sim: SimConfig,
+        controller: DeformationController,
+        estimator: ContactEstimatorNode,
+        normal: Vector3<f64>,
+    ) -> Result<Self, CellError> {
+        let model = lwr4::model();
+        let ft = FtSensorNode::new(FtConfig {
+            calibration: sim.sensor.calibration,
+            tool: lwr4::tool_load(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            low_pass: None,
+            sample_rate: 1000.0,
+        })
+        .map_err(CellError::Ft)?;
+        Ok(Self {
+            sim: Simulator::new(sim)?,
+            driver: LwrDriver::new(DriverConfig::default()),
+            ft,
+            controller,
+            estimator,
+            normal: normal.try_normalize(1e-9).unwrap_or_else(|| Vector3::new(0.0, 0.0, -1.0)),
+            data: model.data(),
+            sensor: model.frame_id(lwr4::FT_SENSOR_FRAME).map_err(ControlError::from)?,
+            model,
+            orientation: None,
+            tare_after: 100,
+            tared: false,
+            commanding: 0,
+        })
+    }
+
+    /// Software tare now (the /ft_sensor/bias service), for the present orientation of the hand: do it
+    /// out of contact.
+    pub fn tare(&mut self) -> Result<(), CellError> {
+        self.ft.tare(self.orientation.as_ref()).map_err(CellError::Ft)?;
+        self.tared = true;
+        Ok(())
+    }
+
+    /// One 1 ms cycle through the wire formats; `None` until the KRC commands.
+    pub fn cycle(&mut self) -> Result<Option<Tick>, CellError> {
+        let m = self.sim.measurement().encode();
+        let (reply, driver) = self.driver.handle(&m)?;
+        self.sim.command(&reply);
+        self.sim.step_cycle()?;
+        self.model.forward_kinematics(&mut self.data, &driver.q);
+        let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
+        self.orientation = Some(orientation);
+        let ft = self
+            .ft
+            .handle(&self.sim.ft_record().encode(), Some(&orientation))
+            .map_err(|e| CellError::Ft(e.to_string()))?;
+        if driver.state != InterfaceState::Command {
+            return Ok(None);
+        }
+        self.commanding += 1;
+        if self.commanding == self.tare_after && !self.tared {
+            self.tare()?;
+        }
+        let force_world = match ft.compensated.filter(|_| self.tared && !ft.invalid) {
+            Some(c) => orientation * Vector3::new(c[0], c[1], c[2]),
+            None => Vector3::zeros(),
+        };
+        let f = (-force_world.dot(&self.normal)).max(0.0);
+        let (torque, controller) = self.controller.tick(&driver.q, &driver.dq, f, &force_world)?;
+        let v = driver.tool_twist;
+        let estimator = self.estimator.update(
+            self.sim.time(),
+            &driver.tool_pose.translation.vector,
+            &Vector3::new(v[0], v[1], v[2]),
+            f,
+        )?;
+        self.driver.set_command(&torque)?;
+        Ok(Some(Tick {
+            time: self.sim.time(),
+            driver,
+            ft,
+            tared: self.tared,
+            force_world,
+            controller,
+            torque,
+            estimator,
+        }))
+    }
+
+    /// Cycles until the KRC commands and the F/T node has tared (at most `limit` cycles).
+    pub fn start(&mut self, limit: usize) -> Result<Tick, CellError> {
+        for _ in 0..limit {
+            if let Some(t) = self.cycle()?.filter(|_| self.tared) {
+                return Ok(t);
+            }
+        }
+        Err(CellError::Ft(format!("no tared command cycle within {limit} cycles")))
+    }
+}

@@ -1,0 +1,132 @@
+//! The messages the nodes publish, built from their structs' outputs: the node binaries publish them
+//! over DDS and the in-process demo records them, so both say exactly the same thing.
+
+use nalgebra::Isometry3;
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::geometry_msgs::{
+    Point, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Twist, TwistStamped, Vector3, Wrench,
+    WrenchStamped,
+};
+use softcontact_msgs::sensor_msgs::JointState;
+use softcontact_msgs::softcontact_msgs::{ContactState, ControllerState as ControllerStateMsg};
+use softcontact_msgs::std_msgs::Header;
+use softcontact_msgs::tf2_msgs::TFMessage;
+
+use crate::contact_estimator::ContactStateOut;
+use crate::deformation_controller::ControllerState;
+use crate::lwr_driver::DriverOutput;
+
+pub fn header(frame: &str, stamp: Time) -> Header {
+    Header { stamp, frame_id: frame.into() }
+}
+
+fn vector(v: [f64; 3]) -> Vector3 {
+    Vector3 { x: v[0], y: v[1], z: v[2] }
+}
+
+fn pose_parts(p: &Isometry3<f64>) -> (Vector3, Quaternion) {
+    let (t, q) = (p.translation.vector, p.rotation);
+    (vector([t.x, t.y, t.z]), Quaternion { x: q.i, y: q.j, z: q.k, w: q.w })
+}
+
+pub fn transform(parent: &str, child: &str, p: &Isometry3<f64>, stamp: Time) -> TransformStamped {
+    let (translation, rotation) = pose_parts(p);
+    TransformStamped {
+        header: header(parent, stamp),
+        child_frame_id: child.into(),
+        transform: Transform { translation, rotation },
+    }
+}
+
+/// /tf_static of the LWR driver: the sensing frame as seen from the tool, from the URDF.
+pub fn tool_to_sensor_static(stamp: Time) -> TFMessage {
+    let model = lwr4::model();
+    let mut data = model.data();
+    model.forward_kinematics(&mut data, &[0.0; 7]);
+    let pose = |frame| model.frame_pose(&data, model.frame_id(frame).expect("the LWR model has its frames"));
+    let tool_to_sensor = pose(lwr4::TOOL_FRAME).inverse() * pose(lwr4::FT_SENSOR_FRAME);
+    TFMessage { transforms: vec![transform(lwr4::TOOL_FRAME, lwr4::FT_SENSOR_FRAME, &tool_to_sensor, stamp)] }
+}
+
+/// The LWR driver's 1 kHz topics for one measurement.
+pub struct DriverMessages {
+    pub joint_state: JointState,
+    pub ee_pose: PoseStamped,
+    pub ee_twist: TwistStamped,
+    pub tf: TFMessage,
+}
+
+impl DriverOutput {
+    pub fn messages(&self, joint_names: &[String], stamp: Time) -> DriverMessages {
+        let h = header("world", stamp);
+        let (t, q) = pose_parts(&self.tool_pose);
+        let v = self.tool_twist;
+        DriverMessages {
+            joint_state: JointState {
+                header: h.clone(),
+                name: joint_names.to_vec(),
+                position: self.q.to_vec(),
+                velocity: self.dq.to_vec(),
+                effort: self.effort.to_vec(),
+            },
+            ee_pose: PoseStamped {
+                header: h.clone(),
+                pose: Pose { position: Point { x: t.x, y: t.y, z: t.z }, orientation: q },
+            },
+            ee_twist: TwistStamped {
+                header: h,
+                twist: Twist { linear: vector([v[0], v[1], v[2]]), angular: vector([v[3], v[4], v[5]]) },
+            },
+            tf: TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &self.tool_pose, stamp)] },
+        }
+    }
+}
+
+/// /ft_sensor/wrench and /ft_sensor/wrench_raw: a wrench in the sensing frame.
+pub fn wrench(w: &[f64; 6], stamp: Time) -> WrenchStamped {
+    WrenchStamped {
+        header: header(lwr4::FT_SENSOR_FRAME, stamp),
+        wrench: Wrench { force: vector([w[0], w[1], w[2]]), torque: vector([w[3], w[4], w[5]]) },
+    }
+}
+
+/// /lwr/joint_torque_command, stamped with the joint state it answers.
+pub fn torque_command(joint_names: &[String], tau: &[f64; 7], answered: &Header) -> JointState {
+    JointState {
+        header: answered.clone(),
+        name: joint_names.to_vec(),
+        position: Vec::new(),
+        velocity: Vec::new(),
+        effort: tau.to_vec(),
+    }
+}
+
+impl ControllerState {
+    pub fn to_msg(&self, stamp: Time) -> ControllerStateMsg {
+        ControllerStateMsg {
+            header: header("world", stamp),
+            f_cmd: self.f_cmd,
+            z_cmd: self.z_cmd,
+            zdot_cmd: self.zdot_cmd,
+            z: self.z,
+            zdot: self.zdot,
+            f: self.f,
+            f_predicted: self.f_predicted,
+            in_contact: self.in_contact,
+            contact_lost: self.contact_lost,
+        }
+    }
+}
+
+impl ContactStateOut {
+    pub fn to_msg(&self, stamp: Time) -> ContactState {
+        ContactState {
+            header: header("world", stamp),
+            deformation: self.deformation,
+            deformation_rate: self.deformation_rate,
+            normal_force: self.normal_force,
+            in_contact: self.in_contact,
+        }
+    }
+}
