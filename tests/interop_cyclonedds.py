@@ -72,6 +72,7 @@ class ControllerState(IdlStruct, typename="softcontact_msgs::msg::dds_::Controll
     f_predicted: float64
     in_contact: bool
     contact_lost: bool
+    force_limited: bool
 
 
 def stamp(h):
@@ -104,7 +105,7 @@ def main():
         ts = [stamp(x.header) for x in xs]
         assert all(b >= a for a, b in zip(ts, ts[1:])), "stamps increase"
         assert ts[0] > 0
-    assert all(s.in_contact and not s.contact_lost for s in got_s)
+    assert all(s.in_contact and not s.contact_lost and not s.force_limited for s in got_s)
     assert all(s.f_cmd == expected_f_cmd for s in got_s), (expected_f_cmd, {s.f_cmd for s in got_s})
     # The controller's normal force is the measured contact force seen from the world: at a hold, its
     # magnitude in the sensor frame is the same number.

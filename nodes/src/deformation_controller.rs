@@ -54,6 +54,7 @@ impl ControllerConfig {
                 max_force,
                 max_deformation,
                 contact_lost_below: 0.5,
+                force_limit: 1.2 * max_force,
             },
             period: 1e-3,
         }
@@ -81,6 +82,8 @@ pub enum ControlError {
 pub struct ControllerState {
     pub in_contact: bool,
     pub contact_lost: bool,
+    /// The measured force passed `force_limit`: the controller backed off and waits for a command.
+    pub force_limited: bool,
     pub f_cmd: f64,
     pub z_cmd: f64,
     pub zdot_cmd: f64,
@@ -90,6 +93,9 @@ pub struct ControllerState {
     /// The model's force at the commanded deformation and rate.
     pub f_predicted: f64,
 }
+
+/// How fast the controller backs off after passing the force limit [s].
+const BACK_OFF_DURATION: f64 = 0.2;
 
 pub struct DeformationController {
     config: ControllerConfig,
@@ -106,6 +112,7 @@ pub struct DeformationController {
     plan: Option<(Trajectory, f64)>,
     f_cmd: f64,
     contact_lost: bool,
+    force_limited: bool,
     limiter: TorqueLimiter,
     /// Buffers of eq. 15 and of the posture torque: the tick allocates nothing.
     torque: TaskTorque,
@@ -130,6 +137,7 @@ impl DeformationController {
             plan: None,
             f_cmd: 0.0,
             contact_lost: false,
+            force_limited: false,
             limiter: TorqueLimiter::new(),
             torque: TaskTorque::new(7),
             tau0: DVector::zeros(7),
@@ -240,6 +248,7 @@ impl DeformationController {
         self.follow(vec![to])?;
         self.f_cmd = force;
         self.contact_lost = false;
+        self.force_limited = false;
         Ok(())
     }
 
@@ -292,6 +301,18 @@ impl DeformationController {
                     self.hold(state.z)?;
                     self.f_cmd = 0.0;
                 }
+                // Too much force, whatever the plan: back off from where the hand is, at once, to the
+                // deformation that gives `max_force` if the force grew linearly (less on a stiffening
+                // surface), and wait there for a new command.
+                let limits = &self.config.limits;
+                if normal_force > limits.force_limit && !self.force_limited {
+                    self.force_limited = true;
+                    self.f_cmd = 0.0;
+                    let from = Reference { position: state.z, ..Default::default() };
+                    let to = Reference { position: state.z * limits.max_force / normal_force, ..Default::default() };
+                    let back_off = Quintic::new(from, to, BACK_OFF_DURATION).ok_or(ControlError::Duration)?;
+                    self.follow(vec![Segment::Move(back_off)])?;
+                }
                 let reference = self.reference();
                 state.z_cmd = reference.position;
                 state.zdot_cmd = reference.velocity;
@@ -299,7 +320,9 @@ impl DeformationController {
                 deformation_acceleration(&self.config.gains, &reference, state.z, state.zdot)
             }
         };
+        state.f_cmd = self.f_cmd;
         state.contact_lost = self.contact_lost;
+        state.force_limited = self.force_limited;
 
         // Across the surface and in orientation: hold the start.
         let (kp, kd) = self.config.lateral;
@@ -359,6 +382,8 @@ pub struct Params {
     pub max_force: f64,
     pub max_deformation: f64,
     pub contact_lost_below: f64,
+    /// Measured normal force above which the controller backs off [N] (above max_force).
+    pub force_limit: f64,
     pub model_update: ModelUpdate,
     /// Re-planning time of the continuous policy [s].
     pub retarget_duration: f64,
@@ -389,6 +414,7 @@ impl Default for Params {
             max_force: c.limits.max_force,
             max_deformation: c.limits.max_deformation,
             contact_lost_below: c.limits.contact_lost_below,
+            force_limit: c.limits.force_limit,
             model_update: ModelUpdate::OnCommand,
             retarget_duration: 0.5,
             initial_model: ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 5_000.0, 0.0)
@@ -413,6 +439,7 @@ impl Params {
         c.onset = OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm };
         c.limits.torque_rate = self.torque_rate;
         c.limits.contact_lost_below = self.contact_lost_below;
+        c.limits.force_limit = self.force_limit;
         c
     }
 }
@@ -447,6 +474,9 @@ impl crate::params::NodeParams for Params {
         positive("contact_lost_below", self.contact_lost_below)?;
         if self.contact_lost_below >= self.max_force {
             return Err("contact_lost_below must be below max_force".into());
+        }
+        if !(self.force_limit.is_finite() && self.force_limit > self.max_force) {
+            return Err(format!("force_limit ({}) must be above max_force ({})", self.force_limit, self.max_force));
         }
         positive("retarget_duration", self.retarget_duration)?;
         positive("state_rate", self.state_rate)?;

@@ -115,6 +115,7 @@ impl ControllerState {
             f_predicted: self.f_predicted,
             in_contact: self.in_contact,
             contact_lost: self.contact_lost,
+            force_limited: self.force_limited,
         }
     }
 }

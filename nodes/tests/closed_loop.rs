@@ -144,3 +144,38 @@ fn a_push_from_a_light_touch_on_a_relaxing_surface_is_not_a_lost_contact() {
     let f = last.unwrap().f;
     assert!((f - 100.0).abs() < 10.0, "pushed to {f} N");
 }
+
+#[test]
+fn a_model_far_too_soft_cannot_crush_the_surface() {
+    // The controller believes the dice is twice as soft as it is: a 100 N command would press it to
+    // about 185 N. Past the force limit (1.2 × 120 N) the controller backs off and waits.
+    let mut config = SimConfig::above_surface(softcontact_sim::dice(), 14);
+    config.sensor = softcontact_sim::FtSensorConfig::gamma();
+    let too_soft = softcontact_contact::ContactModel::new(Kind::KelvinVoigt, 1_000.0, 0.0).unwrap();
+    let config_limits = ControllerConfig::lwr4(120.0, 0.1);
+    let force_limit = config_limits.limits.force_limit;
+    let mut l = Loop::new(config, DeformationController::new(config_limits, too_soft).unwrap());
+    while !l.cycle().is_some_and(|s| s.in_contact) {}
+    l.0.controller.command_force(100.0, 2.0).unwrap();
+    let (mut peak, mut limited_at) = (0.0f64, None);
+    for k in 0..3000 {
+        let s = l.cycle().unwrap();
+        peak = peak.max(s.f);
+        if s.force_limited && limited_at.is_none() {
+            limited_at = Some(k);
+            assert_eq!(s.f_cmd, 0.0, "the force command is dropped");
+        }
+        if let Some(at) = limited_at {
+            assert!(s.force_limited, "stays backed off until a new command");
+            if k > at + 500 {
+                assert!(s.f <= 120.0, "backed off to at most max_force: {} N, {} ms after the limit", s.f, k - at);
+            }
+        }
+    }
+    assert!(limited_at.is_some(), "the force limit was passed without a reaction (peak {peak:.1} N)");
+    assert!(peak < force_limit + 10.0, "peak {peak:.1} N: the back-off came late (limit {force_limit} N)");
+    assert!(l.0.sim.dq().iter().all(|v| v.abs() < 0.05), "still after backing off: {:?}", l.0.sim.dq());
+    // A new command is taken (within the limit of this wrong model's deformations).
+    l.0.controller.command_force(40.0, 1.0).unwrap();
+    assert!(!l.cycle().unwrap().force_limited);
+}

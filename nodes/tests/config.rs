@@ -32,7 +32,14 @@ fn shipped_parameter_files_are_valid_and_match_the_defaults() {
 #[test]
 fn unsafe_controller_settings_are_refused() {
     use softcontact_nodes::deformation_controller::Params;
-    for bad in ["approach_speed:=0.5", "max_force:=-1", "normal:=[0,0,0]", "torque_rate:=.nan", "onset_confirm:=0"] {
+    for bad in [
+        "approach_speed:=0.5",
+        "max_force:=-1",
+        "normal:=[0,0,0]",
+        "torque_rate:=.nan",
+        "onset_confirm:=0",
+        "force_limit:=200",
+    ] {
         let args = ParamArgs { overrides: vec![bad.into()], ..Default::default() };
         assert!(load::<Params>("deformation_controller", &args).is_err(), "{bad} accepted");
     }

@@ -59,6 +59,21 @@ pub struct CommandResult {
     pub model_stiffness: f64,
 }
 
+impl CommandResult {
+    /// Command `i` (from 0) of seed 001's sequence: its cycle (from 1), ratio and force [N].
+    pub fn planned(i: usize, max_force: f64) -> (usize, f64, f64) {
+        let cycle = i / 6 + 1;
+        let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
+        (cycle, ratio, ratio * max_force)
+    }
+
+    /// Command `i`'s result, with the error as seed 001 measures it: |actual − command|.
+    pub fn new(i: usize, max_force: f64, reached: f64, model_stiffness: f64) -> Self {
+        let (cycle, ratio, command) = Self::planned(i, max_force);
+        Self { cycle, ratio, command, reached, error: (reached - command).abs(), model_stiffness }
+    }
+}
+
 /// Samples for the figures, every 10 ms.
 #[derive(Debug, Clone, Default)]
 pub struct Series {
@@ -220,9 +235,7 @@ pub fn run_surface(
     let mut command_times = Vec::with_capacity(plan.commands);
     let mut k = 0usize;
     for i in 0..plan.commands {
-        let cycle = i / 6 + 1;
-        let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
-        let command = ratio * max_force;
+        let (cycle, _, command) = CommandResult::planned(i, max_force);
         if cycle > 1
             && let Some(m) = r.newest.take()
         {
@@ -250,14 +263,7 @@ pub fn run_surface(
         }
         // The force at the end of the move (the last 10 ms, one sample of seed 001's 100 Hz).
         let reached = end.iter().sum::<f64>() / end.len() as f64;
-        commands.push(CommandResult {
-            cycle,
-            ratio,
-            command,
-            reached,
-            error: (reached - command).abs(),
-            model_stiffness: stiffness,
-        });
+        commands.push(CommandResult::new(i, max_force, reached, stiffness));
     }
     Ok(SurfaceRun {
         spec: spec.clone(),

@@ -25,12 +25,14 @@ pub fn identification(runs: &[&SurfaceRun], out: &Path) -> Result<PathBuf> {
         let t0 = s.time.first().copied().unwrap_or(0.0);
         let mm = |v: &f64| v * 1e3;
         let y = range(s.z.iter().chain(&s.z_cmd).map(mm));
+        let end = s.time.last().map_or(1.0, |t| t - t0);
+        // Room on the right for the legend, clear of the data.
         let mut chart = ChartBuilder::on(&area)
             .caption(format!("{}: identification run 1 (simulation)", run.spec.name), ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(35)
             .y_label_area_size(55)
-            .build_cartesian_2d(0.0..s.time.last().map_or(1.0, |t| t - t0), y)?;
+            .build_cartesian_2d(0.0..end * 1.3, y)?;
         chart.configure_mesh().x_desc("time [s]").y_desc("deformation z [mm]").draw()?;
         chart
             .draw_series(DashedLineSeries::new(
@@ -46,10 +48,15 @@ pub fn identification(runs: &[&SurfaceRun], out: &Path) -> Result<PathBuf> {
             .label("actual")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
         chart
-            .draw_series(LineSeries::new(vec![(0.0, 0.0), (s.time.last().map_or(1.0, |t| t - t0), 0.0)], RED))?
+            .draw_series(LineSeries::new(vec![(0.0, 0.0), (end, 0.0)], RED))?
             .label("surface at contact (onset, 1 N)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
-        chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).draw()?;
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()?;
     }
     root.present()?;
     Ok(path.clone())
@@ -106,7 +113,12 @@ pub fn control(run: &SurfaceRun, figure: u32, out: &Path) -> Result<PathBuf> {
         )?
         .label("command (end of each move)")
         .legend(|(x, y)| Circle::new((x + 10, y), 4, GREEN.stroke_width(2)));
-    chart.configure_series_labels().border_style(BLACK).background_style(WHITE.mix(0.8)).draw()?;
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerLeft)
+        .border_style(BLACK)
+        .background_style(WHITE.mix(0.8))
+        .draw()?;
     root.present()?;
     Ok(path.clone())
 }

@@ -14,7 +14,7 @@ use anyhow::Context;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
 use softcontact_nodes::ros;
 
-use super::experiment::{CYCLES, CommandResult, Plan, RATIOS, SurfaceSpec};
+use super::experiment::{CommandResult, Plan, SurfaceSpec};
 use super::report::{Fitness, Identified, Report, SurfaceReport};
 
 fn client_report(out: &Path, name: &str) -> PathBuf {
@@ -32,8 +32,23 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
         let logs = out.join("graph_logs").join(spec.name);
         let _ = std::fs::remove_file(client_report(out, spec.name));
         println!("{}: starting the graph (logs in {}) …", spec.name, logs.display());
+        // The controller's limits of the in-process run, as a parameter overlay.
+        std::fs::create_dir_all(&logs)?;
+        let limits = logs.join("demo_limits.yaml");
+        std::fs::write(
+            &limits,
+            format!(
+                "deformation_controller:\n  ros__parameters:\n    max_force: {:?}\n    max_deformation: {:?}\n    \
+                 force_limit: {:?}\n",
+                spec.max_force,
+                spec.max_deformation,
+                1.2 * spec.max_force
+            ),
+        )?;
         let mut cmd = Command::new(&script);
-        cmd.args(["--isolated", "--surface", &format!("lab_{}", spec.name), "--log-dir"])
+        cmd.args(["--isolated", "--surface", &format!("lab_{}", spec.name), "--params-file"])
+            .arg(&limits)
+            .arg("--log-dir")
             .arg(&logs)
             .arg("--run")
             .arg(&exe)
@@ -140,22 +155,13 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
 
     let mut results = Vec::new();
     for i in 0..plan.commands {
-        let cycle = i / 6 + 1;
-        let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
-        let command = ratio * max_force;
+        let (_, _, command) = CommandResult::planned(i, max_force);
         let stiffness = heard.model.as_ref().map_or(f64::NAN, |m| m.stiffness);
         commands.publish(ForceCommand { force: command, duration: plan.move_duration })?;
         listen(&mut heard, plan.move_duration)?;
         let reached = heard.recent.iter().sum::<f64>() / heard.recent.len().max(1) as f64;
         eprintln!("{}: command {command:.1} N, reached {reached:.1} N", spec.name);
-        results.push(CommandResult {
-            cycle,
-            ratio,
-            command,
-            reached,
-            error: (reached - command).abs(),
-            model_stiffness: stiffness,
-        });
+        results.push(CommandResult::new(i, max_force, reached, stiffness));
     }
     anyhow::ensure!(recorder.stop()?, "the recorder did not stop cleanly");
 

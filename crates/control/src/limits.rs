@@ -1,6 +1,7 @@
 //! Safety limits the controller never bypasses: commands outside the surface's force or deformation
 //! range are refused (not silently clipped), torques are clipped to the joint limits and their change
-//! per second is bounded, and losing contact while pushing stops the push.
+//! per second is bounded, losing contact while pushing stops the push, and a measured force beyond
+//! `force_limit` makes the controller back off whatever it was doing.
 
 /// Limits of one robot on one surface.
 #[derive(Debug, Clone, PartialEq)]
@@ -15,6 +16,9 @@ pub struct Limits {
     pub max_deformation: f64,
     /// Below this normal force while a force is commanded, contact counts as lost [N].
     pub contact_lost_below: f64,
+    /// Above this measured normal force the controller backs off [N] (above `max_force`: a model that
+    /// is too soft, or a surface that stiffened, must not crush anything).
+    pub force_limit: f64,
 }
 
 /// Why a command was refused.

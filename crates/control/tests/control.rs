@@ -209,6 +209,7 @@ fn limits_refuse_bad_commands_and_bound_torques() {
         max_force: 250.0,
         max_deformation: 0.06,
         contact_lost_below: 0.5,
+        force_limit: 1.2 * 250.0,
     };
     assert_eq!(limits.check_force(100.0), Ok(100.0));
     assert_eq!(limits.check_force(300.0), Err(LimitError::Force(300.0, 250.0)));

@@ -129,6 +129,7 @@ pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
                 f_predicted: 140.01,
                 in_contact: true,
                 contact_lost: false,
+                force_limited: true,
             }),
         ),
         (
