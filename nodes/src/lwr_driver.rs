@@ -7,6 +7,11 @@
 //! than `velocity_margin` of its limit, makes the driver hold the current position with a stiff joint
 //! impedance instead; torques are clipped to the joint limits; the driver never waits for the
 //! controller — it answers with the newest command it has and counts stale cycles.
+//!
+//! A stale command keeps its torque in the hold, fading to none over `hold_release_cycles`: in contact
+//! the last torque is what balances the surface, and dropping it at once would let the surface throw
+//! the hand back against the hold's spring (a 10 ms hiccup of the controller became a 0.17 m/s kick).
+//! Overspeed drops the torque at once: then the command itself is suspect.
 
 use nalgebra::{Isometry3, Matrix6xX, Vector6};
 use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
@@ -28,6 +33,8 @@ pub struct DriverConfig {
     pub request_command_mode: bool,
     /// Hold when a joint exceeds this fraction of its velocity limit.
     pub velocity_margin: f64,
+    /// Cycles over which a hold for a stale command fades out that command's torque.
+    pub hold_release_cycles: u64,
 }
 
 impl Default for DriverConfig {
@@ -38,6 +45,7 @@ impl Default for DriverConfig {
             hold_damping: 0.7,
             request_command_mode: true,
             velocity_margin: 0.9,
+            hold_release_cycles: 500,
         }
     }
 }
@@ -103,7 +111,10 @@ pub struct LwrDriver {
     last_msr: Option<(u16, [f64; 7])>,
     cycle: u64,
     command: Option<([f64; 7], u64)>,
-    hold: Option<[f64; 7]>,
+    /// Where the hold holds, and the cycle it began.
+    hold: Option<([f64; 7], u64)>,
+    /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
+    last_torque: [f32; 7],
     pub counters: DriverCounters,
 }
 
@@ -125,6 +136,7 @@ impl LwrDriver {
             cycle: 0,
             command: None,
             hold: None,
+            last_torque: [0.0; 7],
             counters: DriverCounters::default(),
         }
     }
@@ -194,6 +206,7 @@ impl LwrDriver {
             reply.jnt_pos = std::array::from_fn(|i| m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]);
             reply.jnt_damping = [self.config.hold_damping as f32; 7];
             self.hold = None;
+            self.last_torque = [0.0; 7];
             holding = false;
         } else if let (Some((effort, _)), false) = (fresh, overspeed) {
             let mut clipped = false;
@@ -205,12 +218,19 @@ impl LwrDriver {
             }
             self.counters.clipped_cycles += u64::from(clipped);
             reply.jnt_pos = m.data.msr_jnt_pos;
+            self.last_torque = reply.add_jnt_trq;
             self.hold = None;
             holding = false;
         } else {
             self.counters.stale_cycles += u64::from(fresh.is_none());
             self.counters.overspeed_cycles += u64::from(overspeed);
-            let hold = *self.hold.get_or_insert(q);
+            let (hold, since) = *self.hold.get_or_insert((q, self.cycle));
+            if overspeed {
+                self.last_torque = [0.0; 7];
+            }
+            let elapsed = self.cycle.saturating_sub(since) as f64;
+            let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0) as f32;
+            reply.add_jnt_trq = self.last_torque.map(|t| t * keep);
             reply.jnt_pos = hold.map(|v| v as f32);
             reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
             reply.jnt_damping = [self.config.hold_damping as f32; 7];
@@ -252,6 +272,8 @@ pub struct Params {
     pub hold_damping: f64,
     /// Hold when a joint exceeds this fraction of its velocity limit.
     pub velocity_margin: f64,
+    /// Cycles over which a hold for a stale command fades out that command's torque.
+    pub hold_release_cycles: u64,
     /// Do not ask the KRL program to start command mode (monitor only).
     pub monitor_only: bool,
     /// Stop after this many seconds without a measurement (0: wait forever).
@@ -269,6 +291,7 @@ impl Default for Params {
             hold_stiffness: c.hold_stiffness,
             hold_damping: c.hold_damping,
             velocity_margin: c.velocity_margin,
+            hold_release_cycles: c.hold_release_cycles,
             monitor_only: false,
             exit_after_silence: 0.0,
             use_sim_time: false,
@@ -284,6 +307,7 @@ impl Params {
             hold_damping: self.hold_damping,
             request_command_mode: !self.monitor_only,
             velocity_margin: self.velocity_margin,
+            hold_release_cycles: self.hold_release_cycles,
         }
     }
 }
@@ -298,6 +322,9 @@ impl crate::params::NodeParams for Params {
         }
         if !(self.hold_damping.is_finite() && self.hold_damping > 0.0 && self.hold_damping <= 1.0) {
             return Err(format!("hold_damping is a damping ratio in (0, 1], not {}", self.hold_damping));
+        }
+        if self.hold_release_cycles > 10_000 {
+            return Err(format!("hold_release_cycles must be at most 10000, not {}", self.hold_release_cycles));
         }
         if !(self.velocity_margin > 0.0 && self.velocity_margin <= 1.0) {
             return Err(format!("velocity_margin must lie in (0, 1], not {}", self.velocity_margin));

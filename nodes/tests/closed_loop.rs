@@ -179,3 +179,39 @@ fn a_model_far_too_soft_cannot_crush_the_surface() {
     l.0.controller.command_force(40.0, 1.0).unwrap();
     assert!(!l.cycle().unwrap().force_limited);
 }
+
+#[test]
+fn a_controller_that_stalls_while_pushing_does_not_kick_the_hand_back() {
+    // Pushing the sponge at 150 N, the controller misses 20 cycles (a scheduling hiccup): the driver's
+    // watchdog holds after 5, and the hand must stay where it is, not be thrown back by the surface.
+    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), 12);
+    config.sensor = softcontact_sim::FtSensorConfig::gamma();
+    let model = softcontact_contact::ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1_100.0).unwrap();
+    let mut l = Loop::new(config, DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), model).unwrap());
+    while !l.cycle().is_some_and(|s| s.in_contact) {}
+    l.0.controller.command_force(150.0, 2.0).unwrap();
+    for _ in 0..3000 {
+        l.cycle().unwrap();
+    }
+    let before = l.0.sim.contact().normal_force;
+    let cell = &mut l.0;
+    let mut z = Vec::new();
+    let mut held = 0;
+    for _ in 0..20 {
+        // The driver and the arm run on; nobody sets a new command.
+        let (reply, out) = cell.driver.handle(&cell.sim.measurement().encode()).unwrap();
+        cell.sim.command(&reply);
+        cell.sim.step_cycle().unwrap();
+        held += usize::from(out.holding);
+        z.push(cell.sim.contact().deformation);
+    }
+    assert!(held >= 14, "the watchdog held ({held} cycles)");
+    let moved = z.iter().fold(0.0f64, |m, v| m.max((v - z[0]).abs()));
+    let after = l.0.sim.contact().normal_force;
+    assert!(moved < 2e-4, "the hand moved {:.3} mm during the stall", moved * 1e3);
+    assert!((after - before).abs() < 0.05 * before, "force {before:.1} N before the stall, {after:.1} N after");
+    for _ in 0..500 {
+        l.cycle().unwrap();
+    }
+    assert!((l.0.sim.contact().normal_force - 150.0).abs() < 7.5, "back at the command after the stall");
+}

@@ -96,6 +96,51 @@ fn no_fresh_command_means_holding_position() {
 }
 
 #[test]
+fn a_hold_for_a_stale_command_fades_its_torque_out_and_overspeed_drops_it() {
+    let config = DriverConfig { hold_release_cycles: 100, ..DriverConfig::default() };
+    let mut d = LwrDriver::new(config.clone());
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    let total = [1.0, 50.0, 0.5, -40.0, -0.2, 1.0, 0.3];
+    d.set_command(&total).unwrap();
+    let beyond_gravity: [f32; 7] = std::array::from_fn(|i| total[i] as f32 - G[i]);
+    let mut seq = 2;
+    let mut reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
+    // Stale from cycle 7 on: held at the position of the first stale cycle, the torque fading linearly.
+    while seq < 7 {
+        seq += 1;
+        reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
+    }
+    assert_eq!(reply.jnt_pos, Q);
+    assert!(reply.jnt_stiffness.iter().all(|k| *k > 0.0), "holding");
+    for (sent, full) in reply.add_jnt_trq.iter().zip(beyond_gravity) {
+        assert!((sent - full).abs() < 1e-4, "the first cycle of the hold keeps the whole torque: {sent} vs {full}");
+    }
+    for _ in 0..50 {
+        seq += 1;
+        reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
+    }
+    for (sent, full) in reply.add_jnt_trq.iter().zip(beyond_gravity) {
+        assert!((sent - 0.5 * full).abs() < 1e-4, "half of {full} after half the release: {sent}");
+    }
+    for _ in 0..60 {
+        seq += 1;
+        reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
+    }
+    assert_eq!(reply.add_jnt_trq, [0.0; 7], "released");
+
+    // Overspeed: the command is suspect, its torque goes at once.
+    let mut d = LwrDriver::new(config);
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    d.set_command(&total).unwrap();
+    d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap();
+    let mut fast = Q;
+    fast[6] += 0.0031;
+    let (reply, out) = d.handle(&measurement(3, InterfaceState::Command, fast, G)).unwrap();
+    assert!(out.holding);
+    assert_eq!(reply.add_jnt_trq, [0.0; 7]);
+}
+
+#[test]
 fn a_joint_too_fast_makes_the_driver_hold() {
     let mut d = LwrDriver::new(DriverConfig::default());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
