@@ -5,8 +5,10 @@
 //!   `ros2 bag record` does; chunked, zstd, with message/chunk indexes and the summary. [`BagWriter::flush`]
 //!   closes the chunk in progress: a writer killed after it loses nothing written before it.
 //! - [`Recording`] reads any ROS 2 MCAP file (zstd, lz4 or plain chunks) or rosbag2 folder whoever wrote
-//!   it; a file without its end (a killed writer) is recovered up to its last complete chunk, with a
-//!   warning, not an error.
+//!   it, streamed a chunk at a time (memory bounded whatever the file's size), every chunk's CRC checked
+//!   before its messages are given out; a damaged chunk is skipped with a warning that counts what it
+//!   held, every intact one is read; a file without its end (a killed writer) is recovered up to its last
+//!   complete chunk, with a warning, not an error.
 //! - [`cdr`] encodes and decodes the message types of `softcontact-msgs`.
 //!
 //! Pure: files in, files out; no sockets, threads or clocks (times are given by the caller).
@@ -19,7 +21,7 @@ mod write;
 
 pub use any::AnyMessage;
 pub use metadata::Qos;
-pub use read::{BagMessage, Recording, Topic};
+pub use read::{BagMessage, Messages, RECORD_LIMIT, Recording, Topic};
 pub use write::{BagWriter, WriteStats};
 
 use std::path::PathBuf;
@@ -28,6 +30,8 @@ use std::path::PathBuf;
 pub enum BagError {
     #[error("{path}: {source}")]
     Io { path: PathBuf, source: std::io::Error },
+    #[error("{0}: not a regular file (a recording is an .mcap file or a rosbag2 folder)")]
+    NotAFile(PathBuf),
     #[error("{0}: the file is empty")]
     Empty(PathBuf),
     #[error("{path}: truncated with nothing to recover ({reason})")]
