@@ -39,7 +39,10 @@ pub struct Tick {
     /// The contact force on the hand in the world, from the sensor (zero until tared) [N].
     pub force_world: Vector3<f64>,
     pub controller: ControllerState,
-    pub torque: [f64; 7],
+    /// The torque sent to the driver; `None` when the controller's tick failed and the driver was asked
+    /// to hold (the error says why).
+    pub torque: Option<[f64; 7]>,
+    pub refused: Option<ControlError>,
     pub estimator: ContactStateOut,
 }
 
@@ -129,7 +132,11 @@ impl Cell {
             None => Vector3::zeros(),
         };
         let f = (-force_world.dot(&self.normal)).max(0.0);
-        let (torque, controller) = self.controller.tick(&driver.q, &driver.dq, f, &force_world)?;
+        // As the controller node does: a failed tick sends an empty command, and the driver holds.
+        let (torque, controller, refused) = match self.controller.tick(&driver.q, &driver.dq, f, &force_world) {
+            Ok((tau, state)) => (Some(tau), state, None),
+            Err(e) => (None, ControllerState { f, ..Default::default() }, Some(e)),
+        };
         let v = driver.tool_twist;
         let estimator = self.estimator.update(
             self.sim.time(),
@@ -137,7 +144,10 @@ impl Cell {
             &Vector3::new(v[0], v[1], v[2]),
             f,
         )?;
-        self.driver.set_command(&torque)?;
+        match torque {
+            Some(tau) => self.driver.set_command(&tau)?,
+            None => self.driver.set_command(&[]).map_or((), |_| ()),
+        }
         Ok(Some(Tick {
             time: self.sim.time(),
             driver,
@@ -146,6 +156,7 @@ impl Cell {
             force_world,
             controller,
             torque,
+            refused,
             estimator,
         }))
     }

@@ -6,6 +6,14 @@
 //! deformation law turns the reference into z̈_des along n, the hand's position across the surface and its
 //! orientation are held by PD laws, and eq. 15 turns the task acceleration into joint torques with a
 //! null-space joint impedance holding the initial posture. Every output passes the torque limiter.
+//!
+//! What it refuses (the safety contract, README "Safety"): a command whose force, deformation, lift or
+//! move duration lies outside the configured limits; a contact model that is not plausible (exponents
+//! outside [`EXPONENT_RANGE`], a surface placed further than `max_surface_offset` from the measured
+//! onset); a tick whose measurements are not finite numbers. A tick that cannot produce finite torques
+//! returns an error and re-plans a hold where the hand is: the node then sends the driver a hold
+//! request, never an older torque. After the joint states were interrupted (a new KRC session) the
+//! controller forgets the contact and approaches again.
 
 use nalgebra::{DVector, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
@@ -31,9 +39,15 @@ pub struct ControllerConfig {
     pub approach_speed: f64,
     pub onset: OnsetConfig,
     pub limits: Limits,
+    /// Farthest an estimated surface may lie from the measured onset position [m]: a model placing
+    /// it further is refused (a surface 5 cm too low turned a 50 N command into 302 N).
+    pub max_surface_offset: f64,
     /// Control period [s].
     pub period: f64,
 }
+
+/// Exponents a, b, c of a plausible contact law (the seeds' models use 1 to 2).
+pub const EXPONENT_RANGE: std::ops::RangeInclusive<f64> = 0.0..=4.0;
 
 impl ControllerConfig {
     /// Seed 001's set-up on the LWR IV: surface below, 1 kHz.
@@ -53,9 +67,12 @@ impl ControllerConfig {
                 torque_rate: 2000.0,
                 max_force,
                 max_deformation,
+                max_lift: 0.05,
+                move_duration: (0.1, 600.0),
                 contact_lost_below: 0.5,
                 force_limit: 1.2 * max_force,
             },
+            max_surface_offset: 0.01,
             period: 1e-3,
         }
     }
@@ -75,6 +92,10 @@ pub enum ControlError {
     Duration,
     #[error("the contact normal must not be zero")]
     ZeroNormal,
+    #[error("{0} is not a finite number: no torque this tick")]
+    NonFinite(&'static str),
+    #[error("implausible contact model refused: {0}")]
+    ImplausibleModel(String),
 }
 
 /// What the controller reports each tick (/deformation_controller/state).
@@ -96,6 +117,10 @@ pub struct ControllerState {
 
 /// How fast the controller backs off after passing the force limit [s].
 const BACK_OFF_DURATION: f64 = 0.2;
+/// Smallest step of a back-off [m]: it always lifts the hand.
+const BACK_OFF_MIN_STEP: f64 = 0.5e-3;
+/// Most periods of one series of identification pushes.
+const MAX_PUSH_PERIODS: u32 = 10_000;
 
 pub struct DeformationController {
     config: ControllerConfig,
@@ -146,9 +171,30 @@ impl DeformationController {
 
     /// Adopts a new contact model and the estimated offset of the surface from the onset position (the
     /// true surface lies at d + offset·n; negative when the onset fired late, as on a soft sponge).
-    pub fn set_contact_model(&mut self, model: ContactModel, offset: f64) {
+    /// An implausible model or offset is refused and the present one kept.
+    pub fn set_contact_model(&mut self, model: ContactModel, offset: f64) -> Result<(), ControlError> {
+        self.check_plausible(&model, offset)?;
         self.contact_model = model;
         self.offset = offset;
+        Ok(())
+    }
+
+    fn check_plausible(&self, model: &ContactModel, offset: f64) -> Result<(), ControlError> {
+        let implausible = |why: String| Err(ControlError::ImplausibleModel(why));
+        if let Err(e) = model.validate() {
+            return implausible(e.to_string());
+        }
+        let e = model.exponents;
+        if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
+            return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
+        }
+        if !(offset.is_finite() && offset.abs() <= self.config.max_surface_offset) {
+            return implausible(format!(
+                "surface {offset} m from the onset, beyond {} m",
+                self.config.max_surface_offset
+            ));
+        }
+        Ok(())
     }
 
     /// Adopts the estimator's model and its placement of the undeformed surface in the world. The
@@ -165,10 +211,11 @@ impl DeformationController {
             Some(level) => surface.dot(&self.config.normal) - level,
             None => self.offset,
         };
+        self.check_plausible(&model, offset)?;
         if let Some((plan, _)) = self.plan.as_mut() {
             plan.offset -= offset - self.offset;
         }
-        self.set_contact_model(model, offset);
+        self.set_contact_model(model, offset)?;
         match retarget {
             Some(duration) if self.f_cmd > 0.0 && !self.contact_lost => self.command_force(self.f_cmd, duration),
             _ => Ok(()),
@@ -177,6 +224,24 @@ impl DeformationController {
 
     pub fn contact_model(&self) -> &ContactModel {
         &self.contact_model
+    }
+
+    /// Forgets the contact, the plan and the start pose: the next tick approaches again from where the
+    /// hand is. For a new KRC session, or joint states that stopped for a while — the arm may have
+    /// been moved, the surface too.
+    pub fn restart(&mut self) {
+        if let Ok(onset) = OnsetDetector::new(self.config.onset) {
+            self.onset = onset;
+        }
+        self.contact_level = None;
+        self.offset = 0.0;
+        self.start = None;
+        self.time = 0.0;
+        self.plan = None;
+        self.f_cmd = 0.0;
+        self.contact_lost = false;
+        self.force_limited = false;
+        self.limiter.reset();
     }
 
     fn reference(&self) -> Reference {
@@ -196,9 +261,7 @@ impl DeformationController {
     }
 
     fn move_to(&self, to: Reference, duration: f64) -> Result<Segment, ControlError> {
-        if !(duration.is_finite() && duration > 0.0) {
-            return Err(ControlError::Duration);
-        }
+        let duration = self.config.limits.check_duration(duration)?;
         Ok(Segment::Move(Quintic::new(self.reference(), to, duration).ok_or(ControlError::Duration)?))
     }
 
@@ -224,9 +287,10 @@ impl DeformationController {
         }
         let limits = &self.config.limits;
         let (low, high) = (limits.check_deformation(low)?, limits.check_deformation(high)?);
-        if !(frequency.is_finite() && frequency > 0.0 && high >= low && periods > 0) {
+        if !(frequency.is_finite() && frequency > 0.0 && high >= low && (1..=MAX_PUSH_PERIODS).contains(&periods)) {
             return Err(ControlError::Duration);
         }
+        limits.check_duration(1.0 / frequency)?;
         let push = Oscillation { mean: (low + high) / 2.0, amplitude: (high - low) / 2.0, frequency, periods };
         let ramp = self.move_to(push.start(), 1.0 / frequency)?;
         self.follow(vec![ramp, Segment::Oscillate(push)])?;
@@ -237,9 +301,7 @@ impl DeformationController {
     /// A new force command, reached by a quintic of `duration` seconds from the present reference.
     pub fn command_force(&mut self, force: f64, duration: f64) -> Result<(), ControlError> {
         let force = self.config.limits.check_force(force)?;
-        if !(duration.is_finite() && duration > 0.0) {
-            return Err(ControlError::Duration);
-        }
+        self.config.limits.check_duration(duration)?;
         if self.contact_level.is_none() {
             return Err(ControlError::NoContact);
         }
@@ -261,6 +323,12 @@ impl DeformationController {
         normal_force: f64,
         contact_force: &Vector3<f64>,
     ) -> Result<([f64; 7], ControllerState), ControlError> {
+        if !q.iter().chain(dq).all(|v| v.is_finite()) {
+            return Err(ControlError::NonFinite("the joint state"));
+        }
+        if !(normal_force.is_finite() && contact_force.iter().all(|v| v.is_finite())) {
+            return Err(ControlError::NonFinite("the measured force"));
+        }
         self.time += self.config.period;
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
@@ -304,12 +372,20 @@ impl DeformationController {
                 // Too much force, whatever the plan: back off from where the hand is, at once, to the
                 // deformation that gives `max_force` if the force grew linearly (less on a stiffening
                 // surface), and wait there for a new command.
+                // The deformation is taken from the measured onset, not the model's surface: a model
+                // that misplaces the surface must not make the back-off too short. If the force is still
+                // above max_force when the back-off ends, back off again.
                 let limits = &self.config.limits;
-                if normal_force > limits.force_limit && !self.force_limited {
+                let backing_off =
+                    self.force_limited && self.time - self.plan.as_ref().map_or(0.0, |p| p.1) < BACK_OFF_DURATION;
+                let too_much = if self.force_limited { limits.max_force } else { limits.force_limit };
+                if normal_force > too_much && !backing_off {
                     self.force_limited = true;
                     self.f_cmd = 0.0;
+                    let from_onset = along - level;
+                    let lift = from_onset.max(0.0) * (1.0 - limits.max_force / normal_force);
                     let from = Reference { position: state.z, ..Default::default() };
-                    let to = Reference { position: state.z * limits.max_force / normal_force, ..Default::default() };
+                    let to = Reference { position: state.z - lift.max(BACK_OFF_MIN_STEP), ..Default::default() };
                     let back_off = Quintic::new(from, to, BACK_OFF_DURATION).ok_or(ControlError::Duration)?;
                     self.follow(vec![Segment::Move(back_off)])?;
                 }
@@ -342,7 +418,14 @@ impl DeformationController {
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
         let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
-        self.limiter.apply(&self.config.limits, &mut tau, self.config.period);
+        if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, self.config.period) {
+            // Nothing to send this tick; the next one holds the hand where it is.
+            if self.contact_level.is_some() && state.z.is_finite() {
+                self.f_cmd = 0.0;
+                self.hold(state.z)?;
+            }
+            return Err(e.into());
+        }
         Ok((tau, state))
     }
 }
@@ -384,6 +467,13 @@ pub struct Params {
     pub contact_lost_below: f64,
     /// Measured normal force above which the controller backs off [N] (above max_force).
     pub force_limit: f64,
+    /// Largest lift above the surface [m] and range of move durations [s] a command may ask for.
+    pub max_lift: f64,
+    pub move_duration: [f64; 2],
+    /// Farthest an estimated surface may lie from the measured onset [m].
+    pub max_surface_offset: f64,
+    /// Joint states interrupted this long [s] mean a new KRC session (or a moved arm): approach again.
+    pub restart_after: f64,
     pub model_update: ModelUpdate,
     /// Re-planning time of the continuous policy [s].
     pub retarget_duration: f64,
@@ -415,6 +505,10 @@ impl Default for Params {
             max_deformation: c.limits.max_deformation,
             contact_lost_below: c.limits.contact_lost_below,
             force_limit: c.limits.force_limit,
+            max_lift: c.limits.max_lift,
+            move_duration: c.limits.move_duration.into(),
+            max_surface_offset: c.max_surface_offset,
+            restart_after: 0.1,
             model_update: ModelUpdate::OnCommand,
             retarget_duration: 0.5,
             initial_model: ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 5_000.0, 0.0)
@@ -440,47 +534,66 @@ impl Params {
         c.limits.torque_rate = self.torque_rate;
         c.limits.contact_lost_below = self.contact_lost_below;
         c.limits.force_limit = self.force_limit;
+        c.limits.max_lift = self.max_lift;
+        c.limits.move_duration = self.move_duration.into();
+        c.max_surface_offset = self.max_surface_offset;
         c
     }
 }
 
 impl crate::params::NodeParams for Params {
+    /// Every number has a physical range: a value outside it refuses to start the node.
     fn validate(&self) -> Result<(), String> {
-        let positive = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be positive, not {v}")) }
+        let within = |name: &str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && v > lo && v <= hi {
+                Ok(())
+            } else {
+                Err(format!("{name} must lie in ({lo}, {hi}], not {v}"))
+            }
         };
-        let non_negative = |name: &str, v: &[f64]| {
-            if v.iter().all(|x| x.is_finite() && *x >= 0.0) { Ok(()) } else { Err(format!("{name} must be ≥ 0")) }
+        let all_within = |name: &str, v: &[f64], hi: f64| {
+            if v.iter().all(|x| x.is_finite() && (0.0..=hi).contains(x)) {
+                Ok(())
+            } else {
+                Err(format!("{name} must lie in [0, {hi}] for every entry, not {v:?}"))
+            }
         };
         if !Vector3::from(self.normal).norm().is_normal() {
             return Err("normal must be a non-zero direction".into());
         }
-        positive("deformation_frequency", self.deformation_frequency)?;
-        non_negative("lateral_gains", &self.lateral_gains)?;
-        non_negative("orientation_gains", &self.orientation_gains)?;
-        non_negative("posture_stiffness", &self.posture_stiffness)?;
-        non_negative("posture_damping", &self.posture_damping)?;
-        positive("approach_speed", self.approach_speed)?;
-        if self.approach_speed > 0.05 {
-            return Err(format!("approach_speed above 0.05 m/s is not a gentle approach: {}", self.approach_speed));
+        within("deformation_frequency", self.deformation_frequency, 0.0, 200.0)?;
+        all_within("lateral_gains", &self.lateral_gains, 1e4)?;
+        all_within("orientation_gains", &self.orientation_gains, 1e4)?;
+        all_within("posture_stiffness", &self.posture_stiffness, 1e3)?;
+        all_within("posture_damping", &self.posture_damping, 1e2)?;
+        within("approach_speed", self.approach_speed, 0.0, 0.05)?;
+        within("onset_threshold", self.onset_threshold, 0.0, 50.0)?;
+        if !(1..=100).contains(&self.onset_confirm) {
+            return Err(format!("onset_confirm must lie in 1..=100, not {}", self.onset_confirm));
         }
-        positive("onset_threshold", self.onset_threshold)?;
-        if self.onset_confirm == 0 {
-            return Err("onset_confirm must be at least 1".into());
+        within("torque_rate", self.torque_rate, 0.0, 1e5)?;
+        within("max_force", self.max_force, 0.0, 500.0)?;
+        within("max_deformation", self.max_deformation, 0.0, 0.2)?;
+        within("contact_lost_below", self.contact_lost_below, 0.0, self.max_force / 4.0)?;
+        within("force_limit", self.force_limit, self.max_force, 2.0 * self.max_force)?;
+        within("max_lift", self.max_lift, 0.0, 0.2)?;
+        let [shortest, longest] = self.move_duration;
+        if !(shortest.is_finite() && longest.is_finite() && 0.01 <= shortest && shortest < longest && longest <= 3600.0)
+        {
+            return Err(format!(
+                "move_duration must be [shortest, longest] within [0.01, 3600] s, not {:?}",
+                self.move_duration
+            ));
         }
-        positive("torque_rate", self.torque_rate)?;
-        positive("max_force", self.max_force)?;
-        positive("max_deformation", self.max_deformation)?;
-        positive("contact_lost_below", self.contact_lost_below)?;
-        if self.contact_lost_below >= self.max_force {
-            return Err("contact_lost_below must be below max_force".into());
+        within("retarget_duration", self.retarget_duration, shortest - f64::EPSILON, longest)?;
+        within("max_surface_offset", self.max_surface_offset, 0.0, 0.05)?;
+        within("state_rate", self.state_rate, 0.0, 1000.0)?;
+        within("stale_after", self.stale_after, 0.0, 1.0)?;
+        within("restart_after", self.restart_after, self.stale_after, 10.0)?;
+        let e = self.initial_model.exponents;
+        if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
+            return Err(format!("initial_model: exponents outside {EXPONENT_RANGE:?}"));
         }
-        if !(self.force_limit.is_finite() && self.force_limit > self.max_force) {
-            return Err(format!("force_limit ({}) must be above max_force ({})", self.force_limit, self.max_force));
-        }
-        positive("retarget_duration", self.retarget_duration)?;
-        positive("state_rate", self.state_rate)?;
-        positive("stale_after", self.stale_after)?;
         self.initial_model.validate().map_err(|e| format!("initial_model: {e}"))?;
         Ok(())
     }

@@ -12,15 +12,40 @@
 //! the last torque is what balances the surface, and dropping it at once would let the surface throw
 //! the hand back against the hold's spring (a 10 ms hiccup of the controller became a 0.17 m/s kick).
 //! Overspeed drops the torque at once: then the command itself is suspect.
+//!
+//! Who and when (the safety contract, README "Safety"):
+//! - One KRC: the first sender (or the configured `krc_address`) is pinned by IP address; datagrams
+//!   from any other address, or from port 0, are refused and counted as strangers, unanswered. A new
+//!   source port of the pinned address, or measurements resuming after `new_session_after` of silence,
+//!   start a new KRC session: the command, the hold and the velocity history are forgotten, and only a
+//!   command answering a joint state of the new session is applied.
+//! - The watchdog counts answered measurements (each one sample time), whatever their sequence
+//!   numbers say: an out-of-order counter is counted, never a way to keep an old command alive.
+//! - A measurement that is not physically plausible (sample time outside 0.5–100 ms, a joint beyond its
+//!   limit by more than [`POSITION_MARGIN`], a KRC gravity torque beyond twice the joint's limit) is
+//!   refused unanswered: the KRC's own fallback takes over.
+//! - A command that is not 7 finite torques makes the driver hold at once (the controller sends an
+//!   empty command when its tick failed); a command from another session, or older than the watchdog by
+//!   its stamp, is refused and the previous one ages out.
+
+use std::net::{IpAddr, SocketAddr};
 
 use nalgebra::{Isometry3, Matrix6xX, Vector6};
 use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 use softcontact_wire::WireError;
 use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
 
+/// How far beyond its limit a measured joint position is still believed [rad] (the KRC's software
+/// limits lie inside the URDF's; more is a corrupt or forged datagram).
+pub const POSITION_MARGIN: f64 = 0.1;
+/// Sample times the KRC can be configured to (FRI: 1 to 100 ms), with a margin below.
+const SAMPLE_TIME: std::ops::RangeInclusive<f64> = 0.0005..=0.1;
+
 /// KRL exchange convention (CentroEPiaggio ros_control.src): `$FRI_FRM_INT[1]` strategy,
 /// `$FRI_FRM_INT[2]` 1 = start.
 const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+/// More lost measurements in a row than this is no longer a gap but a broken counter.
+const MAX_LOST_IN_A_ROW: i32 = 100;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriverConfig {
@@ -35,6 +60,10 @@ pub struct DriverConfig {
     pub velocity_margin: f64,
     /// Cycles over which a hold for a stale command fades out that command's torque.
     pub hold_release_cycles: u64,
+    /// The KRC's address; `None`: the first sender is pinned.
+    pub krc_address: Option<IpAddr>,
+    /// Measurements resuming after this much silence [s] start a new KRC session.
+    pub new_session_after: f64,
 }
 
 impl Default for DriverConfig {
@@ -46,6 +75,8 @@ impl Default for DriverConfig {
             request_command_mode: true,
             velocity_margin: 0.9,
             hold_release_cycles: 500,
+            krc_address: None,
+            new_session_after: 0.1,
         }
     }
 }
@@ -59,6 +90,12 @@ pub enum DriverError {
     CommandLength(usize),
     #[error("torque command holds a non-finite value for joint {0}")]
     NonFiniteCommand(usize),
+    #[error("torque command answers KRC session {0:?}, the present one is {1}")]
+    OtherSession(Option<u32>, u32),
+    #[error("torque command is {0:.4} s old, beyond the watchdog's {1:.4} s")]
+    TooOld(f64, f64),
+    #[error("implausible measurement: {0}")]
+    Implausible(String),
 }
 
 /// What the driver counted (published on /diagnostics).
@@ -70,6 +107,14 @@ pub struct DriverCounters {
     /// Repeated or reordered measurements (answered, not used for control).
     pub out_of_order: u64,
     pub malformed: u64,
+    /// Well-formed measurements refused as physically implausible (unanswered).
+    pub implausible: u64,
+    /// Datagrams from anyone but the pinned KRC (unanswered).
+    pub strangers: u64,
+    /// KRC sessions begun (the first included).
+    pub sessions: u64,
+    /// Socket errors on receive or on sending a reply (counted; the driver goes on).
+    pub network_errors: u64,
     /// Cycles answered with a command older than the watchdog, or none.
     pub stale_cycles: u64,
     /// Cycles where a torque was clipped to its limit.
@@ -77,6 +122,8 @@ pub struct DriverCounters {
     /// Cycles held because a joint was too fast.
     pub overspeed_cycles: u64,
     pub commands_refused: u64,
+    /// Commands refused for their age or their session (part of `commands_refused`).
+    pub commands_too_old: u64,
 }
 
 /// The state the driver publishes for one measurement.
@@ -96,6 +143,8 @@ pub struct DriverOutput {
     pub holding: bool,
     /// The KRC's cycle counter of this measurement.
     pub sequence: u16,
+    /// The KRC session this measurement belongs to (published with the joint state).
+    pub session: u32,
 }
 
 /// The driver: one instance per FRI connection.
@@ -107,9 +156,15 @@ pub struct LwrDriver {
     jacobian: Matrix6xX<f64>,
     effort_limits: [f64; 7],
     velocity_limits: [f64; 7],
+    position_limits: [(f64, f64); 7],
     send_seq: u16,
     last_msr: Option<(u16, [f64; 7])>,
+    /// Measurements answered; the watchdog's clock.
     cycle: u64,
+    /// The sample time of the newest measurement [s].
+    sample_time: f64,
+    peer: Option<SocketAddr>,
+    session: u32,
     command: Option<([f64; 7], u64)>,
     /// Where the hold holds, and the cycle it began.
     hold: Option<([f64; 7], u64)>,
@@ -123,17 +178,22 @@ impl LwrDriver {
         let model = lwr4::model();
         let effort_limits = std::array::from_fn(|i| model.joints[i].limits.effort);
         let velocity_limits = std::array::from_fn(|i| model.joints[i].limits.velocity);
+        let position_limits = std::array::from_fn(|i| (model.joints[i].limits.lower, model.joints[i].limits.upper));
         Self {
             data: model.data(),
             tool: model.frame_id(lwr4::TOOL_FRAME).expect("the LWR model has lwr_tool"),
             jacobian: Matrix6xX::zeros(7),
             effort_limits,
             velocity_limits,
+            position_limits,
             config,
             model,
             send_seq: 0,
             last_msr: None,
             cycle: 0,
+            sample_time: 1e-3,
+            peer: None,
+            session: 0,
             command: None,
             hold: None,
             last_torque: [0.0; 7],
@@ -141,19 +201,106 @@ impl LwrDriver {
         }
     }
 
-    /// A new total joint torque command (gravity included). Refused, keeping the previous one, if it
-    /// is not 7 finite values.
-    pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
-        let refuse = |e| Err::<(), _>(e);
-        if effort.len() != 7 {
-            self.counters.commands_refused += 1;
-            return refuse(DriverError::CommandLength(effort.len()));
+    /// The KRC session of the newest measurement.
+    pub fn session(&self) -> u32 {
+        self.session
+    }
+
+    /// The watchdog's bound on a command's age [s].
+    pub fn watchdog_time(&self) -> f64 {
+        self.config.watchdog_cycles as f64 * self.sample_time
+    }
+
+    /// Who sent a datagram: the pinned KRC (`Some(new_session)`), or a stranger (`None`, counted,
+    /// not to be answered). A datagram from the pinned address on a new port begins a new session.
+    pub fn accept_sender(&mut self, from: SocketAddr) -> Option<bool> {
+        let pinned_ip = self.config.krc_address.or(self.peer.map(|p| p.ip()));
+        if from.port() == 0 || pinned_ip.is_some_and(|ip| ip != from.ip()) {
+            self.counters.strangers += 1;
+            return None;
         }
-        if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
+        let new_session = self.peer != Some(from);
+        if new_session {
+            self.peer = Some(from);
+            self.begin_session();
+        }
+        Some(new_session)
+    }
+
+    /// Measurements resume after `silence` seconds without one: a long silence is a new session.
+    pub fn resumed_after(&mut self, silence: f64) {
+        if !(silence <= self.config.new_session_after) {
+            self.begin_session();
+        }
+    }
+
+    /// A new KRC session: forget the command, the hold and the velocity history.
+    pub fn begin_session(&mut self) {
+        self.session = self.session.wrapping_add(1);
+        self.counters.sessions += 1;
+        self.last_msr = None;
+        self.command = None;
+        self.hold = None;
+        self.last_torque = [0.0; 7];
+    }
+
+    /// A new total joint torque command (gravity included), answering the newest measurement. If it is
+    /// not 7 finite values it is refused and the driver holds from the next cycle on (an empty command
+    /// is the controller's way to ask for that hold).
+    pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
+        let refused = if effort.len() != 7 {
+            Some(DriverError::CommandLength(effort.len()))
+        } else {
+            effort.iter().position(|v| !v.is_finite()).map(DriverError::NonFiniteCommand)
+        };
+        if let Some(e) = refused {
             self.counters.commands_refused += 1;
-            return refuse(DriverError::NonFiniteCommand(i));
+            self.command = None;
+            return Err(e);
         }
         self.command = Some((std::array::from_fn(|i| effort[i]), self.cycle));
+        Ok(())
+    }
+
+    /// A command that arrived over the network: it names the session of the joint state it answers and
+    /// is `age` seconds old by that joint state's stamp. One from another session, or older than the
+    /// watchdog (or stamped in the future), is refused and the present command ages out as usual.
+    pub fn set_remote_command(&mut self, effort: &[f64], session: Option<u32>, age: f64) -> Result<(), DriverError> {
+        if session != Some(self.session) {
+            self.counters.commands_refused += 1;
+            self.counters.commands_too_old += 1;
+            return Err(DriverError::OtherSession(session, self.session));
+        }
+        let bound = self.watchdog_time();
+        if !(age >= -bound && age <= bound) {
+            self.counters.commands_refused += 1;
+            self.counters.commands_too_old += 1;
+            return Err(DriverError::TooOld(age, bound));
+        }
+        self.set_command(effort)
+    }
+
+    fn check_plausible(&self, m: &fri::Measurement) -> Result<(), DriverError> {
+        let implausible = |why: String| Err(DriverError::Implausible(why));
+        let t = m.intf.desired_msr_sample_time as f64;
+        if !SAMPLE_TIME.contains(&t) {
+            return implausible(format!("sample time {t} s"));
+        }
+        for i in 0..7 {
+            let q = m.data.msr_jnt_pos[i] as f64;
+            let (lower, upper) = self.position_limits[i];
+            if !(q >= lower - POSITION_MARGIN && q <= upper + POSITION_MARGIN) {
+                return implausible(format!("joint {} at {q} rad, limits [{lower}, {upper}]", i + 1));
+            }
+            let g = m.data.gravity[i] as f64;
+            if !(g.abs() <= 2.0 * self.effort_limits[i]) {
+                return implausible(format!("KRC gravity {g} N·m on joint {}", i + 1));
+            }
+            let c = (m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]) as f64;
+            if !(c >= lower - POSITION_MARGIN && c <= upper + POSITION_MARGIN) {
+                return implausible(format!("KRC commanded joint {} at {c} rad", i + 1));
+            }
+        }
         Ok(())
     }
 
@@ -167,26 +314,30 @@ impl LwrDriver {
                 return Err(e.into());
             }
         };
+        if let Err(e) = self.check_plausible(&m) {
+            self.counters.implausible += 1;
+            return Err(e);
+        }
         self.counters.measurements += 1;
+        self.sample_time = m.intf.desired_msr_sample_time as f64;
         let q: [f64; 7] = std::array::from_fn(|i| m.data.msr_jnt_pos[i] as f64);
         let seq = m.header.send_seq;
         let mut dq = [0.0; 7];
-        let mut in_order = true;
         if let Some((prev_seq, prev_q)) = self.last_msr {
+            // Lost measurements widen the step; a counter that went back (or jumped) is counted and the
+            // step taken as one cycle, so the velocity guard sees any jump in position.
             let gap = fri::sequence_gap(prev_seq, seq);
-            if gap < 0 {
-                self.counters.out_of_order += 1;
-                in_order = false;
-            } else {
+            let steps = if (0..=MAX_LOST_IN_A_ROW).contains(&gap) {
                 self.counters.lost += gap as u64;
-                let dt = (gap as f64 + 1.0) * (m.intf.desired_msr_sample_time as f64).max(1e-4);
-                dq = std::array::from_fn(|i| (q[i] - prev_q[i]) / dt);
-            }
+                gap as f64 + 1.0
+            } else {
+                self.counters.out_of_order += 1;
+                1.0
+            };
+            dq = std::array::from_fn(|i| (q[i] - prev_q[i]) / (steps * self.sample_time));
         }
-        if in_order {
-            self.last_msr = Some((seq, q));
-            self.cycle += 1;
-        }
+        self.last_msr = Some((seq, q));
+        self.cycle += 1;
 
         let commanding = m.intf.state == InterfaceState::Command && m.robot.power != 0;
         let overspeed = dq.iter().zip(&self.velocity_limits).any(|(v, l)| v.abs() > self.config.velocity_margin * l);
@@ -254,6 +405,7 @@ impl LwrDriver {
             quality: m.intf.quality,
             holding,
             sequence: seq,
+            session: self.session,
         };
         Ok((reply, output))
     }
@@ -263,8 +415,13 @@ impl LwrDriver {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK).
+    /// Where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK): this PC's address on the
+    /// robot network, never an unspecified address (0.0.0.0 answers every network).
     pub fri_bind: std::net::SocketAddr,
+    /// The KRC's IP address; empty: the first sender is pinned, every other address refused.
+    pub krc_address: Option<IpAddr>,
+    /// Measurements resuming after this much silence start a new KRC session [s].
+    pub new_session_after: f64,
     /// A command older than this many cycles makes the driver hold position.
     pub watchdog_cycles: u64,
     /// Joint stiffness of the hold [N·m/rad] and its damping ratio.
@@ -287,6 +444,8 @@ impl Default for Params {
         let c = DriverConfig::default();
         Self {
             fri_bind: ([127, 0, 0, 1], 49938).into(),
+            krc_address: None,
+            new_session_after: c.new_session_after,
             watchdog_cycles: c.watchdog_cycles,
             hold_stiffness: c.hold_stiffness,
             hold_damping: c.hold_damping,
@@ -308,6 +467,8 @@ impl Params {
             request_command_mode: !self.monitor_only,
             velocity_margin: self.velocity_margin,
             hold_release_cycles: self.hold_release_cycles,
+            krc_address: self.krc_address,
+            new_session_after: self.new_session_after,
         }
     }
 }
@@ -317,8 +478,17 @@ impl crate::params::NodeParams for Params {
         if !(1..=100).contains(&self.watchdog_cycles) {
             return Err(format!("watchdog_cycles must lie in 1..=100, not {}", self.watchdog_cycles));
         }
-        if self.hold_stiffness.iter().any(|k| !(k.is_finite() && *k > 0.0)) {
-            return Err("hold_stiffness must be positive for every joint".into());
+        if self.fri_bind.ip().is_unspecified() {
+            return Err(format!(
+                "fri_bind {} listens on every network: give this PC's address on the robot network",
+                self.fri_bind
+            ));
+        }
+        if self.hold_stiffness.iter().any(|k| !(k.is_finite() && *k > 0.0 && *k <= 5000.0)) {
+            return Err("hold_stiffness must lie in (0, 5000] N·m/rad for every joint".into());
+        }
+        if !(self.new_session_after.is_finite() && (0.005..=10.0).contains(&self.new_session_after)) {
+            return Err(format!("new_session_after must lie in [0.005, 10] s, not {}", self.new_session_after));
         }
         if !(self.hold_damping.is_finite() && self.hold_damping > 0.0 && self.hold_damping <= 1.0) {
             return Err(format!("hold_damping is a damping ratio in (0, 1], not {}", self.hold_damping));
@@ -329,8 +499,8 @@ impl crate::params::NodeParams for Params {
         if !(self.velocity_margin > 0.0 && self.velocity_margin <= 1.0) {
             return Err(format!("velocity_margin must lie in (0, 1], not {}", self.velocity_margin));
         }
-        if !(self.exit_after_silence.is_finite() && self.exit_after_silence >= 0.0) {
-            return Err("exit_after_silence must be ≥ 0".into());
+        if !(self.exit_after_silence.is_finite() && (0.0..=86_400.0).contains(&self.exit_after_silence)) {
+            return Err("exit_after_silence must lie in [0, 86400] s".into());
         }
         Ok(())
     }

@@ -16,6 +16,7 @@ use softcontact_msgs::tf2_msgs::TFMessage;
 use crate::contact_estimator::ContactStateOut;
 use crate::deformation_controller::ControllerState;
 use crate::lwr_driver::DriverOutput;
+use softcontact_wire::fri::InterfaceState;
 
 pub fn header(frame: &str, stamp: Time) -> Header {
     Header { stamp, frame_id: frame.into() }
@@ -57,14 +58,43 @@ pub struct DriverMessages {
     pub tf: TFMessage,
 }
 
+/// What /lwr/joint_states say of the driver in `header.frame_id` (a joint state has no frame of its
+/// own): the KRC session and whether the KRC applies commands, as `krc_session_<n>_<command|monitor>`.
+/// The torque command echoes the header it answers, so the driver applies only commands of its present
+/// session, and the controller approaches afresh when the session changes or the KRC stops commanding.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DriverSession {
+    pub session: u32,
+    pub commanding: bool,
+}
+
+impl DriverSession {
+    const PREFIX: &str = "krc_session_";
+
+    pub fn to_frame_id(self) -> String {
+        format!("{}{}_{}", Self::PREFIX, self.session, if self.commanding { "command" } else { "monitor" })
+    }
+
+    pub fn from_frame_id(frame_id: &str) -> Option<Self> {
+        let (session, mode) = frame_id.strip_prefix(Self::PREFIX)?.split_once('_')?;
+        let commanding = match mode {
+            "command" => true,
+            "monitor" => false,
+            _ => return None,
+        };
+        Some(Self { session: session.parse().ok()?, commanding })
+    }
+}
+
 impl DriverOutput {
     pub fn messages(&self, joint_names: &[String], stamp: Time) -> DriverMessages {
         let h = header("world", stamp);
+        let session = DriverSession { session: self.session, commanding: self.state == InterfaceState::Command };
         let (t, q) = pose_parts(&self.tool_pose);
         let v = self.tool_twist;
         DriverMessages {
             joint_state: JointState {
-                header: h.clone(),
+                header: header(&session.to_frame_id(), stamp),
                 name: joint_names.to_vec(),
                 position: self.q.to_vec(),
                 velocity: self.dq.to_vec(),
@@ -100,6 +130,12 @@ pub fn torque_command(joint_names: &[String], tau: &[f64; 7], answered: &Header)
         velocity: Vec::new(),
         effort: tau.to_vec(),
     }
+}
+
+/// An empty /lwr/joint_torque_command: the controller has no torque for this joint state, and the
+/// driver holds at once.
+pub fn hold_request(joint_names: &[String], answered: &Header) -> JointState {
+    JointState { effort: Vec::new(), ..torque_command(joint_names, &[0.0; 7], answered) }
 }
 
 impl ControllerState {

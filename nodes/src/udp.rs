@@ -16,7 +16,9 @@ pub(crate) fn no_datagram(e: &std::io::Error) -> bool {
     matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted)
 }
 
-/// The remote end of FRI: listens where the KRC sends, answers the sender of each measurement.
+/// The remote end of FRI: listens where the KRC sends, answers the pinned KRC's measurements (the
+/// driver decides who that is and when a new session begins). No datagram and no socket error ends
+/// it: errors are counted in the driver's counters.
 pub struct FriClient {
     socket: UdpSocket,
     pub driver: LwrDriver,
@@ -24,6 +26,7 @@ pub struct FriClient {
     pub reply_latency: Histogram,
     /// Time the kernel takes to accept the answer (on loopback it also delivers it) [s].
     pub send_duration: Histogram,
+    last_arrival: Option<Instant>,
 }
 
 impl FriClient {
@@ -33,6 +36,7 @@ impl FriClient {
             driver,
             reply_latency: Histogram::new(1e-6, 20_000),
             send_duration: Histogram::new(1e-6, 20_000),
+            last_arrival: None,
         })
     }
 
@@ -41,21 +45,42 @@ impl FriClient {
     }
 
     /// Waits up to `timeout` for a measurement, answers it at once with the newest command, and returns
-    /// what to publish; `None` on timeout. Malformed datagrams are counted by the driver and skipped.
+    /// what to publish; `None` on timeout or a socket error. Malformed, implausible and strangers'
+    /// datagrams are counted by the driver and skipped.
     pub fn cycle(&mut self, timeout: Duration) -> std::io::Result<Option<DriverOutput>> {
         let mut buf = [0u8; 2048];
         self.socket.set_read_timeout(Some(timeout))?;
+        let deadline = Instant::now() + timeout;
         loop {
             let (n, from) = match self.socket.recv_from(&mut buf) {
                 Ok(r) => r,
                 Err(e) if no_datagram(&e) => return Ok(None),
-                Err(e) => return Err(e),
+                Err(_) => {
+                    // E.g. an ICMP error queued on the socket: count it, and never spin on it.
+                    self.driver.counters.network_errors += 1;
+                    std::thread::sleep(
+                        Duration::from_millis(1).min(deadline.saturating_duration_since(Instant::now())),
+                    );
+                    if Instant::now() >= deadline {
+                        return Ok(None);
+                    }
+                    continue;
+                }
             };
             let arrived = Instant::now();
+            if self.driver.accept_sender(from).is_none() {
+                continue;
+            }
+            if let Some(previous) = self.last_arrival {
+                self.driver.resumed_after((arrived - previous).as_secs_f64());
+            }
+            self.last_arrival = Some(arrived);
             if let Ok((reply, output)) = self.driver.handle(&buf[..n]) {
                 let datagram = reply.encode();
                 let sending = Instant::now();
-                self.socket.send_to(&datagram, from)?;
+                if self.socket.send_to(&datagram, from).is_err() {
+                    self.driver.counters.network_errors += 1;
+                }
                 self.reply_latency.record((sending - arrived).as_secs_f64());
                 self.send_duration.record(sending.elapsed().as_secs_f64());
                 return Ok(Some(output));
@@ -64,53 +89,133 @@ impl FriClient {
     }
 }
 
-/// The client end of RDT, connected to one sensor.
+/// The client end of RDT, talking to one sensor. No datagram and no socket error ends it: an ICMP
+/// port or host unreachable (the box not up yet, or rebooting), a missing route or a stranger's datagram
+/// is counted in the node's counters, and while no fresh record arrives the start request goes out
+/// again every `restart_after`, so the stream begins whenever the box comes up.
 pub struct RdtClient {
     socket: UdpSocket,
+    sensor: SocketAddr,
+    connected: bool,
     pub node: FtSensorNode,
+    /// A silence this long ends a stream: a restarted sequence after it is a new stream, not a replay.
+    pub new_stream_after: Duration,
+    /// While no fresh record arrives for this long, the start request is sent again.
+    pub restart_after: Duration,
+    last_datagram: Option<Instant>,
+    last_fresh: Instant,
+    last_start: Option<Instant>,
 }
 
 impl RdtClient {
+    /// A socket on an ephemeral port of every interface, connected to the sensor when a route to it
+    /// exists (the kernel then picks the interface that faces the box, and drops other senders' datagrams);
+    /// until then connecting is retried with each start request.
     pub fn connect(sensor: SocketAddr, node: FtSensorNode) -> std::io::Result<Self> {
         let bind: SocketAddr = if sensor.is_ipv4() {
-            "127.0.0.1:0".parse().expect("address")
+            (std::net::Ipv4Addr::UNSPECIFIED, 0).into()
         } else {
-            "[::1]:0".parse().expect("address")
+            (std::net::Ipv6Addr::UNSPECIFIED, 0).into()
         };
         let socket = UdpSocket::bind(bind)?;
-        socket.connect(sensor)?;
-        Ok(Self { socket, node })
+        let mut client = Self {
+            socket,
+            sensor,
+            connected: false,
+            node,
+            new_stream_after: Duration::from_millis(100),
+            restart_after: Duration::from_secs(1),
+            last_datagram: None,
+            last_fresh: Instant::now(),
+            last_start: None,
+        };
+        client.try_connect();
+        Ok(client)
     }
 
-    pub fn request(&self, command: RdtCommand, sample_count: u32) -> std::io::Result<()> {
-        self.socket.send(&Request { command, sample_count }.encode()).map(|_| ())
+    fn try_connect(&mut self) {
+        if !self.connected {
+            match self.socket.connect(self.sensor) {
+                Ok(()) => self.connected = true,
+                Err(_) => self.node.counters.network_errors += 1,
+            }
+        }
     }
 
-    /// Starts real-time streaming (sample count 0: until stopped).
-    pub fn start(&self) -> std::io::Result<()> {
+    /// Sends a request; a failure is counted and returned (it never needs to end the caller).
+    pub fn request(&mut self, command: RdtCommand, sample_count: u32) -> std::io::Result<()> {
+        self.try_connect();
+        let datagram = Request { command, sample_count }.encode();
+        let sent =
+            if self.connected { self.socket.send(&datagram) } else { self.socket.send_to(&datagram, self.sensor) };
+        sent.map(|_| ()).inspect_err(|_| self.node.counters.network_errors += 1)
+    }
+
+    /// Starts real-time streaming (sample count 0: until stopped); the box restarts its sequence.
+    pub fn start(&mut self) -> std::io::Result<()> {
+        self.last_start = Some(Instant::now());
+        self.node.new_stream();
         self.request(RdtCommand::StartRealTime, 0)
     }
 
-    pub fn stop(&self) -> std::io::Result<()> {
+    pub fn stop(&mut self) -> std::io::Result<()> {
         self.request(RdtCommand::Stop, 0)
     }
 
-    /// The next record, or `None` after `timeout`. Malformed datagrams are counted and skipped.
+    /// Time since the last fresh record (or since the client was made).
+    pub fn silence(&self) -> Duration {
+        self.last_fresh.elapsed()
+    }
+
+    /// The next fresh record, or `None` after `timeout`. Malformed, repeated, out-of-order and
+    /// strangers' datagrams and socket errors are counted and skipped; while no fresh record arrives
+    /// the start request is repeated every `restart_after`.
     pub fn receive(
         &mut self,
         timeout: Duration,
         orientation: Option<&UnitQuaternion<f64>>,
     ) -> std::io::Result<Option<FtOutput>> {
         let mut buf = [0u8; 2048];
-        self.socket.set_read_timeout(Some(timeout))?;
+        let deadline = Instant::now() + timeout;
         loop {
-            let n = match self.socket.recv(&mut buf) {
-                Ok(n) => n,
+            if self.last_fresh.elapsed() >= self.restart_after
+                && self.last_start.is_none_or(|t| t.elapsed() >= self.restart_after)
+            {
+                // The box may be booting, or have given our stream to another client: ask again.
+                let _ = self.start();
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            self.socket.set_read_timeout(Some(left))?;
+            let (n, from) = match self.socket.recv_from(&mut buf) {
+                Ok(r) => r,
                 Err(e) if no_datagram(&e) => return Ok(None),
-                Err(e) => return Err(e),
+                Err(_) => {
+                    // E.g. ECONNREFUSED from an ICMP port unreachable: count it, and never spin on it.
+                    self.node.counters.network_errors += 1;
+                    std::thread::sleep(
+                        Duration::from_millis(1).min(deadline.saturating_duration_since(Instant::now())),
+                    );
+                    continue;
+                }
             };
-            if let Ok(out) = self.node.handle(&buf[..n], orientation) {
-                return Ok(Some(out));
+            if from != self.sensor {
+                self.node.counters.foreign += 1;
+                continue;
+            }
+            let now = Instant::now();
+            if self.last_datagram.is_some_and(|t| now - t >= self.new_stream_after) {
+                self.node.new_stream();
+            }
+            self.last_datagram = Some(now);
+            match self.node.handle(&buf[..n], orientation) {
+                Ok(out) if out.fresh => {
+                    self.last_fresh = now;
+                    return Ok(Some(out));
+                }
+                _ => {}
             }
         }
     }

@@ -68,7 +68,7 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
         sponge.stiffness
     );
     assert!((learned.contact_position.z - surface_top).abs() < 1e-3, "surface placed within 1 mm");
-    l.0.controller.set_contact_model(learned.model.clone(), learned.offset);
+    l.0.controller.set_contact_model(learned.model.clone(), learned.offset).unwrap();
     // Seed 001's control experiment, shortened: 2 s quintic moves, force read at the end of each move.
     let mut errors = Vec::new();
     for ratio in [0.5, 0.3, 0.7, 0.4, 0.6] {

@@ -57,15 +57,126 @@ fn out_of_command_mode_the_driver_mirrors_the_krc_and_asks_to_start() {
 }
 
 #[test]
-fn bad_commands_are_refused_and_the_last_good_one_kept() {
+fn a_bad_command_is_refused_and_the_driver_holds_at_once() {
+    // Safety class 1: a non-finite value anywhere means hold, never "repeat the last torque".
+    for bad in [&[0.0; 6][..], &[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0], &[f64::INFINITY; 7], &[]] {
+        let mut d = LwrDriver::new(DriverConfig::default());
+        d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+        d.set_command(&[5.0; 7]).unwrap();
+        assert!(d.set_command(bad).is_err());
+        let (reply, out) = d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap();
+        assert!(out.holding, "{bad:?}");
+        assert_eq!(reply.add_jnt_trq, [0.0; 7], "no torque of the earlier command survives {bad:?}");
+        assert_eq!(reply.jnt_pos, Q);
+        assert_eq!(d.counters.commands_refused, 1);
+    }
+    assert_eq!(
+        LwrDriver::new(DriverConfig::default()).set_command(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]),
+        Err(DriverError::NonFiniteCommand(2))
+    );
+}
+
+#[test]
+fn the_watchdog_counts_answers_not_sequence_numbers() {
+    // Safety class 2: a counter that goes back (a spoofed datagram, or a KRC whose counter restarted)
+    // used to freeze the watchdog, so that a 9 s old torque was applied after the controller died.
     let mut d = LwrDriver::new(DriverConfig::default());
+    d.handle(&measurement(1000, InterfaceState::Command, Q, G)).unwrap();
+    d.set_command(&[1.0, 50.0, 0.5, -40.0, -0.2, 1.0, 0.3]).unwrap();
+    let mut holding_from = None;
+    for (i, seq) in [1001u16, 3, 4, 5, 6, 7, 8, 9, 10].into_iter().enumerate() {
+        let (_, out) = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap();
+        if out.holding && holding_from.is_none() {
+            holding_from = Some(i + 1);
+        }
+    }
+    assert_eq!(holding_from, Some(6), "stale after the watchdog's 5 answered cycles");
+    assert!(d.counters.out_of_order >= 1);
+}
+
+#[test]
+fn strangers_are_refused_and_a_new_port_of_the_krc_is_a_new_session() {
+    // Safety class 3: only the pinned KRC is answered; class 4: port 0 is no sender.
+    let krc: std::net::SocketAddr = "192.168.0.1:49938".parse().unwrap();
+    let mut d = LwrDriver::new(DriverConfig::default());
+    assert_eq!(d.accept_sender(krc), Some(true), "the first sender is pinned");
+    assert_eq!(d.accept_sender(krc), Some(false));
+    for stranger in ["192.168.0.7:49938", "10.0.0.1:5000", "192.168.0.1:0", "[::1]:49938"] {
+        assert_eq!(d.accept_sender(stranger.parse().unwrap()), None, "{stranger}");
+    }
+    assert_eq!(d.counters.strangers, 4);
+    // The configured KRC address refuses even the first sender if it is someone else.
+    let config = DriverConfig { krc_address: Some("192.168.0.1".parse().unwrap()), ..DriverConfig::default() };
+    let mut pinned = LwrDriver::new(config);
+    assert_eq!(pinned.accept_sender("192.168.0.9:49938".parse().unwrap()), None);
+    assert_eq!(pinned.accept_sender(krc), Some(true));
+
+    // A restarted KRC (new port): the old command is gone, the driver holds until a command answers
+    // the new session.
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
-    d.set_command(&[0.0; 7]).unwrap();
-    assert_eq!(d.set_command(&[0.0; 6]), Err(DriverError::CommandLength(6)));
-    assert_eq!(d.set_command(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]), Err(DriverError::NonFiniteCommand(2)));
-    let (reply, _) = d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap();
-    assert!((reply.add_jnt_trq[1] - 30.0).abs() < 1e-5, "zero total torque, less gravity");
-    assert_eq!(d.counters.commands_refused, 2);
+    let first = d.session();
+    d.set_command(&[5.0; 7]).unwrap();
+    assert!(!d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!(d.accept_sender("192.168.0.1:50001".parse().unwrap()), Some(true));
+    let (reply, out) = d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    assert!(out.holding && reply.add_jnt_trq == [0.0; 7]);
+    assert_eq!(out.session, first + 1);
+    assert_eq!(
+        d.set_remote_command(&[5.0; 7], Some(first), 0.0),
+        Err(DriverError::OtherSession(Some(first), first + 1))
+    );
+    assert!(d.set_remote_command(&[5.0; 7], None, 0.0).is_err());
+    assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    // Silence longer than new_session_after is a new session too.
+    d.set_remote_command(&[5.0; 7], Some(first + 1), 0.001).unwrap();
+    assert!(!d.handle(&measurement(3, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    d.resumed_after(0.5);
+    assert!(d.handle(&measurement(4, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!(d.counters.sessions, 3);
+}
+
+#[test]
+fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
+    // Safety class 7: a replayed command 20 min old was applied.
+    let mut d = LwrDriver::new(DriverConfig::default());
+    d.accept_sender("127.0.0.1:40000".parse().unwrap());
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    let s = Some(d.session());
+    for age in [1200.0, 0.006, -0.01, f64::NAN, f64::INFINITY] {
+        assert!(matches!(d.set_remote_command(&[5.0; 7], s, age), Err(DriverError::TooOld(..))), "{age}");
+    }
+    assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    d.set_remote_command(&[5.0; 7], s, 0.004).unwrap();
+    assert!(!d.handle(&measurement(3, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!(d.counters.commands_too_old, 5);
+}
+
+#[test]
+fn implausible_measurements_are_refused_unanswered() {
+    // Safety class 8: sample time +inf disabled the overspeed guard; positions of 1e30 became the hold.
+    let mut d = LwrDriver::new(DriverConfig::default());
+    let tweak = |f: &dyn Fn(&mut fri::Measurement)| {
+        let mut m = fri::Measurement::decode(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+        f(&mut m);
+        m.encode().to_vec()
+    };
+    let bad = [
+        tweak(&|m| m.intf.desired_msr_sample_time = f32::INFINITY),
+        tweak(&|m| m.intf.desired_msr_sample_time = 1e9),
+        tweak(&|m| m.intf.desired_msr_sample_time = 0.0),
+        tweak(&|m| m.intf.desired_msr_sample_time = -0.001),
+        tweak(&|m| m.data.msr_jnt_pos[3] = 1e30),
+        tweak(&|m| m.data.msr_jnt_pos[0] = -3.2),
+        tweak(&|m| m.data.gravity[1] = 1e9),
+        tweak(&|m| m.data.cmd_jnt_pos[2] = 40.0),
+    ];
+    for (i, datagram) in bad.iter().enumerate() {
+        // Some are refused by the decoder (non-finite control data), the rest by the driver.
+        assert!(d.handle(datagram).is_err(), "case {i}");
+    }
+    assert_eq!(d.counters.measurements, 0);
+    assert_eq!(d.counters.implausible + d.counters.malformed, bad.len() as u64);
+    assert!(d.handle(&measurement(1, InterfaceState::Command, Q, G)).is_ok());
 }
 
 #[test]

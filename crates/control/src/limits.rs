@@ -1,7 +1,9 @@
 //! Safety limits the controller never bypasses: commands outside the surface's force or deformation
 //! range are refused (not silently clipped), torques are clipped to the joint limits and their change
 //! per second is bounded, losing contact while pushing stops the push, and a measured force beyond
-//! `force_limit` makes the controller back off whatever it was doing.
+//! `force_limit` makes the controller back off whatever it was doing. Every number that reaches the
+//! law is checked against a physical range first; a non-finite torque is an error (the driver then
+//! holds), never replaced by an older one.
 
 /// Limits of one robot on one surface.
 #[derive(Debug, Clone, PartialEq)]
@@ -14,6 +16,11 @@ pub struct Limits {
     pub max_force: f64,
     /// Largest deformation command [m].
     pub max_deformation: f64,
+    /// Largest lift above the surface a deformation command may ask for [m] (a negative deformation).
+    pub max_lift: f64,
+    /// Shortest and longest move [s]: a quicker move is a jolt, a longer one a forgotten command (and
+    /// beyond ~1e150 s a quintic's coefficients are no longer numbers).
+    pub move_duration: (f64, f64),
     /// Below this normal force while a force is commanded, contact counts as lost [N].
     pub contact_lost_below: f64,
     /// Above this measured normal force the controller backs off [N] (above `max_force`: a model that
@@ -28,8 +35,14 @@ pub enum LimitError {
     Force(f64, f64),
     #[error("the force command needs a deformation of {0} m, beyond the surface's limit of {1} m")]
     Deformation(f64, f64),
+    #[error("a lift of {0} m is beyond the limit of {1} m")]
+    Lift(f64, f64),
+    #[error("move duration {0} s is outside [{1}, {2}] s")]
+    Duration(f64, f64, f64),
     #[error("the command is not a finite number")]
     NonFinite,
+    #[error("torque for joint {0} is not a finite number: the driver holds")]
+    NonFiniteTorque(usize),
 }
 
 impl Limits {
@@ -50,7 +63,21 @@ impl Limits {
         if z > self.max_deformation {
             return Err(LimitError::Deformation(z, self.max_deformation));
         }
+        if z < -self.max_lift {
+            return Err(LimitError::Lift(-z, self.max_lift));
+        }
         Ok(z)
+    }
+
+    pub fn check_duration(&self, duration: f64) -> Result<f64, LimitError> {
+        let (shortest, longest) = self.move_duration;
+        if !duration.is_finite() {
+            return Err(LimitError::NonFinite);
+        }
+        if !(shortest..=longest).contains(&duration) {
+            return Err(LimitError::Duration(duration, shortest, longest));
+        }
+        Ok(duration)
     }
 }
 
@@ -67,16 +94,16 @@ impl TorqueLimiter {
         Self { last: None, clipped: 0 }
     }
 
-    /// Limits `tau` in place for a tick of `dt` seconds. A non-finite torque is replaced by the previous
-    /// output (or zero) and counted, never passed on.
-    pub fn apply(&mut self, limits: &Limits, tau: &mut [f64], dt: f64) {
+    /// Limits `tau` in place for a tick of `dt` seconds. A non-finite torque is refused whole: the
+    /// caller sends no torque (the driver holds), and the rate limit starts afresh afterwards.
+    pub fn apply(&mut self, limits: &Limits, tau: &mut [f64], dt: f64) -> Result<(), LimitError> {
+        if let Some(i) = tau.iter().position(|t| !t.is_finite()) {
+            self.last = None;
+            return Err(LimitError::NonFiniteTorque(i));
+        }
         let mut clipped = false;
         for (i, t) in tau.iter_mut().enumerate() {
             let previous = self.last.as_ref().map(|l| l[i]);
-            if !t.is_finite() {
-                *t = previous.unwrap_or(0.0);
-                clipped = true;
-            }
             let limit = limits.joint_torque[i];
             let mut v = t.clamp(-limit, limit);
             if let Some(p) = previous {
@@ -91,6 +118,7 @@ impl TorqueLimiter {
             Some(last) if last.len() == tau.len() => last.copy_from_slice(tau),
             _ => self.last = Some(tau.to_vec()),
         }
+        Ok(())
     }
 
     /// Forget the previous output (e.g. after the driver held position).

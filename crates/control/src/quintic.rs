@@ -18,7 +18,8 @@ pub struct Reference {
 
 impl Quintic {
     /// The unique quintic with the given boundary states. `None` for a non-positive or non-finite
-    /// duration or boundary.
+    /// duration or boundary, or when its powers leave f64's range (beyond ~1e61 s, where the coefficients become NaN or
+    /// silently zero).
     pub fn new(start: Reference, end: Reference, duration: f64) -> Option<Self> {
         let values = [start.position, start.velocity, start.acceleration, end.position, end.velocity, end.acceleration];
         if !(duration.is_finite() && duration > 0.0) || values.iter().any(|v| !v.is_finite()) {
@@ -32,7 +33,9 @@ impl Quintic {
         let c3 = (20.0 * (p1 - p0) - (8.0 * v1 + 12.0 * v0) * t - (3.0 * a0 - a1) * t2) / (2.0 * t3);
         let c4 = (30.0 * (p0 - p1) + (14.0 * v1 + 16.0 * v0) * t + (3.0 * a0 - 2.0 * a1) * t2) / (2.0 * t4);
         let c5 = (12.0 * (p1 - p0) - 6.0 * (v1 + v0) * t - (a0 - a1) * t2) / (2.0 * t5);
-        Some(Self { coefficients: [p0, v0, a0 / 2.0, c3, c4, c5], duration })
+        let coefficients = [p0, v0, a0 / 2.0, c3, c4, c5];
+        let representable = t5.is_normal() && coefficients.iter().all(|c| c.is_finite());
+        representable.then_some(Self { coefficients, duration })
     }
 
     /// From rest to rest.

@@ -40,6 +40,11 @@ fn quintics_meet_their_boundary_conditions_exactly() {
     }
     assert!(Quintic::rest_to_rest(0.0, 1.0, 0.0).is_none());
     assert!(Quintic::rest_to_rest(f64::NAN, 1.0, 2.0).is_none());
+    // Durations whose powers overflow give no quintic at all (they gave NaN coefficients).
+    for huge in [1e154, 1e200, f64::MAX] {
+        assert!(Quintic::rest_to_rest(0.0, 0.01, huge).is_none(), "{huge}");
+    }
+    assert!(Quintic::rest_to_rest(0.0, 0.01, 1e-300).is_none());
 }
 
 #[test]
@@ -208,6 +213,8 @@ fn limits_refuse_bad_commands_and_bound_torques() {
         torque_rate: 1000.0,
         max_force: 250.0,
         max_deformation: 0.06,
+        max_lift: 0.05,
+        move_duration: (0.1, 600.0),
         contact_lost_below: 0.5,
         force_limit: 1.2 * 250.0,
     };
@@ -216,16 +223,28 @@ fn limits_refuse_bad_commands_and_bound_torques() {
     assert_eq!(limits.check_force(-1.0), Err(LimitError::Force(-1.0, 250.0)));
     assert_eq!(limits.check_force(f64::NAN), Err(LimitError::NonFinite));
     assert!(limits.check_deformation(0.07).is_err());
+    assert_eq!(limits.check_deformation(-0.06), Err(LimitError::Lift(0.06, 0.05)));
+    assert_eq!(limits.check_deformation(-1e300), Err(LimitError::Lift(1e300, 0.05)));
+    assert_eq!(limits.check_duration(2.0), Ok(2.0));
+    for bad in [0.0, 0.05, -1.0, 601.0, 1e200] {
+        assert_eq!(limits.check_duration(bad), Err(LimitError::Duration(bad, 0.1, 600.0)));
+    }
+    assert_eq!(limits.check_duration(f64::INFINITY), Err(LimitError::NonFinite));
     let mut limiter = TorqueLimiter::new();
     let mut tau = vec![0.0; 7];
-    limiter.apply(&limits, &mut tau, 1e-3);
+    limiter.apply(&limits, &mut tau, 1e-3).unwrap();
     // A step of 50 N·m is spread over ticks at 1000 N·m/s: 1 N·m per 1 ms tick.
-    let mut step = vec![50.0, -50.0, 0.0, 0.0, 0.0, 200.0, f64::NAN];
-    limiter.apply(&limits, &mut step, 1e-3);
+    let mut step = vec![50.0, -50.0, 0.0, 0.0, 0.0, 200.0, 0.0];
+    limiter.apply(&limits, &mut step, 1e-3).unwrap();
     assert_eq!(step, vec![1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    // A non-finite torque is refused whole, never replaced by the last one.
+    let mut bad = vec![1.0, 1.0, 1.0, 1.0, 1.0, 1.0, f64::NAN];
+    assert_eq!(limiter.apply(&limits, &mut bad, 1e-3), Err(LimitError::NonFiniteTorque(6)));
+    let mut inf = vec![f64::INFINITY; 7];
+    assert_eq!(limiter.apply(&limits, &mut inf, 1e-3), Err(LimitError::NonFiniteTorque(0)));
     for _ in 0..100 {
         let mut big = vec![500.0; 7];
-        limiter.apply(&limits, &mut big, 1e-3);
+        limiter.apply(&limits, &mut big, 1e-3).unwrap();
         assert!(big.iter().zip(&limits.joint_torque).all(|(t, l)| t.abs() <= *l));
     }
     assert!(limiter.clipped >= 100);

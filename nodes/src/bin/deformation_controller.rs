@@ -16,7 +16,7 @@ use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ControllerState as StateMsg, ForceCommand};
 use softcontact_nodes::contact_estimator::{ModelMsg, model_from_msg};
 use softcontact_nodes::deformation_controller::{DeformationController, ModelUpdate, Params};
-use softcontact_nodes::messages;
+use softcontact_nodes::messages::{self, DriverSession};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 
@@ -31,6 +31,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    ros::init_logging("deformation_controller");
     let (p, declared) = params::load::<Params>("deformation_controller", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut controller = DeformationController::new(p.controller_config(), p.initial_model.clone())?;
@@ -59,6 +60,7 @@ fn main() -> anyhow::Result<()> {
     let (mut ticks, mut stale, mut failed, mut adopted) = (0u64, 0u64, 0u64, 0u64);
     let mut next_stale_log = Instant::now();
     let mut was_in_contact = false;
+    let (mut last_joint_state, mut last_session, mut ticks_in_session, mut restarts) = (None, None, 0u64, 0u64);
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         while let Ok(Some((m, _))) = models.take() {
@@ -109,6 +111,25 @@ fn main() -> anyhow::Result<()> {
                 failed += 1;
                 continue;
             };
+            // A new KRC session, a KRC that stopped commanding, or joint states that stopped for a
+            // while: the arm may have moved, so forget the contact and approach again once it commands.
+            let session = DriverSession::from_frame_id(&js.header.frame_id);
+            let arrived = Instant::now();
+            let interrupted = last_joint_state.is_some_and(|t: Instant| (arrived - t).as_secs_f64() > p.restart_after);
+            last_joint_state = Some(arrived);
+            let commanding = session.is_some_and(|s| s.commanding);
+            if interrupted || session.map(|s| s.session) != last_session || !commanding {
+                if ticks_in_session > 0 || interrupted {
+                    ros::log(&node, LogLevel::Warn, "new KRC session or interrupted joint states: approaching again");
+                    restarts += 1;
+                }
+                controller.restart();
+                ticks_in_session = 0;
+                last_session = session.map(|s| s.session);
+                if !commanding {
+                    continue;
+                }
+            }
             let Some((f_sensor, _)) = wrench.filter(|(_, seen)| seen.elapsed().as_secs_f64() <= p.stale_after) else {
                 stale += 1;
                 if Instant::now() >= next_stale_log {
@@ -128,13 +149,16 @@ fn main() -> anyhow::Result<()> {
             let (tau, s) = match controller.tick(&q, &dq, f, &force) {
                 Ok(r) => r,
                 Err(e) => {
+                    // An empty command: the driver holds at once, rather than repeat an older torque.
                     failed += 1;
-                    ros::log(&node, LogLevel::Error, &format!("tick failed, no command sent: {e}"));
+                    ros::log(&node, LogLevel::Error, &format!("tick failed, the driver is asked to hold: {e}"));
+                    torque_pub.publish(messages::hold_request(&names, &js.header))?;
                     continue;
                 }
             };
             torque_pub.publish(messages::torque_command(&names, &tau, &js.header))?;
             ticks += 1;
+            ticks_in_session += 1;
             if s.in_contact != was_in_contact {
                 was_in_contact = s.in_contact;
                 ros::log(
@@ -149,7 +173,7 @@ fn main() -> anyhow::Result<()> {
         }
     }
     eprintln!(
-        "deformation_controller: exit: {ticks} commands sent, {stale} joint states without a fresh force, {failed} failed, {adopted} models adopted; peak RSS {:.1} MB",
+        "deformation_controller: exit: {ticks} commands sent, {stale} joint states without a fresh force, {failed} failed, {adopted} models adopted, {restarts} restarts; peak RSS {:.1} MB",
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
     Ok(())

@@ -13,7 +13,7 @@ use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params};
-use softcontact_nodes::messages;
+use softcontact_nodes::messages::{self, DriverSession};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 use softcontact_nodes::stats::Histogram;
@@ -56,6 +56,11 @@ fn diagnostics(
             ("lost", c.lost),
             ("out_of_order", c.out_of_order),
             ("malformed", c.malformed),
+            ("implausible", c.implausible),
+            ("strangers", c.strangers),
+            ("sessions", c.sessions),
+            ("network_errors", c.network_errors),
+            ("commands_too_old", c.commands_too_old),
             ("stale_cycles", c.stale_cycles),
             ("clipped_cycles", c.clipped_cycles),
             ("overspeed_cycles", c.overspeed_cycles),
@@ -69,6 +74,7 @@ fn diagnostics(
 }
 
 fn main() -> anyhow::Result<()> {
+    ros::init_logging("lwr_driver");
     let (p, declared) = params::load::<Params>("lwr_driver", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
@@ -95,13 +101,23 @@ fn main() -> anyhow::Result<()> {
     let mut last: Option<DriverOutput> = None;
     let mut next_diagnostics = Instant::now();
     let mut last_seen = Instant::now();
+    let mut next_refusal_log = Instant::now();
+    let mut publish_errors = 0u64;
     while !ros::stopping(&stop) {
         let output = client.cycle(Duration::from_millis(5))?;
         // Newest torque command wins; a bad one is refused and counted, the previous one stays.
+        // A command must answer a joint state of the present KRC session, within the watchdog's age
+        // by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
         while let Ok(Some((cmd, _))) = commands.take() {
-            match client.driver.set_command(&cmd.effort) {
+            let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
+            let age = clock.now().as_secs_f64() - cmd.header.stamp.as_secs_f64();
+            match client.driver.set_remote_command(&cmd.effort, session, age) {
                 Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
-                Err(e) => ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}")),
+                Err(e) if Instant::now() >= next_refusal_log => {
+                    ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
+                    next_refusal_log = Instant::now() + Duration::from_secs(1);
+                }
+                Err(_) => {}
             }
         }
         if let Some(out) = output {
@@ -111,23 +127,28 @@ fn main() -> anyhow::Result<()> {
                 command_age.record(stamp.as_secs_f64() - t);
             }
             let m = out.messages(&names, stamp);
-            joint_states.publish(m.joint_state)?;
-            ee_pose.publish(m.ee_pose)?;
-            ee_twist.publish(m.ee_twist)?;
-            tf.publish(m.tf)?;
+            // The KRC is answered already; a middleware error is counted, never the end of the driver.
+            let sent = [
+                joint_states.publish(m.joint_state).is_ok(),
+                ee_pose.publish(m.ee_pose).is_ok(),
+                ee_twist.publish(m.ee_twist).is_ok(),
+                tf.publish(m.tf).is_ok(),
+            ];
+            publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
             ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));
             break;
         }
         if Instant::now() >= next_diagnostics {
-            diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now()))?;
+            publish_errors +=
+                u64::from(diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now())).is_err());
             next_diagnostics += Duration::from_secs(1);
         }
     }
     diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now()))?;
     // The exit report: tests and `launch-scripts/sim.sh` read these lines.
-    eprintln!("lwr_driver: exit: {:?}", client.driver.counters);
+    eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
         "lwr_driver: reply latency {}; within 200 us: {:.4} %",
         client.reply_latency.summary(1e6, "us"),
