@@ -14,6 +14,17 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 use softcontact_msgs::RosType;
 
+/// Sends the `log` records of the middleware (RustDDS, ros2-client) and of our crates to stderr, each
+/// line prefixed with `node`: warnings and errors by default, `RUST_LOG` (e.g. `info`, `rustdds=debug`)
+/// overrides. Without it a middleware failure is silent. Call it first in `main`; a second call is a no-op.
+pub fn init_logging(node: &str) {
+    use std::io::Write;
+    let node = node.to_owned();
+    let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+        .format(move |f, r| writeln!(f, "{node}: [{} {}] {}", r.level(), r.target(), r.args()))
+        .try_init();
+}
+
 fn domain_id() -> anyhow::Result<u16> {
     match std::env::var("ROS_DOMAIN_ID") {
         Ok(v) if v.trim().is_empty() => Ok(0),

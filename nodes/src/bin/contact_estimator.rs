@@ -28,6 +28,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    ros::init_logging("contact_estimator");
     let (p, declared) = params::load::<Params>("contact_estimator", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut estimator = ContactEstimatorNode::new(p.estimator_config())?;

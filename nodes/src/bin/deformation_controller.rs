@@ -32,6 +32,7 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     ros::init_logging("deformation_controller");
+    ros::init_logging("deformation_controller");
     let (p, declared) = params::load::<Params>("deformation_controller", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut controller = DeformationController::new(p.controller_config(), p.initial_model.clone())?;

@@ -28,6 +28,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    ros::init_logging("ft_sensor");
     let (p, declared) = params::load::<Params>("ft_sensor", &Args::parse().params)?;
     let config = FtConfig {
         calibration: p.calibration().map_err(anyhow::Error::msg)?,

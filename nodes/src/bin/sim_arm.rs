@@ -24,6 +24,7 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    ros::init_logging("sim_arm");
     let (p, declared) = params::load::<Params>("sim_arm", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut config = SimConfig::above_surface(softcontact_sim::sponge(), p.seed);
