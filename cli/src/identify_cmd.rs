@@ -17,6 +17,8 @@ pub const WRENCH: &str = "/ft_sensor/wrench";
 pub const POSE: &str = "/lwr/ee_pose";
 pub const TWIST: &str = "/lwr/ee_twist";
 pub const TF_STATIC: &str = "/tf_static";
+/// The most samples fitted (28 hours at 10 ms).
+const MAX_WINDOW: usize = 10_000_000;
 
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
@@ -46,12 +48,25 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
         );
     }
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers, e.g. 0,0,-1") };
+    anyhow::ensure!(
+        args.sample_period.is_finite() && (1e-4..=1.0).contains(&args.sample_period),
+        "--sample-period must be between 0.0001 and 1 s"
+    );
+    anyhow::ensure!(args.onset.is_finite() && args.onset > 0.0, "--onset must be a positive force [N]");
     let (start, end) = recording.time_range().unwrap_or((0, 0));
+    // Room for every sample of the recording (the whole contact is fitted): its duration over the
+    // sample period, but never more than it has wrench readings (a summary's times may be anything) nor
+    // MAX_WINDOW.
+    let by_time = (end.saturating_sub(start) as f64 * 1e-9 / args.sample_period) as usize + 2;
+    let by_readings = recording.topic(WRENCH).map_or(0, |t| t.message_count).saturating_add(2);
+    let window = by_time.min(usize::try_from(by_readings).unwrap_or(usize::MAX)).clamp(1200, MAX_WINDOW);
+    if by_time > MAX_WINDOW && by_readings > MAX_WINDOW as u64 {
+        eprintln!("warning: the recording is longer than {MAX_WINDOW} samples: its last {MAX_WINDOW} are fitted");
+    }
     let config = EstimatorConfig {
         normal: Vector3::new(x, y, z),
         sample_period: args.sample_period,
-        // Room for every sample of the recording: the whole contact is fitted.
-        window: (((end - start) as f64 * 1e-9 / args.sample_period.max(1e-6)) as usize + 2).max(1200),
+        window,
         onset: softcontact_contact::OnsetConfig { threshold: args.onset, ..Default::default() },
         // A whole recording has holds: every fold scored about the mean of all the data.
         fit: FitConfig { score_about_overall_mean: true, ..Default::default() },
@@ -186,7 +201,8 @@ pub fn print_table(id: &Identification, name: &str) {
 
 pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     let recording = Recording::open(&args.file)?;
-    for w in recording.warnings() {
+    let said = recording.warnings();
+    for w in &said {
         eprintln!("warning: {w}");
     }
     let bar = indicatif::ProgressBar::new(recording.message_count());
@@ -198,6 +214,10 @@ pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     bar.set_message("identify");
     let id = identify(&recording, args, |n| bar.set_position(n))?;
     bar.finish_and_clear();
+    // Damage found while reading (a chunk skipped).
+    for w in recording.warnings().iter().skip(said.len()) {
+        eprintln!("warning: {w}");
+    }
     let name = args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
     print_table(&id, name);
     if let Some(path) = &args.json {

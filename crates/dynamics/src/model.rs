@@ -186,12 +186,32 @@ pub fn fixed_subtree_inertia(robot: &urdf_rs::Robot, link: &str) -> Result<BodyI
     Ok(total)
 }
 
+/// The largest URDF read [bytes]: a robot description is a few tens of kB (urdf/lwr4.urdf: 7 kB).
+const MAX_URDF_BYTES: u64 = 4 << 20;
+
 impl Model {
-    /// Reads and builds the model from a URDF file.
+    /// Reads and builds the model from a URDF file: a regular file (not a device or a FIFO) of at most
+    /// 4 MB (a robot description is tens of kB: a larger file is refused, not read).
     pub fn from_urdf_file(path: impl AsRef<Path>) -> Result<Self, Error> {
+        use std::io::Read;
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| Error::Read { path: path.display().to_string(), message: e.to_string() })?;
+        let read_error = |message: String| Error::Read { path: path.display().to_string(), message };
+        let meta = std::fs::metadata(path).map_err(|e| read_error(e.to_string()))?;
+        if !meta.is_file() {
+            return Err(read_error("not a regular file".into()));
+        }
+        let too_large = || read_error(format!("larger than {} MB: not a robot description", MAX_URDF_BYTES >> 20));
+        if meta.len() > MAX_URDF_BYTES {
+            return Err(too_large());
+        }
+        // The file may grow after the check: read no more than the bound.
+        let mut text = String::new();
+        std::fs::File::open(path)
+            .and_then(|f| f.take(MAX_URDF_BYTES + 1).read_to_string(&mut text))
+            .map_err(|e| read_error(e.to_string()))?;
+        if text.len() as u64 > MAX_URDF_BYTES {
+            return Err(too_large());
+        }
         Self::from_urdf_str(&text).map_err(|e| {
             if let Error::Parse(m) = e { Error::Read { path: path.display().to_string(), message: m } } else { e }
         })
