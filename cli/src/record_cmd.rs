@@ -27,18 +27,59 @@ pub struct RecordArgs {
 pub struct ReplayArgs {
     /// A recording: an .mcap file or a rosbag2 folder.
     pub file: PathBuf,
-    /// Speed factor of the recorded timing.
-    #[arg(long, default_value_t = 1.0)]
+    /// Speed factor of the recorded timing, 0.01 to 100.
+    #[arg(long, default_value_t = 1.0, value_parser = rate)]
     pub rate: f64,
     /// Start again at the end, until Ctrl-C.
     #[arg(long = "loop")]
     pub looping: bool,
-    /// Replay only these topics (default: all whose type the project knows).
+    /// Replay only these topics (default: all whose type the project knows, but the actuator topics).
     #[arg(long, value_delimiter = ',')]
     pub topics: Vec<String>,
-    /// Seconds to wait for subscribers to match before the first message.
-    #[arg(long, default_value_t = 1.0)]
+    /// Seconds to wait for subscribers to match before the first message, 0 to 3600.
+    #[arg(long, default_value_t = 1.0, value_parser = wait)]
     pub wait: f64,
+    /// Also publish the recorded commands to the arm (see ACTUATOR_TOPICS): into a live graph they move
+    /// it. Without this flag they are never published.
+    #[arg(long)]
+    pub actuators: bool,
+}
+
+/// Recorded topics whose messages command the arm when published into a live graph: torques the driver
+/// applies, force commands the controller executes, contact models the controller places its pushes with.
+pub const ACTUATOR_TOPICS: [(&str, &str); 3] = [
+    ("/lwr/joint_torque_command", "the driver applies them to the arm"),
+    ("/deformation_controller/force_command", "the controller moves the arm to them"),
+    ("/contact_estimator/model", "the controller places its pushes with it"),
+];
+
+/// Types that command the arm on whatever topic they were recorded.
+const ACTUATOR_TYPES: [&str; 2] = ["softcontact_msgs/msg/ForceCommand", "softcontact_msgs/msg/ContactModel"];
+
+/// Why a recorded topic commands the arm, if it does.
+pub fn actuator(topic: &str, type_name: &str) -> Option<&'static str> {
+    ACTUATOR_TOPICS.iter().find(|(t, _)| *t == topic).map(|(_, why)| *why).or_else(|| {
+        ACTUATOR_TYPES
+            .contains(&softcontact_bag::type_path(type_name).as_str())
+            .then_some("its type commands the controller")
+    })
+}
+
+fn in_range(s: &str, name: &str, low: f64, high: f64, unit: &str) -> Result<f64, String> {
+    let v: f64 = s.trim().parse().map_err(|_| format!("{name} takes a number, not `{s}`"))?;
+    if v.is_finite() && (low..=high).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{name} must be between {low} and {high}{unit} (got {s})"))
+    }
+}
+
+fn rate(s: &str) -> Result<f64, String> {
+    in_range(s, "--rate", 0.01, 100.0, "")
+}
+
+fn wait(s: &str) -> Result<f64, String> {
+    in_range(s, "--wait", 0.0, 3600.0, " s")
 }
 
 fn now_ns() -> u64 {
@@ -164,14 +205,15 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
 }
 
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.rate.is_finite() && args.rate > 0.0, "--rate must be positive");
+    // The parsers hold these; a caller building ReplayArgs itself is checked too.
+    rate(&args.rate.to_string()).map_err(anyhow::Error::msg)?;
+    wait(&args.wait.to_string()).map_err(anyhow::Error::msg)?;
     let recording = Recording::open(&args.file)?;
-    for w in recording.warnings() {
+    let mut said = recording.warnings();
+    for w in &said {
         eprintln!("warning: {w}");
     }
-    let stop = ros::shutdown_flag()?;
-    let mut node = ros::node("softcontact_replay")?;
-    let mut publishers = Vec::new();
+    let mut plan = Vec::new();
     for topic in recording.topics() {
         if !args.topics.is_empty() && !args.topics.contains(&topic.name) {
             continue;
@@ -180,24 +222,49 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
             eprintln!("skipping {} ({}): not a type the project knows", topic.name, topic.type_name);
             continue;
         }
-        let qos = topic.qos.or_else(|| GRAPH_TOPICS.iter().find(|t| t.0 == topic.name).map(|t| t.2));
-        let publisher = AnyPublisher::new(&mut node, &topic.name, &topic.type_name, qos.unwrap_or(Qos::SENSOR))?;
-        println!("replaying {} ({}, {} messages)", topic.name, topic.type_name, topic.message_count);
-        publishers.push((topic.name.clone(), publisher));
+        if let Some(why) = actuator(&topic.name, &topic.type_name)
+            && !args.actuators
+        {
+            anyhow::ensure!(
+                args.topics.is_empty(),
+                "{} commands the arm ({why}): replaying it into a live graph moves the arm; add --actuators if \
+                 that is what you want",
+                topic.name
+            );
+            eprintln!(
+                "skipping {} ({}, {} messages): it commands the arm ({why}); --actuators replays it",
+                topic.name, topic.type_name, topic.message_count
+            );
+            continue;
+        }
+        plan.push(topic);
     }
     for wanted in &args.topics {
-        anyhow::ensure!(publishers.iter().any(|(n, _)| n == wanted), "the recording has no {wanted} to replay");
+        anyhow::ensure!(plan.iter().any(|t| &t.name == wanted), "the recording has no {wanted} to replay");
     }
-    anyhow::ensure!(!publishers.is_empty(), "nothing to replay");
-    let (t0, t1) = recording.time_range().unwrap_or((0, 0));
-    std::thread::sleep(Duration::from_secs_f64(args.wait.max(0.0)));
+    anyhow::ensure!(!plan.is_empty(), "nothing to replay");
+    let stop = ros::shutdown_flag()?;
+    let mut node = ros::node("softcontact_replay")?;
+    let mut publishers = Vec::new();
+    for topic in plan {
+        let qos = topic.qos.or_else(|| GRAPH_TOPICS.iter().find(|t| t.0 == topic.name).map(|t| t.2));
+        let publisher = AnyPublisher::new(&mut node, &topic.name, &topic.type_name, qos.unwrap_or(Qos::SENSOR))?;
+        let what = if actuator(&topic.name, &topic.type_name).is_some() { ", commands to the arm" } else { "" };
+        println!("replaying {} ({}, {} messages{what})", topic.name, topic.type_name, topic.message_count);
+        publishers.push((topic.name.clone(), publisher));
+    }
+    let span = recording.time_range().map_or(0.0, |(a, b)| b.saturating_sub(a) as f64 * 1e-9);
+    std::thread::sleep(Duration::from_secs_f64(args.wait));
     let mut sent = 0u64;
     'replay: loop {
         let start = Instant::now();
+        // The timing's origin is the first message read, whatever a summary says.
+        let mut origin = None;
         for m in recording.messages() {
             let m = m?;
             let Some((_, publisher)) = publishers.iter().find(|(n, _)| n == m.topic()) else { continue };
-            let due = start + Duration::from_secs_f64((m.log_time - t0) as f64 * 1e-9 / args.rate);
+            let since = m.log_time.saturating_sub(*origin.get_or_insert(m.log_time)) as f64 * 1e-9;
+            let due = start + Duration::from_secs_f64((since / args.rate).min(1e9));
             loop {
                 if ros::stopping(&stop) {
                     break 'replay;
@@ -212,14 +279,16 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
             publisher.publish(msg)?;
             sent += 1;
             if sent.is_multiple_of(1000) {
-                print!(
-                    "\rreplayed {sent} messages, {:.1} of {:.1} s",
-                    (m.log_time - t0) as f64 * 1e-9,
-                    (t1 - t0) as f64 * 1e-9
-                );
+                print!("\rreplayed {sent} messages, {since:.1} of {span:.1} s");
                 std::io::stdout().flush()?;
             }
         }
+        // Damage found while reading (a chunk skipped: its messages were not published).
+        let now = recording.warnings();
+        for w in now.iter().skip(said.len()) {
+            eprintln!("\nwarning: {w}");
+        }
+        said = now;
         if !args.looping {
             break;
         }

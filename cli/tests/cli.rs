@@ -42,7 +42,7 @@ fn recording_commands_refuse_bad_arguments_before_touching_the_network() {
         (&["record", "/x:foo_msgs/msg/Bar"], "type foo_msgs/msg/Bar is not one the project knows"),
         (&["record", "lwr/ee_pose"], "names start with /"),
         (&["replay", "/nonexistent/run.mcap"], "/nonexistent/run.mcap: No such file"),
-        (&["replay", "x.mcap", "--rate", "0"], "--rate must be positive"),
+        (&["replay", "x.mcap", "--rate", "0"], "--rate must be between 0.01 and 100"),
     ];
     for (args, want) in cases {
         let o = softcontact(args);
