@@ -132,6 +132,7 @@ impl Cell {
             None => Vector3::zeros(),
         };
         let f = (-force_world.dot(&self.normal)).max(0.0);
+        self.controller.follow_session(Some(driver.session), true, self.sim.krc_cycle());
         // As the controller node does: a failed tick sends an empty command, and the driver holds.
         let (torque, controller, refused) = match self.controller.tick(&driver.q, &driver.dq, f, &force_world) {
             Ok((tau, state)) => (Some(tau), state, None),

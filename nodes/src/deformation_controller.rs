@@ -42,6 +42,8 @@ pub struct ControllerConfig {
     /// Farthest an estimated surface may lie from the measured onset position [m]: a model placing
     /// it further is refused (a surface 5 cm too low turned a 50 N command into 302 N).
     pub max_surface_offset: f64,
+    /// Joint states interrupted this long [s] mean a new KRC session or a moved arm: approach again.
+    pub restart_after: f64,
     /// Control period [s].
     pub period: f64,
 }
@@ -69,10 +71,12 @@ impl ControllerConfig {
                 max_deformation,
                 max_lift: 0.05,
                 move_duration: (0.1, 600.0),
+                max_deformation_rate: 0.25,
                 contact_lost_below: 0.5,
                 force_limit: 1.2 * max_force,
             },
             max_surface_offset: 0.01,
+            restart_after: 0.1,
             period: 1e-3,
         }
     }
@@ -117,6 +121,8 @@ pub struct ControllerState {
 
 /// How fast the controller backs off after passing the force limit [s].
 const BACK_OFF_DURATION: f64 = 0.2;
+/// How far ahead the force guard looks [s]: the hand needs a few ticks to turn around.
+const FORCE_LOOKAHEAD: f64 = 0.02;
 /// Smallest step of a back-off [m]: it always lifts the hand.
 const BACK_OFF_MIN_STEP: f64 = 0.5e-3;
 /// Most periods of one series of identification pushes.
@@ -138,6 +144,11 @@ pub struct DeformationController {
     f_cmd: f64,
     contact_lost: bool,
     force_limited: bool,
+    /// The measured force of the previous tick and its smoothed rate [N/s], to back off before the
+    /// force limit is passed rather than after.
+    force_trend: Option<(f64, f64)>,
+    /// The driver's KRC session the contact state belongs to.
+    session: Option<u32>,
     limiter: TorqueLimiter,
     /// Buffers of eq. 15 and of the posture torque: the tick allocates nothing.
     torque: TaskTorque,
@@ -163,6 +174,8 @@ impl DeformationController {
             f_cmd: 0.0,
             contact_lost: false,
             force_limited: false,
+            force_trend: None,
+            session: None,
             limiter: TorqueLimiter::new(),
             torque: TaskTorque::new(7),
             tau0: DVector::zeros(7),
@@ -222,8 +235,30 @@ impl DeformationController {
         }
     }
 
+    /// The measured force's rate [N/s], smoothed over ~10 ms so that sensor noise does not trip it.
+    fn force_rate(&mut self, force: f64) -> f64 {
+        let alpha = (self.config.period / 0.01).min(1.0);
+        let (previous, rate) = self.force_trend.unwrap_or((force, 0.0));
+        let rate = rate + alpha * ((force - previous) / self.config.period - rate);
+        self.force_trend = Some((force, rate));
+        rate
+    }
+
     pub fn contact_model(&self) -> &ContactModel {
         &self.contact_model
+    }
+
+    /// Follows the driver's KRC session before a tick: whether to tick on this joint state. A new session,
+    /// a KRC that does not command (monitor mode), or joint states that came after `silence` seconds
+    /// longer than `restart_after` make the controller [`restart`](Self::restart); it ticks only while
+    /// the KRC commands.
+    pub fn follow_session(&mut self, session: Option<u32>, commanding: bool, silence: f64) -> bool {
+        let interrupted = !(silence <= self.config.restart_after);
+        if interrupted || session != self.session || !commanding {
+            self.restart();
+            self.session = session;
+        }
+        commanding
     }
 
     /// Forgets the contact, the plan and the start pose: the next tick approaches again from where the
@@ -241,6 +276,7 @@ impl DeformationController {
         self.f_cmd = 0.0;
         self.contact_lost = false;
         self.force_limited = false;
+        self.force_trend = None;
         self.limiter.reset();
     }
 
@@ -260,9 +296,18 @@ impl DeformationController {
         self.follow(vec![Segment::Move(Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?)])
     }
 
+    /// A move from the present reference, refused if too quick or too long, or if the present model
+    /// expects more than `max_force` at its end.
     fn move_to(&self, to: Reference, duration: f64) -> Result<Segment, ControlError> {
-        let duration = self.config.limits.check_duration(duration)?;
-        Ok(Segment::Move(Quintic::new(self.reference(), to, duration).ok_or(ControlError::Duration)?))
+        let limits = &self.config.limits;
+        let duration = limits.check_duration(duration)?;
+        let expected = self.contact_model.force(to.position.max(0.0), 0.0)?;
+        if !(expected <= limits.max_force) {
+            return Err(LimitError::Force(expected, limits.max_force).into());
+        }
+        let quintic = Quintic::new(self.reference(), to, duration).ok_or(ControlError::Duration)?;
+        limits.check_rate(quintic.peak_velocity())?;
+        Ok(Segment::Move(quintic))
     }
 
     /// A deformation command (position control along n, seed 001's identification ramps): a quintic of
@@ -291,6 +336,12 @@ impl DeformationController {
             return Err(ControlError::Duration);
         }
         limits.check_duration(1.0 / frequency)?;
+        // The oscillation's peak speed, and its deepest point through the model.
+        limits.check_rate(std::f64::consts::PI * frequency * (high - low))?;
+        let expected = self.contact_model.force(high.max(0.0), 0.0)?;
+        if !(expected <= limits.max_force) {
+            return Err(LimitError::Force(expected, limits.max_force).into());
+        }
         let push = Oscillation { mean: (low + high) / 2.0, amplitude: (high - low) / 2.0, frequency, periods };
         let ramp = self.move_to(push.start(), 1.0 / frequency)?;
         self.follow(vec![ramp, Segment::Oscillate(push)])?;
@@ -330,6 +381,7 @@ impl DeformationController {
             return Err(ControlError::NonFinite("the measured force"));
         }
         self.time += self.config.period;
+        let force_rate = self.force_rate(normal_force);
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -379,7 +431,7 @@ impl DeformationController {
                 let backing_off =
                     self.force_limited && self.time - self.plan.as_ref().map_or(0.0, |p| p.1) < BACK_OFF_DURATION;
                 let too_much = if self.force_limited { limits.max_force } else { limits.force_limit };
-                if normal_force > too_much && !backing_off {
+                if normal_force + force_rate.max(0.0) * FORCE_LOOKAHEAD > too_much && !backing_off {
                     self.force_limited = true;
                     self.f_cmd = 0.0;
                     let from_onset = along - level;
@@ -467,8 +519,10 @@ pub struct Params {
     pub contact_lost_below: f64,
     /// Measured normal force above which the controller backs off [N] (above max_force).
     pub force_limit: f64,
-    /// Largest lift above the surface [m] and range of move durations [s] a command may ask for.
+    /// Largest lift above the surface [m], range of move durations [s] and fastest deformation rate
+    /// [m/s] a command may ask for.
     pub max_lift: f64,
+    pub max_deformation_rate: f64,
     pub move_duration: [f64; 2],
     /// Farthest an estimated surface may lie from the measured onset [m].
     pub max_surface_offset: f64,
@@ -506,9 +560,10 @@ impl Default for Params {
             contact_lost_below: c.limits.contact_lost_below,
             force_limit: c.limits.force_limit,
             max_lift: c.limits.max_lift,
+            max_deformation_rate: c.limits.max_deformation_rate,
             move_duration: c.limits.move_duration.into(),
             max_surface_offset: c.max_surface_offset,
-            restart_after: 0.1,
+            restart_after: c.restart_after,
             model_update: ModelUpdate::OnCommand,
             retarget_duration: 0.5,
             initial_model: ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 5_000.0, 0.0)
@@ -535,8 +590,10 @@ impl Params {
         c.limits.contact_lost_below = self.contact_lost_below;
         c.limits.force_limit = self.force_limit;
         c.limits.max_lift = self.max_lift;
+        c.limits.max_deformation_rate = self.max_deformation_rate;
         c.limits.move_duration = self.move_duration.into();
         c.max_surface_offset = self.max_surface_offset;
+        c.restart_after = self.restart_after;
         c
     }
 }
@@ -577,6 +634,7 @@ impl crate::params::NodeParams for Params {
         within("contact_lost_below", self.contact_lost_below, 0.0, self.max_force / 4.0)?;
         within("force_limit", self.force_limit, self.max_force, 2.0 * self.max_force)?;
         within("max_lift", self.max_lift, 0.0, 0.2)?;
+        within("max_deformation_rate", self.max_deformation_rate, 0.0, 0.5)?;
         let [shortest, longest] = self.move_duration;
         if !(shortest.is_finite() && longest.is_finite() && 0.01 <= shortest && shortest < longest && longest <= 3600.0)
         {

@@ -21,6 +21,8 @@ pub struct Limits {
     /// Shortest and longest move [s]: a quicker move is a jolt, a longer one a forgotten command (and
     /// beyond ~1e150 s a quintic's coefficients are no longer numbers).
     pub move_duration: (f64, f64),
+    /// Fastest a move may compress or lift [m/s] (a quick plunge overshoots any force guard).
+    pub max_deformation_rate: f64,
     /// Below this normal force while a force is commanded, contact counts as lost [N].
     pub contact_lost_below: f64,
     /// Above this measured normal force the controller backs off [N] (above `max_force`: a model that
@@ -39,6 +41,8 @@ pub enum LimitError {
     Lift(f64, f64),
     #[error("move duration {0} s is outside [{1}, {2}] s")]
     Duration(f64, f64, f64),
+    #[error("a move at {0} m/s is faster than {1} m/s: give it more time")]
+    Rate(f64, f64),
     #[error("the command is not a finite number")]
     NonFinite,
     #[error("torque for joint {0} is not a finite number: the driver holds")]
@@ -67,6 +71,16 @@ impl Limits {
             return Err(LimitError::Lift(-z, self.max_lift));
         }
         Ok(z)
+    }
+
+    pub fn check_rate(&self, speed: f64) -> Result<f64, LimitError> {
+        if !speed.is_finite() {
+            return Err(LimitError::NonFinite);
+        }
+        if speed.abs() > self.max_deformation_rate {
+            return Err(LimitError::Rate(speed.abs(), self.max_deformation_rate));
+        }
+        Ok(speed)
     }
 
     pub fn check_duration(&self, duration: f64) -> Result<f64, LimitError> {

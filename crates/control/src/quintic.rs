@@ -51,6 +51,11 @@ impl Quintic {
         self.duration
     }
 
+    /// The largest |velocity| over the move (sampled at 1 % of its duration, and both ends).
+    pub fn peak_velocity(&self) -> f64 {
+        (0..=100).map(|i| self.at(self.duration * i as f64 / 100.0).velocity.abs()).fold(0.0, f64::max)
+    }
+
     /// The reference at time t after the start; before the start it is the start, after the end the
     /// end state continued at constant velocity (zero for moves that end at rest).
     pub fn at(&self, t: f64) -> Reference {

@@ -215,6 +215,7 @@ fn limits_refuse_bad_commands_and_bound_torques() {
         max_deformation: 0.06,
         max_lift: 0.05,
         move_duration: (0.1, 600.0),
+        max_deformation_rate: 0.1,
         contact_lost_below: 0.5,
         force_limit: 1.2 * 250.0,
     };
@@ -230,6 +231,11 @@ fn limits_refuse_bad_commands_and_bound_torques() {
         assert_eq!(limits.check_duration(bad), Err(LimitError::Duration(bad, 0.1, 600.0)));
     }
     assert_eq!(limits.check_duration(f64::INFINITY), Err(LimitError::NonFinite));
+    assert_eq!(limits.check_rate(-0.05), Ok(-0.05));
+    assert_eq!(limits.check_rate(0.2), Err(LimitError::Rate(0.2, 0.1)));
+    // A rest-to-rest quintic peaks at 15/8 of the mean speed, at mid-move.
+    let q = softcontact_control::Quintic::rest_to_rest(0.0, 0.02, 2.0).unwrap();
+    assert!((q.peak_velocity() - 15.0 / 8.0 * 0.01).abs() < 1e-12);
     let mut limiter = TorqueLimiter::new();
     let mut tau = vec![0.0; 7];
     limiter.apply(&limits, &mut tau, 1e-3).unwrap();

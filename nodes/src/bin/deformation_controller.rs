@@ -32,7 +32,6 @@ struct Args {
 
 fn main() -> anyhow::Result<()> {
     ros::init_logging("deformation_controller");
-    ros::init_logging("deformation_controller");
     let (p, declared) = params::load::<Params>("deformation_controller", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut controller = DeformationController::new(p.controller_config(), p.initial_model.clone())?;
@@ -113,23 +112,26 @@ fn main() -> anyhow::Result<()> {
                 continue;
             };
             // A new KRC session, a KRC that stopped commanding, or joint states that stopped for a
-            // while: the arm may have moved, so forget the contact and approach again once it commands.
+            // while: the arm may have moved, so the controller forgets the contact and approaches again.
             let session = DriverSession::from_frame_id(&js.header.frame_id);
             let arrived = Instant::now();
-            let interrupted = last_joint_state.is_some_and(|t: Instant| (arrived - t).as_secs_f64() > p.restart_after);
+            let silence = last_joint_state.map_or(0.0, |t: Instant| (arrived - t).as_secs_f64());
             last_joint_state = Some(arrived);
             let commanding = session.is_some_and(|s| s.commanding);
-            if interrupted || session.map(|s| s.session) != last_session || !commanding {
-                if ticks_in_session > 0 || interrupted {
-                    ros::log(&node, LogLevel::Warn, "new KRC session or interrupted joint states: approaching again");
-                    restarts += 1;
-                }
-                controller.restart();
+            let restarted = ticks_in_session > 0
+                && (silence > p.restart_after || session.map(|s| s.session) != last_session || !commanding);
+            if restarted {
+                ros::log(
+                    &node,
+                    LogLevel::Warn,
+                    "new KRC session, KRC not commanding, or joint states interrupted: approaching again",
+                );
+                restarts += 1;
                 ticks_in_session = 0;
-                last_session = session.map(|s| s.session);
-                if !commanding {
-                    continue;
-                }
+            }
+            last_session = session.map(|s| s.session);
+            if !controller.follow_session(last_session, commanding, silence) {
+                continue;
             }
             let Some((f_sensor, _)) = wrench.filter(|(_, seen)| seen.elapsed().as_secs_f64() <= p.stale_after) else {
                 stale += 1;

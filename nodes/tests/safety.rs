@@ -1,0 +1,234 @@
+//! The safety contract in the lockstep cell (README "Safety"): from a hand pressing the sponge, every
+//! bad input a user, a file or a stranger can send the controller is refused, and the arm stays put —
+//! the hand moves less than 5 mm, every joint stays within its position, velocity and torque limits,
+//! and the true contact force (the simulator's) never passes `force_limit`. Then a fuzz of the same
+//! inputs, random and extreme, accepted or not, checked against the same physical invariants
+//! (`SOFTCONTACT_FUZZ_CASES`, default 1000).
+
+use nalgebra::Vector3;
+use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
+use softcontact_contact::{ContactModel, Exponents, Kind};
+use softcontact_dynamics::lwr4;
+use softcontact_nodes::cell::Cell;
+use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
+use softcontact_sim::{SimConfig, Simulator};
+
+const MAX_FORCE: f64 = 250.0;
+const FORCE_LIMIT: f64 = 1.2 * MAX_FORCE;
+
+/// The cell with the hand pressing the sponge at 60 N, settled; the controller knows the sponge.
+fn pressing(seed: u64) -> Cell {
+    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), seed);
+    config.sensor = softcontact_sim::FtSensorConfig::gamma();
+    let controller =
+        DeformationController::new(ControllerConfig::lwr4(MAX_FORCE, 0.06), softcontact_sim::sponge()).unwrap();
+    let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+    let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+    let mut cycles = 0;
+    while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
+        cycles += 1;
+        assert!(cycles < 10_000, "no contact");
+    }
+    cell.controller.command_force(60.0, 1.0).unwrap();
+    run(&mut cell, 1500);
+    cell
+}
+
+/// The physical invariants of one cycle; the first violation, if any.
+fn violation(sim: &Simulator) -> Option<String> {
+    let model = lwr4::model();
+    for (i, j) in model.joints.iter().enumerate() {
+        let (q, dq, tau) = (sim.q()[i], sim.dq()[i], sim.applied_torque()[i]);
+        if !(q >= j.limits.lower && q <= j.limits.upper) {
+            return Some(format!("joint {} at {q} rad, limits [{}, {}]", i + 1, j.limits.lower, j.limits.upper));
+        }
+        if !(dq.abs() <= j.limits.velocity) {
+            return Some(format!("joint {} at {dq} rad/s, limit {}", i + 1, j.limits.velocity));
+        }
+        // The KRC adds its own gravity to what the driver sends: allow its share above the limit.
+        if !(tau.abs() <= 1.5 * j.limits.effort) {
+            return Some(format!("joint {} torque {tau} N·m, limit {}", i + 1, j.limits.effort));
+        }
+    }
+    let f = sim.contact().normal_force;
+    (!(f <= FORCE_LIMIT)).then(|| format!("contact force {f} N above the force limit {FORCE_LIMIT} N"))
+}
+
+/// Runs `cycles` cycles checking the invariants; the largest distance of the hand from where it was.
+fn run(cell: &mut Cell, cycles: usize) -> f64 {
+    let start = cell.sim.tool_pose().translation.vector;
+    let mut farthest: f64 = 0.0;
+    for k in 0..cycles {
+        cell.cycle().unwrap();
+        if let Some(v) = violation(&cell.sim) {
+            panic!("cycle {k}: {v}");
+        }
+        farthest = farthest.max((cell.sim.tool_pose().translation.vector - start).norm());
+    }
+    farthest
+}
+
+/// Refused inputs leave the hand where it was: less than 5 mm in 2 s.
+fn assert_stays_put(cell: &mut Cell, what: &str) {
+    let moved = run(cell, 2000);
+    assert!(moved < 5e-3, "{what}: the hand moved {:.1} mm", moved * 1e3);
+}
+
+#[test]
+fn commands_outside_their_physical_range_are_refused_and_the_arm_stays_put() {
+    // Class 1: `softcontact force 60 --duration 1e200` made the quintic NaN and swept the hand 1 m.
+    let mut cell = pressing(21);
+    for duration in [1e200, 1e154, 1e61, 601.0, f64::INFINITY, f64::NAN, 0.0, -1.0, 1e-300, 0.01] {
+        assert!(cell.controller.command_force(60.0, duration).is_err(), "duration {duration}");
+        assert!(cell.controller.command_force(100.0, duration).is_err(), "duration {duration}");
+        assert!(cell.controller.command_deformation(0.01, duration).is_err(), "duration {duration}");
+    }
+    for force in [f64::NAN, f64::INFINITY, -1.0, 1e300, MAX_FORCE + 1.0] {
+        assert!(cell.controller.command_force(force, 2.0).is_err(), "force {force}");
+    }
+    for z in [f64::NAN, -1e300, -0.06, 0.07, 1e300, f64::NEG_INFINITY] {
+        assert!(cell.controller.command_deformation(z, 2.0).is_err(), "deformation {z}");
+    }
+    for (low, high, frequency, periods) in
+        [(0.0, 0.01, 1e-300, 3), (0.0, 0.01, 1e300, 3), (0.0, 0.01, 1.0, u32::MAX), (-1e300, 0.01, 1.0, 3)]
+    {
+        assert!(cell.controller.command_pushes(low, high, frequency, periods).is_err(), "{frequency} {periods}");
+    }
+    assert_stays_put(&mut cell, "refused commands");
+}
+
+#[test]
+fn implausible_models_are_refused_and_a_command_through_them_does_not_crush() {
+    // Class 8: a model placing the surface 5 cm too low turned a 50 N command into 302 N; a contact
+    // position of 1e300 made the hand jump.
+    let mut cell = pressing(22);
+    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let sponge = softcontact_sim::sponge();
+    let n = Vector3::new(0.0, 0.0, -1.0);
+    for (model, at) in [
+        (sponge.clone(), surface + 0.05 * n),
+        (sponge.clone(), surface - 0.05 * n),
+        (sponge.clone(), Vector3::new(0.0, 0.0, 1e300)),
+        (sponge.clone(), Vector3::new(f64::NAN, 0.0, 0.0)),
+        (ContactModel::general(2e4, 0.0, Exponents { a: 9.0, b: 0.0, c: 1.0 }).unwrap(), surface),
+    ] {
+        assert!(cell.controller.adopt_estimate(model, &at, Some(0.5)).is_err(), "{at:?}");
+    }
+    assert_stays_put(&mut cell, "refused models");
+    cell.controller.command_force(50.0, 1.0).unwrap();
+    run(&mut cell, 2000);
+    let f = cell.sim.contact().normal_force;
+    assert!((f - 50.0).abs() < 5.0, "50 N commanded, {f:.1} N reached");
+}
+
+#[test]
+fn a_model_far_too_soft_and_misplaced_backs_off_below_max_force() {
+    // Class 8: the back-off used the model's surface; with a misplaced one it left 277 N (max 250 N).
+    let mut cell = pressing(23);
+    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let too_soft = ContactModel::new(Kind::AzadFeatherstone, 15_000.0, 0.0).unwrap();
+    // Within the plausible offset, but the wrong way: the model thinks the hand is 9 mm shallower.
+    cell.controller.adopt_estimate(too_soft, &(surface + Vector3::new(0.0, 0.0, -0.009)), None).unwrap();
+    cell.controller.command_force(MAX_FORCE * 0.8, 2.0).unwrap();
+    let mut limited = false;
+    for k in 0..4000 {
+        limited |= cell.cycle().unwrap().is_some_and(|t| t.controller.force_limited);
+        if let Some(v) = violation(&cell.sim) {
+            panic!("cycle {k}: {v}");
+        }
+    }
+    let f = cell.sim.contact().normal_force;
+    assert!(limited, "the force limit was reached");
+    assert!(f <= MAX_FORCE, "after the back-off {f:.1} N, max {MAX_FORCE} N");
+}
+
+#[test]
+fn a_restarted_krc_session_makes_the_controller_approach_again() {
+    // Class 2: a restarted arm was driven 63 mm into the sponge by a controller that kept its old
+    // contact state. The KRC restarts (its arm back above the sponge); the driver sees a new session.
+    let mut cell = pressing(24);
+    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), 25);
+    config.sensor = softcontact_sim::FtSensorConfig::gamma();
+    cell.sim = Simulator::new(config).unwrap();
+    cell.driver.begin_session();
+    let mut deepest: f64 = 0.0;
+    for k in 0..8000 {
+        cell.cycle().unwrap();
+        if let Some(v) = violation(&cell.sim) {
+            panic!("cycle {k}: {v}");
+        }
+        deepest = deepest.max(cell.sim.contact().deformation);
+    }
+    // A gentle approach stops within a few millimetres of the 1 N onset.
+    assert!(deepest < 5e-3, "the hand went {:.1} mm into the sponge", deepest * 1e3);
+    assert!(cell.controller.contact_model().stiffness > 0.0);
+}
+
+/// One random or extreme value: a third of the time an extreme.
+fn value(rng: &mut SmallRng, typical: std::ops::Range<f64>) -> f64 {
+    const EXTREMES: [f64; 12] = [
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e300,
+        -1e300,
+        1e154,
+        0.0,
+        -0.0,
+        1e-300,
+        -1.0,
+        f64::MAX,
+        f64::MIN_POSITIVE,
+    ];
+    if rng.random_bool(1.0 / 3.0) { EXTREMES[rng.random_range(0..EXTREMES.len())] } else { rng.random_range(typical) }
+}
+
+#[test]
+fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
+    let cases: usize = std::env::var("SOFTCONTACT_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
+    let mut rng = SmallRng::seed_from_u64(0xF022);
+    let mut cell = pressing(26);
+    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let (mut accepted, mut refused) = (0, 0);
+    for case in 0..cases {
+        let result = match rng.random_range(0..4) {
+            0 => cell.controller.command_force(value(&mut rng, -50.0..400.0), value(&mut rng, 0.0..5.0)),
+            1 => cell.controller.command_deformation(value(&mut rng, -0.08..0.08), value(&mut rng, 0.0..5.0)),
+            2 => cell.controller.command_pushes(
+                value(&mut rng, -0.01..0.05),
+                value(&mut rng, -0.01..0.05),
+                value(&mut rng, 0.0..20.0),
+                rng.random_range(0..5),
+            ),
+            _ => {
+                let exponents = Exponents {
+                    a: value(&mut rng, 0.5..3.0),
+                    b: value(&mut rng, 0.0..2.0),
+                    c: value(&mut rng, 0.5..2.0),
+                };
+                let offset = Vector3::new(0.0, 0.0, value(&mut rng, -0.02..0.02));
+                let retarget = rng.random_bool(0.5).then(|| value(&mut rng, 0.0..2.0));
+                match ContactModel::general(value(&mut rng, 1e2..1e6), value(&mut rng, 0.0..1e4), exponents) {
+                    Ok(model) => cell.controller.adopt_estimate(model, &(surface + offset), retarget),
+                    Err(_) => Ok(()), // refused by the model itself, never reaches the controller
+                }
+            }
+        };
+        if result.is_ok() {
+            accepted += 1
+        } else {
+            refused += 1
+        }
+        // Each input is followed by 50 ms of control, invariants checked every cycle.
+        for k in 0..50 {
+            cell.cycle().unwrap();
+            if let Some(v) = violation(&cell.sim) {
+                panic!("case {case} ({result:?}), cycle {k}: {v}");
+            }
+        }
+    }
+    eprintln!("{cases} fuzz cases: {accepted} accepted, {refused} refused, no violation");
+    assert!(accepted > cases / 20 && refused > cases / 5, "{accepted} accepted, {refused} refused");
+}
