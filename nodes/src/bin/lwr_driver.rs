@@ -75,7 +75,6 @@ fn diagnostics(
 
 fn main() -> anyhow::Result<()> {
     ros::init_logging("lwr_driver");
-    ros::init_logging("lwr_driver");
     let (p, declared) = params::load::<Params>("lwr_driver", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
