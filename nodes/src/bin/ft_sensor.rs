@@ -1,12 +1,14 @@
 //! `ft_sensor`: the ATI Net F/T as a ROS 2 node. Streams RDT records, publishes /ft_sensor/wrench_raw
 //! (bias removed) and /ft_sensor/wrench (also the hand's weight removed, for the orientation taken from
-//! /lwr/ee_pose), serves /ft_sensor/bias (std_srvs/Trigger: software tare), and reports stale,
-//! saturated or faulty data on /diagnostics.
+//! /lwr/ee_pose), serves /ft_sensor/bias (std_srvs/Trigger: software tare, refused in contact or in
+//! motion, with the reason in the answer), and reports stale, saturated or faulty data and network
+//! errors on /diagnostics. No datagram and no network error ends it: it asks the box to stream until it
+//! does.
 
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
@@ -38,7 +40,9 @@ fn main() -> anyhow::Result<()> {
         sample_rate: p.rate,
     };
     let stop = ros::shutdown_flag()?;
-    let mut client = RdtClient::connect(p.sensor, FtSensorNode::new(config).map_err(anyhow::Error::msg)?)?;
+    let ft = FtSensorNode::new(config).map_err(anyhow::Error::msg)?.with_tare_policy(p.tare_policy());
+    let mut client = RdtClient::connect(p.sensor, ft)?;
+    client.new_stream_after = Duration::from_secs_f64(p.stale_after);
     let mut node = ros::node_with_parameters("ft_sensor", declared)?;
     let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
     let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
@@ -55,23 +59,28 @@ fn main() -> anyhow::Result<()> {
 
     let tool_to_sensor = ForcePairing::urdf_tool_to_sensor()?;
 
-    client.start()?;
+    if let Err(e) = client.start() {
+        ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));
+    }
     ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
     let mut orientation: Option<UnitQuaternion<f64>> = None;
-    let mut last_record = Instant::now();
     let mut last_status = 0u32;
-    let mut started = Instant::now();
+    let mut last_saturated = false;
     let mut next_diagnostics = Instant::now();
+    let mut logged_network_errors = 0;
     // Tared yet? With `tare_after` < 0 the user tares through the service; until then only raw data.
     let mut tared = p.tare_after < 0.0;
     let mut tare_due: Option<Instant> = None;
+    let mut tare_refusal: Option<String> = None;
     while !ros::stopping(&stop) {
         while let Ok(Some((pose, _))) = poses.take() {
-            orientation = Some(geometry::pose_of(&pose.pose).1 * tool_to_sensor);
+            let (position, rotation) = geometry::pose_of(&pose.pose);
+            client.node.observe_tool_pose(&Isometry3::from_parts(position.into(), rotation));
+            orientation = Some(rotation * tool_to_sensor);
         }
         if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
-            last_record = Instant::now();
             last_status = out.status.0;
+            last_saturated = out.saturated;
             if !out.invalid {
                 let stamp = clock.now();
                 raw_pub.publish(messages::wrench(&out.raw, stamp))?;
@@ -83,30 +92,48 @@ fn main() -> anyhow::Result<()> {
         if !tared && orientation.is_some() {
             let due = *tare_due.get_or_insert_with(|| Instant::now() + Duration::from_secs_f64(p.tare_after));
             if Instant::now() >= due {
-                match client.node.tare(orientation.as_ref()) {
+                // Refused (the hand in contact, moving, an unsteady reading): try again in a while.
+                match client.node.checked_tare(orientation.as_ref()) {
                     Ok(b) => {
                         tared = true;
+                        tare_refusal = None;
                         ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
                     }
-                    Err(e) => ros::log(&node, LogLevel::Warn, &format!("tare failed: {e}")),
+                    Err(e) => {
+                        if tare_refusal.as_ref() != Some(&e) {
+                            ros::log(&node, LogLevel::Warn, &format!("start-up {e}; retrying"));
+                        }
+                        tare_refusal = Some(e);
+                        tare_due = Some(Instant::now() + Duration::from_millis(100));
+                    }
                 }
             }
         }
         while let Ok(Some((id, _))) = bias.receive_request() {
-            let response = match client.node.tare(orientation.as_ref()) {
+            let response = match client.node.checked_tare(orientation.as_ref()) {
                 Ok(b) => {
                     tared = true;
+                    tare_refusal = None;
+                    ros::log(&node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
                     TriggerResponse { success: true, message: format!("bias set to {b:?}") }
                 }
-                Err(e) => TriggerResponse { success: false, message: e },
+                Err(e) => {
+                    ros::log(&node, LogLevel::Warn, &format!("/ft_sensor/bias: {e}"));
+                    TriggerResponse { success: false, message: e }
+                }
             };
             bias.send_response(id, response)?;
         }
-        let silent = last_record.elapsed().as_secs_f64();
-        if silent > 1.0 && started.elapsed().as_secs_f64() > 1.0 {
-            // The box may have lost our stream (a newer start from elsewhere, a reboot): ask again.
-            client.start()?;
-            started = Instant::now();
+        // The client repeats the start request while no fresh record comes (box booting, rebooting).
+        let silent = client.silence().as_secs_f64();
+        let network_errors = client.node.counters.network_errors;
+        if network_errors > logged_network_errors && silent > 1.0 {
+            ros::log(
+                &node,
+                LogLevel::Warn,
+                &format!("no record from {} for {silent:.1} s, {network_errors} network errors: retrying", p.sensor),
+            );
+            logged_network_errors = network_errors + 10;
         }
         if p.exit_after_silence > 0.0 && silent > p.exit_after_silence {
             ros::log(&node, LogLevel::Info, &format!("no record for {} s, exiting", p.exit_after_silence));
@@ -116,13 +143,23 @@ fn main() -> anyhow::Result<()> {
             let c = client.node.counters;
             let status = softcontact_wire::rdt::Status(last_status);
             let (level, message) = if silent > p.stale_after {
-                (DiagnosticStatus::STALE, format!("no record for {silent:.3} s"))
-            } else if status.is_saturated() || status.is_error() {
-                (DiagnosticStatus::ERROR, status.describe().join(", "))
+                let why = if c.network_errors > 0 {
+                    format!(" ({} network errors: box not up or unreachable?)", c.network_errors)
+                } else {
+                    String::new()
+                };
+                (DiagnosticStatus::STALE, format!("no fresh record for {silent:.3} s{why}"))
+            } else if status.is_error() || last_saturated {
+                let mut what = status.describe();
+                if last_saturated && !status.is_saturated() {
+                    what.push("reading at or beyond the calibrated range");
+                }
+                (DiagnosticStatus::ERROR, what.join(", "))
             } else if orientation.is_none() {
                 (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
             } else if !tared {
-                (DiagnosticStatus::WARN, "not tared yet: /ft_sensor/wrench waits".into())
+                let why = tare_refusal.as_deref().unwrap_or("waiting for tare_after");
+                (DiagnosticStatus::WARN, format!("not tared yet ({why}): /ft_sensor/wrench waits"))
             } else {
                 (DiagnosticStatus::OK, "streaming".into())
             };
@@ -136,15 +173,20 @@ fn main() -> anyhow::Result<()> {
                     ("records", c.records),
                     ("lost", c.lost),
                     ("out_of_order", c.out_of_order),
+                    ("duplicate", c.duplicate),
+                    ("restarts", c.restarts),
                     ("malformed", c.malformed),
                     ("saturated", c.saturated),
                     ("errors", c.errors),
+                    ("network_errors", c.network_errors),
+                    ("foreign", c.foreign),
+                    ("tares_refused", c.tares_refused),
                 ],
             ))?;
             next_diagnostics += Duration::from_secs(1);
         }
     }
-    client.stop()?;
+    let _ = client.stop();
     eprintln!("ft_sensor: exit: {:?}; peak RSS {:.1} MB", client.node.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
 }
