@@ -64,6 +64,9 @@ pub struct DriverConfig {
     pub krc_address: Option<IpAddr>,
     /// Measurements resuming after this much silence [s] start a new KRC session.
     pub new_session_after: f64,
+    /// A command answering a joint state older than this [s] (by its stamp) is refused: a replayed or
+    /// long-delayed command. Commands that pass still age out after `watchdog_cycles`.
+    pub max_command_age: f64,
 }
 
 impl Default for DriverConfig {
@@ -77,6 +80,7 @@ impl Default for DriverConfig {
             hold_release_cycles: 500,
             krc_address: None,
             new_session_after: 0.1,
+            max_command_age: 0.02,
         }
     }
 }
@@ -206,11 +210,6 @@ impl LwrDriver {
         self.session
     }
 
-    /// The watchdog's bound on a command's age [s].
-    pub fn watchdog_time(&self) -> f64 {
-        self.config.watchdog_cycles as f64 * self.sample_time
-    }
-
     /// Who sent a datagram: the pinned KRC (`Some(new_session)`), or a stranger (`None`, counted,
     /// not to be answered). A datagram from the pinned address on a new port begins a new session.
     pub fn accept_sender(&mut self, from: SocketAddr) -> Option<bool> {
@@ -263,15 +262,15 @@ impl LwrDriver {
     }
 
     /// A command that arrived over the network: it names the session of the joint state it answers and
-    /// is `age` seconds old by that joint state's stamp. One from another session, or older than the
-    /// watchdog (or stamped in the future), is refused and the present command ages out as usual.
+    /// is `age` seconds old by that joint state's stamp. One from another session, or older than
+    /// `max_command_age` (or stamped as far in the future), is refused and the present command ages out as usual.
     pub fn set_remote_command(&mut self, effort: &[f64], session: Option<u32>, age: f64) -> Result<(), DriverError> {
         if session != Some(self.session) {
             self.counters.commands_refused += 1;
             self.counters.commands_too_old += 1;
             return Err(DriverError::OtherSession(session, self.session));
         }
-        let bound = self.watchdog_time();
+        let bound = self.config.max_command_age;
         if !(age >= -bound && age <= bound) {
             self.counters.commands_refused += 1;
             self.counters.commands_too_old += 1;
@@ -422,6 +421,8 @@ pub struct Params {
     pub krc_address: Option<IpAddr>,
     /// Measurements resuming after this much silence start a new KRC session [s].
     pub new_session_after: f64,
+    /// A command answering a joint state older than this is refused [s].
+    pub max_command_age: f64,
     /// A command older than this many cycles makes the driver hold position.
     pub watchdog_cycles: u64,
     /// Joint stiffness of the hold [N·m/rad] and its damping ratio.
@@ -435,6 +436,10 @@ pub struct Params {
     pub monitor_only: bool,
     /// Stop after this many seconds without a measurement (0: wait forever).
     pub exit_after_silence: f64,
+    /// Torque commands silent this long [s] while the KRC commands, after they flowed: the controller
+    /// or the middleware is dead. The driver holds (its watchdog) and reports it, in the log and as an
+    /// ERROR on /diagnostics; it never exits while the KRC commands.
+    pub dead_after: f64,
     /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
@@ -446,6 +451,7 @@ impl Default for Params {
             fri_bind: ([127, 0, 0, 1], 49938).into(),
             krc_address: None,
             new_session_after: c.new_session_after,
+            max_command_age: c.max_command_age,
             watchdog_cycles: c.watchdog_cycles,
             hold_stiffness: c.hold_stiffness,
             hold_damping: c.hold_damping,
@@ -453,6 +459,7 @@ impl Default for Params {
             hold_release_cycles: c.hold_release_cycles,
             monitor_only: false,
             exit_after_silence: 0.0,
+            dead_after: 2.0,
             use_sim_time: false,
         }
     }
@@ -469,6 +476,7 @@ impl Params {
             hold_release_cycles: self.hold_release_cycles,
             krc_address: self.krc_address,
             new_session_after: self.new_session_after,
+            max_command_age: self.max_command_age,
         }
     }
 }
@@ -490,6 +498,9 @@ impl crate::params::NodeParams for Params {
         if !(self.new_session_after.is_finite() && (0.005..=10.0).contains(&self.new_session_after)) {
             return Err(format!("new_session_after must lie in [0.005, 10] s, not {}", self.new_session_after));
         }
+        if !(self.max_command_age.is_finite() && (0.001..=0.1).contains(&self.max_command_age)) {
+            return Err(format!("max_command_age must lie in [0.001, 0.1] s, not {}", self.max_command_age));
+        }
         if !(self.hold_damping.is_finite() && self.hold_damping > 0.0 && self.hold_damping <= 1.0) {
             return Err(format!("hold_damping is a damping ratio in (0, 1], not {}", self.hold_damping));
         }
@@ -502,6 +513,7 @@ impl crate::params::NodeParams for Params {
         if !(self.exit_after_silence.is_finite() && (0.0..=86_400.0).contains(&self.exit_after_silence)) {
             return Err("exit_after_silence must lie in [0, 86400] s".into());
         }
+        crate::liveness::validate_dead_after(self.dead_after)?;
         Ok(())
     }
 }

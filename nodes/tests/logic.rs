@@ -142,7 +142,7 @@ fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
     d.accept_sender("127.0.0.1:40000".parse().unwrap());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     let s = Some(d.session());
-    for age in [1200.0, 0.006, -0.01, f64::NAN, f64::INFINITY] {
+    for age in [1200.0, 0.021, -0.021, f64::NAN, f64::INFINITY] {
         assert!(matches!(d.set_remote_command(&[5.0; 7], s, age), Err(DriverError::TooOld(..))), "{age}");
     }
     assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
