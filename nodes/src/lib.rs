@@ -8,6 +8,7 @@ pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod geometry;
 pub mod identify;
+pub mod liveness;
 pub mod lwr_driver;
 pub mod messages;
 pub mod params;
