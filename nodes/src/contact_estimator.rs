@@ -182,6 +182,9 @@ pub struct Params {
     pub state_rate: f64,
     /// A pose older than this when a force arrives is not paired with it [s].
     pub stale_after: f64,
+    /// /ft_sensor/wrench or /lwr/ee_pose silent this long [s] after they flowed (both are due at
+    /// 1 kHz): their publisher or the middleware is dead, and the node exits with an error.
+    pub dead_after: f64,
     /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
@@ -202,6 +205,7 @@ impl Default for Params {
             min_window_fill: 0.25,
             state_rate: 100.0,
             stale_after: 0.05,
+            dead_after: 2.0,
             use_sim_time: false,
         }
     }
@@ -228,6 +232,7 @@ impl crate::params::NodeParams for Params {
         positive("refit_period", self.refit_period)?;
         positive("state_rate", self.state_rate)?;
         positive("stale_after", self.stale_after)?;
+        crate::liveness::validate_dead_after(self.dead_after)?;
         if !(0.0..=1.0).contains(&self.min_window_fill) {
             return Err(format!("min_window_fill must lie in [0, 1], not {}", self.min_window_fill));
         }

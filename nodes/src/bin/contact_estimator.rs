@@ -2,7 +2,9 @@
 //! /ft_sensor/wrench with the newest /lwr/ee_pose and /lwr/ee_twist, detects the onset, keeps the
 //! sliding window, publishes /contact_estimator/state at `state_rate` and, every `refit_period`, every
 //! candidate's cross-validated fit with the chosen model and the surface position on
-//! /contact_estimator/model.
+//! /contact_estimator/model. /ft_sensor/wrench or /lwr/ee_pose silent for `dead_after` after they flowed
+//! (a dead publisher or middleware): it exits with an error naming the stream, and the launch script
+//! stops the graph.
 
 use std::time::{Duration, Instant};
 
@@ -14,6 +16,7 @@ use softcontact_msgs::softcontact_msgs::ContactState;
 use softcontact_msgs::std_msgs::Header;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ForcePairing, ModelMsg, Params};
 use softcontact_nodes::geometry;
+use softcontact_nodes::liveness::{StreamWatch, first_dead};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
 
@@ -55,10 +58,14 @@ fn main() -> anyhow::Result<()> {
     let (mut next_state, mut next_refit) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
     let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
     let mut was_in_contact = false;
+    let mut wrench_watch = StreamWatch::new("/ft_sensor/wrench", 1000.0, p.dead_after);
+    let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
+    let mut dead = None;
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         // Pairing by arrival, aged by this process's clock (stamps of other processes may differ).
         while let Ok(Some((m, _))) = poses.take() {
+            pose_watch.seen(start.elapsed().as_secs_f64());
             let (position, rotation) = geometry::pose_of(&m.pose);
             pairing.pose(start.elapsed().as_secs_f64(), position, rotation);
         }
@@ -66,6 +73,7 @@ fn main() -> anyhow::Result<()> {
             pairing.twist(geometry::vector_of(&m.twist.linear));
         }
         while let Ok(Some((w, _))) = wrenches.take() {
+            wrench_watch.seen(start.elapsed().as_secs_f64());
             let Some(paired) = pairing.force(start.elapsed().as_secs_f64(), geometry::vector_of(&w.wrench.force))
             else {
                 unpaired += 1;
@@ -104,10 +112,16 @@ fn main() -> anyhow::Result<()> {
                 }
             }
         }
+        // Judged after everything that arrived was read.
+        if let Some(d) = first_dead(&[&wrench_watch, &pose_watch], start.elapsed().as_secs_f64()) {
+            ros::log(&node, LogLevel::Error, &format!("{d}: exiting"));
+            dead = Some(d);
+            break;
+        }
     }
     eprintln!(
         "contact_estimator: exit: {samples} readings, {unpaired} without a fresh pose, {refits} models published, {refit_failures} refits failed; peak RSS {:.1} MB",
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
-    Ok(())
+    dead.map_or(Ok(()), |d| Err(d.into()))
 }
