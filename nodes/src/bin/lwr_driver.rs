@@ -1,7 +1,9 @@
 //! `lwr_driver`: the LWR IV joint-torque interface as a ROS 2 node. Answers the KRC over FRI every
 //! cycle (the reply goes out before anything is published), publishes /lwr/joint_states, /lwr/ee_pose,
 //! /lwr/ee_twist, /tf and /tf_static, takes /lwr/joint_torque_command (effort = total torque, gravity
-//! included), and reports its counters on /diagnostics once a second.
+//! included), and reports its counters on /diagnostics once a second. Torque commands that flowed and
+//! stopped for `dead_after` while the KRC commands (a dead controller or middleware): the watchdog holds
+//! the arm, and the driver logs an error once and reports ERROR on /diagnostics; it never exits for it.
 
 use std::time::{Duration, Instant};
 
@@ -12,6 +14,7 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_nodes::liveness::{DeadStream, StreamWatch};
 use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params};
 use softcontact_nodes::messages::{self, DriverSession};
 use softcontact_nodes::params::{self, ParamArgs};
@@ -34,16 +37,18 @@ fn diagnostics(
     client: &FriClient,
     command_age: &Histogram,
     last: Option<&DriverOutput>,
+    dead: Option<&DeadStream>,
     stamp: Time,
 ) -> DiagnosticArray {
     let c = client.driver.counters;
     let us = |s: f64| (s * 1e6).round() as u64;
-    let (level, message) = match last {
-        None => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
-        Some(o) if o.holding => {
+    let (level, message) = match (dead, last) {
+        (Some(d), _) => (DiagnosticStatus::ERROR, format!("{d}; holding position")),
+        (None, None) => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
+        (None, Some(o)) if o.holding => {
             (DiagnosticStatus::WARN, format!("holding position ({:?}, quality {:?})", o.state, o.quality))
         }
-        Some(o) => (DiagnosticStatus::OK, format!("{:?}, quality {:?}", o.state, o.quality)),
+        (None, Some(o)) => (DiagnosticStatus::OK, format!("{:?}, quality {:?}", o.state, o.quality)),
     };
     ros::diagnostics(
         stamp,
@@ -103,12 +108,16 @@ fn main() -> anyhow::Result<()> {
     let mut last_seen = Instant::now();
     let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
+    let start = Instant::now();
+    let mut command_watch = StreamWatch::new("/lwr/joint_torque_command", 1000.0, p.dead_after);
+    let mut commands_dead: Option<DeadStream> = None;
     while !ros::stopping(&stop) {
         let output = client.cycle(Duration::from_millis(5))?;
         // Newest torque command wins; a bad one is refused and counted, the previous one stays.
         // A command must answer a joint state of the present KRC session, within the watchdog's age
         // by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
         while let Ok(Some((cmd, _))) = commands.take() {
+            command_watch.seen(start.elapsed().as_secs_f64());
             let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
             let age = clock.now().as_secs_f64() - cmd.header.stamp.as_secs_f64();
             match client.driver.set_remote_command(&cmd.effort, session, age) {
@@ -140,13 +149,32 @@ fn main() -> anyhow::Result<()> {
             ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));
             break;
         }
+        // Commands are due while the KRC commands; silence beyond dead_after is reported, never an exit.
+        let now = start.elapsed().as_secs_f64();
+        let krc_commands = last.as_ref().is_some_and(|o| o.state == InterfaceState::Command)
+            && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
+        if !krc_commands {
+            command_watch.not_due(now);
+        }
+        match (command_watch.dead(now), &commands_dead) {
+            (Some(d), None) => {
+                ros::log(&node, LogLevel::Error, &format!("{d}; holding the arm while the KRC commands"));
+                commands_dead = Some(d);
+            }
+            (Some(d), Some(_)) => commands_dead = Some(d),
+            (None, Some(_)) => {
+                ros::log(&node, LogLevel::Info, "torque commands flow again (or the KRC stopped commanding)");
+                commands_dead = None;
+            }
+            (None, None) => {}
+        }
         if Instant::now() >= next_diagnostics {
-            publish_errors +=
-                u64::from(diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now())).is_err());
+            let status = diagnostics(&client, &command_age, last.as_ref(), commands_dead.as_ref(), clock.now());
+            publish_errors += u64::from(diag.publish(status).is_err());
             next_diagnostics += Duration::from_secs(1);
         }
     }
-    diag.publish(diagnostics(&client, &command_age, last.as_ref(), clock.now()))?;
+    diag.publish(diagnostics(&client, &command_age, last.as_ref(), commands_dead.as_ref(), clock.now()))?;
     // The exit report: tests and `launch-scripts/sim.sh` read these lines.
     eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
