@@ -537,6 +537,9 @@ pub struct Params {
     pub state_rate: f64,
     /// No command is sent while the force reading is older than this [s]: the driver then holds.
     pub stale_after: f64,
+    /// /lwr/joint_states silent this long [s] after they flowed (they are due at 1 kHz): the driver
+    /// or the middleware is dead, and the node exits with an error (the launch script stops the graph).
+    pub dead_after: f64,
     /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
@@ -570,6 +573,7 @@ impl Default for Params {
                 .expect("a valid model"),
             state_rate: 100.0,
             stale_after: 0.05,
+            dead_after: 2.0,
             use_sim_time: false,
         }
     }
@@ -648,6 +652,10 @@ impl crate::params::NodeParams for Params {
         within("state_rate", self.state_rate, 0.0, 1000.0)?;
         within("stale_after", self.stale_after, 0.0, 1.0)?;
         within("restart_after", self.restart_after, self.stale_after, 10.0)?;
+        crate::liveness::validate_dead_after(self.dead_after)?;
+        if self.dead_after <= self.restart_after {
+            return Err(format!("dead_after ({}) must exceed restart_after ({})", self.dead_after, self.restart_after));
+        }
         let e = self.initial_model.exponents;
         if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
             return Err(format!("initial_model: exponents outside {EXPONENT_RANGE:?}"));

@@ -4,6 +4,8 @@
 //! /contact_estimator/model (adopted per `model_update`); publishes /lwr/joint_torque_command, stamped
 //! with the joint state it answers (the driver measures the command's age from it), and
 //! /deformation_controller/state. With a stale force reading it sends nothing, and the driver holds.
+//! Joint states silent for `dead_after` after they flowed (a dead driver or middleware): it exits with an
+//! error naming the stream, and the launch script stops the graph.
 
 use std::time::{Duration, Instant};
 
@@ -16,6 +18,7 @@ use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ControllerState as StateMsg, ForceCommand};
 use softcontact_nodes::contact_estimator::{ModelMsg, model_from_msg};
 use softcontact_nodes::deformation_controller::{DeformationController, ModelUpdate, Params};
+use softcontact_nodes::liveness::StreamWatch;
 use softcontact_nodes::messages::{self, DriverSession};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
@@ -61,6 +64,9 @@ fn main() -> anyhow::Result<()> {
     let mut next_stale_log = Instant::now();
     let mut was_in_contact = false;
     let (mut last_joint_state, mut last_session, mut ticks_in_session, mut restarts) = (None, None, 0u64, 0u64);
+    let start = Instant::now();
+    let mut joint_states_watch = StreamWatch::new("/lwr/joint_states", 1000.0, p.dead_after);
+    let mut dead = None;
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         while let Ok(Some((m, _))) = models.take() {
@@ -115,6 +121,7 @@ fn main() -> anyhow::Result<()> {
             // while: the arm may have moved, so the controller forgets the contact and approaches again.
             let session = DriverSession::from_frame_id(&js.header.frame_id);
             let arrived = Instant::now();
+            joint_states_watch.seen((arrived - start).as_secs_f64());
             let silence = last_joint_state.map_or(0.0, |t: Instant| (arrived - t).as_secs_f64());
             last_joint_state = Some(arrived);
             let commanding = session.is_some_and(|s| s.commanding);
@@ -174,10 +181,16 @@ fn main() -> anyhow::Result<()> {
                 state_pub.publish(s.to_msg(js.header.stamp))?;
             }
         }
+        // Judged after everything that arrived was read.
+        if let Some(d) = joint_states_watch.dead(start.elapsed().as_secs_f64()) {
+            ros::log(&node, LogLevel::Error, &format!("{d}: exiting"));
+            dead = Some(d);
+            break;
+        }
     }
     eprintln!(
         "deformation_controller: exit: {ticks} commands sent, {stale} joint states without a fresh force, {failed} failed, {adopted} models adopted, {restarts} restarts; peak RSS {:.1} MB",
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
-    Ok(())
+    dead.map_or(Ok(()), |d| Err(d.into()))
 }
