@@ -44,3 +44,18 @@ fn unsafe_controller_settings_are_refused() {
         assert!(load::<Params>("deformation_controller", &args).is_err(), "{bad} accepted");
     }
 }
+
+#[test]
+fn dead_after_outside_its_range_is_refused_by_every_node_that_has_it() {
+    use softcontact_nodes::*;
+    for bad in ["dead_after:=0.05", "dead_after:=61", "dead_after:=.inf", "dead_after:=-1"] {
+        let args = ParamArgs { overrides: vec![bad.into()], ..Default::default() };
+        assert!(load::<lwr_driver::Params>("lwr_driver", &args).is_err(), "lwr_driver: {bad} accepted");
+        assert!(load::<contact_estimator::Params>("contact_estimator", &args).is_err(), "estimator: {bad}");
+        assert!(load::<deformation_controller::Params>("deformation_controller", &args).is_err(), "controller: {bad}");
+    }
+    let args = ParamArgs { overrides: vec!["dead_after:=0.1".into()], ..Default::default() };
+    assert!(load::<contact_estimator::Params>("contact_estimator", &args).is_ok());
+    // The controller's must exceed restart_after (0.1 s by default): a gap is a restart before it is death.
+    assert!(load::<deformation_controller::Params>("deformation_controller", &args).is_err());
+}
