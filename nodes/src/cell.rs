@@ -134,9 +134,14 @@ impl Cell {
         let f = (-force_world.dot(&self.normal)).max(0.0);
         self.controller.follow_session(Some(driver.session), true, self.sim.krc_cycle());
         // As the controller node does: a failed tick sends an empty command, and the driver holds.
-        let (torque, controller, refused) = match self.controller.tick(&driver.q, &driver.dq, f, &force_world) {
-            Ok((tau, state)) => (Some(tau), state, None),
-            Err(e) => (None, ControllerState { f, ..Default::default() }, Some(e)),
+        // An invalid F/T sample (saturated, an error bit) is withheld, as the F/T node withholds it from
+        // /ft_sensor/wrench: no tick, no command, and the driver's watchdog holds if it lasts.
+        let withheld = self.tared && ft.invalid;
+        let tick = (!withheld).then(|| self.controller.tick(&driver.q, &driver.dq, f, &force_world));
+        let (torque, controller, refused) = match tick {
+            None => (None, ControllerState { f, ..Default::default() }, None),
+            Some(Ok((tau, state))) => (Some(tau), state, None),
+            Some(Err(e)) => (None, ControllerState { f, ..Default::default() }, Some(e)),
         };
         let v = driver.tool_twist;
         let estimator = self.estimator.update(
@@ -147,6 +152,7 @@ impl Cell {
         )?;
         match torque {
             Some(tau) => self.driver.set_command(&tau)?,
+            None if withheld => {}
             None => self.driver.set_command(&[]).map_or((), |_| ()),
         }
         Ok(Some(Tick {

@@ -296,15 +296,12 @@ impl DeformationController {
         self.follow(vec![Segment::Move(Quintic::new(hold, hold, 1.0).ok_or(ControlError::Duration)?)])
     }
 
-    /// A move from the present reference, refused if too quick or too long, or if the present model
-    /// expects more than `max_force` at its end.
+    /// A move from the present reference, refused if too quick or too long. (Deformation commands are
+    /// position commands: the model in use may be a rough guess, so the force guard, not the model,
+    /// bounds their force.)
     fn move_to(&self, to: Reference, duration: f64) -> Result<Segment, ControlError> {
         let limits = &self.config.limits;
         let duration = limits.check_duration(duration)?;
-        let expected = self.contact_model.force(to.position.max(0.0), 0.0)?;
-        if !(expected <= limits.max_force) {
-            return Err(LimitError::Force(expected, limits.max_force).into());
-        }
         let quintic = Quintic::new(self.reference(), to, duration).ok_or(ControlError::Duration)?;
         limits.check_rate(quintic.peak_velocity())?;
         Ok(Segment::Move(quintic))
@@ -336,12 +333,8 @@ impl DeformationController {
             return Err(ControlError::Duration);
         }
         limits.check_duration(1.0 / frequency)?;
-        // The oscillation's peak speed, and its deepest point through the model.
+        // The oscillation's peak speed.
         limits.check_rate(std::f64::consts::PI * frequency * (high - low))?;
-        let expected = self.contact_model.force(high.max(0.0), 0.0)?;
-        if !(expected <= limits.max_force) {
-            return Err(LimitError::Force(expected, limits.max_force).into());
-        }
         let push = Oscillation { mean: (low + high) / 2.0, amplitude: (high - low) / 2.0, frequency, periods };
         let ramp = self.move_to(push.start(), 1.0 / frequency)?;
         self.follow(vec![ramp, Segment::Oscillate(push)])?;
@@ -393,7 +386,15 @@ impl DeformationController {
         if let Some(OnsetEvent::Contact { position }) = self.onset.update(along, normal_force)?
             && self.contact_level.is_none()
         {
-            self.contact_level = Some(position);
+            // Contact made already pressing (a restart while pushing): the surface is not where the
+            // onset fired but as deep above it as the model needs for the force read now.
+            let pressed = normal_force > 4.0 * self.config.onset.threshold;
+            let depth = match self.contact_model.deformation_for_force(normal_force) {
+                Ok(z) if pressed => z.clamp(0.0, self.config.limits.max_deformation),
+                _ => 0.0,
+            };
+            self.contact_level = Some(position - depth);
+            let position = position - depth;
             // Hold where contact was made until a force is commanded.
             self.hold(along - position - self.offset)?;
         }

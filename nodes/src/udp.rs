@@ -68,11 +68,12 @@ impl FriClient {
                 }
             };
             let arrived = Instant::now();
-            if self.driver.accept_sender(from).is_none() {
+            let silence = self.last_arrival.map_or(f64::INFINITY, |t| (arrived - t).as_secs_f64());
+            if self.driver.accept_sender(from, silence).is_none() {
                 continue;
             }
-            if let Some(previous) = self.last_arrival {
-                self.driver.resumed_after((arrived - previous).as_secs_f64());
+            if self.last_arrival.is_some() {
+                self.driver.resumed_after(silence);
             }
             self.last_arrival = Some(arrived);
             if let Ok((reply, output)) = self.driver.handle(&buf[..n]) {

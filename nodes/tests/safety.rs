@@ -232,3 +232,19 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
     eprintln!("{cases} fuzz cases: {accepted} accepted, {refused} refused, no violation");
     assert!(accepted > cases / 20 && refused > cases / 5, "{accepted} accepted, {refused} refused");
 }
+
+#[test]
+fn a_new_session_while_pressing_places_the_surface_by_the_force_read() {
+    // Adversarial finding: after a restart while pushing 200 N, the onset fired at the deformed
+    // position, taken for the surface, and a 10 N command then held 220 N.
+    let mut cell = pressing(27);
+    cell.controller.command_force(200.0, 2.0).unwrap();
+    run(&mut cell, 2500);
+    cell.driver.begin_session();
+    let moved = run(&mut cell, 1000);
+    assert!(moved < 5e-3, "the new session moved the hand {:.1} mm", moved * 1e3);
+    cell.controller.command_force(10.0, 2.0).unwrap();
+    run(&mut cell, 3000);
+    let f = cell.sim.contact().normal_force;
+    assert!((f - 10.0).abs() < 5.0, "10 N commanded after the new session, {f:.1} N held");
+}
