@@ -58,6 +58,7 @@ fn main() -> anyhow::Result<()> {
     ros::log(&node, LogLevel::Info, &format!("ready: model update {:?}, domain {}", p.model_update, node.domain_id()));
 
     let mut wrench: Option<(Vector3<f64>, Instant)> = None;
+    let (mut newest_wrench_stamp, mut newest_joint_state_stamp, mut not_newer) = (f64::MIN, f64::MIN, 0u64);
     let mut pending_model = None;
     let state_every = ((1000.0 / p.state_rate).round() as u64).max(1);
     let (mut ticks, mut stale, mut failed, mut adopted) = (0u64, 0u64, 0u64, 0u64);
@@ -105,13 +106,28 @@ fn main() -> anyhow::Result<()> {
                 Err(e) => ros::log(&node, LogLevel::Error, &format!("force command {} N refused: {e}", c.force)),
             }
         }
+        // Only measurements newer than the newest one seen count: a replayed recording (its stamps are
+        // as recorded) or a backlog after a stall never drives the arm. Of a backlog, the newest joint
+        // state is the one answered.
         while let Ok(Some((w, _))) = wrenches.take() {
             let f = Vector3::new(w.wrench.force.x, w.wrench.force.y, w.wrench.force.z);
-            if f.iter().all(|v| v.is_finite()) {
+            let stamp = w.header.stamp.as_secs_f64();
+            if f.iter().all(|v| v.is_finite()) && stamp > newest_wrench_stamp {
+                newest_wrench_stamp = stamp;
                 wrench = Some((f, Instant::now()));
             }
         }
+        let mut newest_joint_state = None;
         while let Ok(Some((js, _))) = joint_states.take() {
+            let stamp = js.header.stamp.as_secs_f64();
+            if stamp > newest_joint_state_stamp {
+                newest_joint_state_stamp = stamp;
+                newest_joint_state = Some(js);
+            } else {
+                not_newer += 1;
+            }
+        }
+        for js in newest_joint_state {
             let (Ok(q), Ok(dq)) = (<[f64; 7]>::try_from(&js.position[..]), <[f64; 7]>::try_from(&js.velocity[..]))
             else {
                 failed += 1;
@@ -189,7 +205,7 @@ fn main() -> anyhow::Result<()> {
         }
     }
     eprintln!(
-        "deformation_controller: exit: {ticks} commands sent, {stale} joint states without a fresh force, {failed} failed, {adopted} models adopted, {restarts} restarts; peak RSS {:.1} MB",
+        "deformation_controller: exit: {ticks} commands sent, {stale} joint states without a fresh force, {failed} failed, {adopted} models adopted, {restarts} restarts, {not_newer} joint states not newer than the last; peak RSS {:.1} MB",
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
     dead.map_or(Ok(()), |d| Err(d.into()))
