@@ -127,7 +127,7 @@ fn main() -> anyhow::Result<()> {
                 not_newer += 1;
             }
         }
-        for js in newest_joint_state {
+        while let Some(js) = newest_joint_state.take() {
             let (Ok(q), Ok(dq)) = (<[f64; 7]>::try_from(&js.position[..]), <[f64; 7]>::try_from(&js.velocity[..]))
             else {
                 failed += 1;
