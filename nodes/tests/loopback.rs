@@ -291,7 +291,9 @@ fn malformed_datagrams_are_refused_and_counted() {
     });
     cell.join().unwrap();
     assert!(sent >= 20);
-    assert_eq!(client.driver.counters.malformed, sent as u64, "every rogue datagram refused and counted");
+    // From another port of the KRC's address while the KRC talks: strangers, refused before decoding.
+    assert_eq!(client.driver.counters.strangers, sent as u64, "every rogue datagram refused and counted");
+    assert_eq!(client.driver.counters.sessions, 1, "the rogue port never took the session over");
     assert!(outputs.iter().filter(|o| o.state == InterfaceState::Command).count() > 800);
     assert_eq!(truth.try_iter().last().unwrap().state, InterfaceState::Command);
 }
