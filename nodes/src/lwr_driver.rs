@@ -8,10 +8,13 @@
 //! impedance instead; torques are clipped to the joint limits; the driver never waits for the
 //! controller — it answers with the newest command it has and counts stale cycles.
 //!
-//! A stale command keeps its torque in the hold, fading to none over `hold_release_cycles`: in contact
-//! the last torque is what balances the surface, and dropping it at once would let the surface throw
-//! the hand back against the hold's spring (a 10 ms hiccup of the controller became a 0.17 m/s kick).
-//! Overspeed drops the torque at once: then the command itself is suspect.
+//! A stale command's torque is handed over to the hold's spring: in contact the last torque is what
+//! balances the surface, and dropping it would let the surface throw the hand back against the spring
+//! (a 10 ms hiccup of the controller became a 0.17 m/s kick; a 1.5 s stall at 200 N threw the hand
+//! back 30 mm). The hold's set point is offset from the held position by that torque over the joint's
+//! stiffness, at most `hold_max_preload` rad — the farthest the hold would move a joint if the surface
+//! vanished — and only what the offset cannot carry fades, over `hold_release_cycles`. Overspeed drops
+//! the torque and the offset at once: then the command itself is suspect.
 //!
 //! Who and when (the safety contract, README "Safety"):
 //! - One KRC: the first sender (or the configured `krc_address`) is pinned by IP address; datagrams
@@ -58,8 +61,11 @@ pub struct DriverConfig {
     pub request_command_mode: bool,
     /// Hold when a joint exceeds this fraction of its velocity limit.
     pub velocity_margin: f64,
-    /// Cycles over which a hold for a stale command fades out that command's torque.
+    /// Cycles over which a hold for a stale command fades out what its spring's preload cannot carry.
     pub hold_release_cycles: u64,
+    /// The largest offset of the hold's set point from the held position [rad]: how much of a stale
+    /// command's torque the hold's spring carries on.
+    pub hold_max_preload: f64,
     /// The KRC's address; `None`: the first sender is pinned.
     pub krc_address: Option<IpAddr>,
     /// Measurements resuming after this much silence [s] start a new KRC session.
@@ -73,11 +79,12 @@ impl Default for DriverConfig {
     fn default() -> Self {
         Self {
             watchdog_cycles: 5,
-            hold_stiffness: [800.0, 800.0, 500.0, 500.0, 200.0, 100.0, 100.0],
+            hold_stiffness: [5000.0, 5000.0, 5000.0, 5000.0, 1000.0, 500.0, 500.0],
             hold_damping: 0.7,
             request_command_mode: true,
             velocity_margin: 0.9,
             hold_release_cycles: 500,
+            hold_max_preload: 0.02,
             krc_address: None,
             new_session_after: 0.1,
             max_command_age: 0.02,
@@ -170,8 +177,7 @@ pub struct LwrDriver {
     peer: Option<SocketAddr>,
     session: u32,
     command: Option<([f64; 7], u64)>,
-    /// Where the hold holds, and the cycle it began.
-    hold: Option<([f64; 7], u64)>,
+    hold: Option<Hold>,
     /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
     last_torque: [f32; 7],
     pub counters: DriverCounters,
@@ -373,14 +379,19 @@ impl LwrDriver {
         } else {
             self.counters.stale_cycles += u64::from(fresh.is_none());
             self.counters.overspeed_cycles += u64::from(overspeed);
-            let (hold, since) = *self.hold.get_or_insert((q, self.cycle));
             if overspeed {
                 self.last_torque = [0.0; 7];
             }
-            let elapsed = self.cycle.saturating_sub(since) as f64;
-            let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0) as f32;
-            reply.add_jnt_trq = self.last_torque.map(|t| t * keep);
-            reply.jnt_pos = hold.map(|v| v as f32);
+            let config = &self.config;
+            let hold = self.hold.get_or_insert_with(|| Hold::new(q, self.cycle, &self.last_torque, config));
+            if overspeed {
+                hold.preload = [0.0; 7];
+                hold.rest = [0.0; 7];
+            }
+            let elapsed = self.cycle.saturating_sub(hold.since) as f64;
+            let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0);
+            reply.add_jnt_trq = hold.rest.map(|t| (t * keep) as f32);
+            reply.jnt_pos = std::array::from_fn(|i| (hold.q[i] + hold.preload[i]) as f32);
             reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
             reply.jnt_damping = [self.config.hold_damping as f32; 7];
             holding = true;
@@ -409,6 +420,25 @@ impl LwrDriver {
     }
 }
 
+/// Where a hold holds, since which cycle, and how the torque it took over is split: a set-point offset
+/// of the spring (kept) and the rest (fading).
+#[derive(Debug, Clone, Copy)]
+struct Hold {
+    q: [f64; 7],
+    since: u64,
+    preload: [f64; 7],
+    rest: [f64; 7],
+}
+
+impl Hold {
+    fn new(q: [f64; 7], since: u64, torque: &[f32; 7], config: &DriverConfig) -> Self {
+        let limit = config.hold_max_preload;
+        let preload = std::array::from_fn(|i| (torque[i] as f64 / config.hold_stiffness[i]).clamp(-limit, limit));
+        let rest = std::array::from_fn(|i| torque[i] as f64 - config.hold_stiffness[i] * preload[i]);
+        Self { q, since, preload, rest }
+    }
+}
+
 /// The `lwr_driver` node's parameters (config/lwr_driver.yaml).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -429,8 +459,12 @@ pub struct Params {
     pub hold_damping: f64,
     /// Hold when a joint exceeds this fraction of its velocity limit.
     pub velocity_margin: f64,
-    /// Cycles over which a hold for a stale command fades out that command's torque.
+    /// Cycles over which a hold for a stale command fades out what its spring's preload cannot carry.
     pub hold_release_cycles: u64,
+    /// The largest offset of the hold's set point from the held position [rad], per joint: how much
+    /// of a stale command's torque (the surface's balance) the hold carries on, and the farthest it
+    /// moves a joint should the surface vanish.
+    pub hold_max_preload: f64,
     /// Do not ask the KRL program to start command mode (monitor only).
     pub monitor_only: bool,
     /// Stop after this many seconds without a measurement (0: wait forever).
@@ -456,6 +490,7 @@ impl Default for Params {
             hold_damping: c.hold_damping,
             velocity_margin: c.velocity_margin,
             hold_release_cycles: c.hold_release_cycles,
+            hold_max_preload: c.hold_max_preload,
             monitor_only: false,
             exit_after_silence: 0.0,
             dead_after: 2.0,
@@ -473,6 +508,7 @@ impl Params {
             request_command_mode: !self.monitor_only,
             velocity_margin: self.velocity_margin,
             hold_release_cycles: self.hold_release_cycles,
+            hold_max_preload: self.hold_max_preload,
             krc_address: self.krc_address,
             new_session_after: self.new_session_after,
             max_command_age: self.max_command_age,
@@ -510,6 +546,9 @@ impl crate::params::NodeParams for Params {
         }
         if self.hold_release_cycles > 10_000 {
             return Err(format!("hold_release_cycles must be at most 10000, not {}", self.hold_release_cycles));
+        }
+        if !(self.hold_max_preload.is_finite() && (0.0..=0.05).contains(&self.hold_max_preload)) {
+            return Err(format!("hold_max_preload must lie in [0, 0.05] rad, not {}", self.hold_max_preload));
         }
         if !(self.velocity_margin > 0.0 && self.velocity_margin <= 1.0) {
             return Err(format!("velocity_margin must lie in (0, 1], not {}", self.velocity_margin));

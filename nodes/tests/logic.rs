@@ -209,39 +209,57 @@ fn no_fresh_command_means_holding_position() {
 }
 
 #[test]
-fn a_hold_for_a_stale_command_fades_its_torque_out_and_overspeed_drops_it() {
+fn a_hold_for_a_stale_command_hands_its_torque_to_the_spring_and_overspeed_drops_it() {
     let config = DriverConfig { hold_release_cycles: 100, ..DriverConfig::default() };
+    let (k, limit) = (config.hold_stiffness, config.hold_max_preload);
     let mut d = LwrDriver::new(config.clone());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
-    let total = [1.0, 50.0, 0.5, -40.0, -0.2, 1.0, 0.3];
+    // Joints 2 and 4 need more than the preload can carry (5000 N·m/rad × 0.02 rad = 100 N·m).
+    let total = [1.0, 150.0, 0.5, -95.0, -0.2, 1.0, 0.3];
     d.set_command(&total).unwrap();
-    let beyond_gravity: [f32; 7] = std::array::from_fn(|i| total[i] as f32 - G[i]);
+    let beyond_gravity: [f64; 7] = std::array::from_fn(|i| total[i] - G[i] as f64);
     let mut seq = 2;
     let mut reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
-    // Stale from cycle 7 on: held at the position of the first stale cycle, the torque fading linearly.
+    // What the hold applies at the held position: its spring's preload and the torque added.
+    let applied = |r: &softcontact_wire::fri::Command, i: usize| {
+        r.jnt_stiffness[i] as f64 * (r.jnt_pos[i] as f64 - Q[i] as f64) + r.add_jnt_trq[i] as f64
+    };
+    // Stale from cycle 7 on: held at the position of the first stale cycle.
     while seq < 7 {
         seq += 1;
         reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
     }
-    assert_eq!(reply.jnt_pos, Q);
-    assert!(reply.jnt_stiffness.iter().all(|k| *k > 0.0), "holding");
-    for (sent, full) in reply.add_jnt_trq.iter().zip(beyond_gravity) {
-        assert!((sent - full).abs() < 1e-4, "the first cycle of the hold keeps the whole torque: {sent} vs {full}");
+    assert!(reply.jnt_stiffness.iter().all(|kj| *kj > 0.0), "holding");
+    for (i, full) in beyond_gravity.iter().enumerate() {
+        let offset = reply.jnt_pos[i] as f64 - Q[i] as f64;
+        assert!(offset.abs() <= limit * (1.0 + 1e-5), "joint {i}: set point {offset} rad off, limit {limit}");
+        let kept = applied(&reply, i);
+        assert!((kept - full).abs() < 2e-3 * full.abs().max(1.0), "first cycle keeps all of {full}: {kept}");
     }
     for _ in 0..50 {
         seq += 1;
         reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
     }
-    for (sent, full) in reply.add_jnt_trq.iter().zip(beyond_gravity) {
-        assert!((sent - 0.5 * full).abs() < 1e-4, "half of {full} after half the release: {sent}");
+    for (i, full) in beyond_gravity.iter().enumerate() {
+        let carried = (full / k[i]).clamp(-limit, limit) * k[i];
+        let expected = carried + 0.5 * (full - carried);
+        let kept = applied(&reply, i);
+        assert!(
+            (kept - expected).abs() < 2e-3 * full.abs().max(1.0),
+            "joint {i}: half the rest fades: {kept} vs {expected}"
+        );
     }
     for _ in 0..60 {
         seq += 1;
         reply = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().0;
     }
-    assert_eq!(reply.add_jnt_trq, [0.0; 7], "released");
+    assert_eq!(reply.add_jnt_trq, [0.0; 7], "the rest released");
+    for (i, full) in beyond_gravity.iter().enumerate() {
+        let carried = (full / k[i]).clamp(-limit, limit) * k[i];
+        assert!((applied(&reply, i) - carried).abs() < 2e-3 * full.abs().max(1.0), "joint {i}: the spring carries on");
+    }
 
-    // Overspeed: the command is suspect, its torque goes at once.
+    // Overspeed: the command is suspect, its torque and any preload go at once.
     let mut d = LwrDriver::new(config);
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     d.set_command(&total).unwrap();
@@ -251,6 +269,7 @@ fn a_hold_for_a_stale_command_fades_its_torque_out_and_overspeed_drops_it() {
     let (reply, out) = d.handle(&measurement(3, InterfaceState::Command, fast, G)).unwrap();
     assert!(out.holding);
     assert_eq!(reply.add_jnt_trq, [0.0; 7]);
+    assert_eq!(reply.jnt_pos, fast, "held where it is, no preload");
 }
 
 #[test]

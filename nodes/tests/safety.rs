@@ -251,3 +251,66 @@ fn a_new_session_while_pressing_places_the_surface_by_the_force_read() {
     let f = cell.sim.contact().normal_force;
     assert!((f - 10.0).abs() < 5.0, "10 N commanded after the new session, {f:.1} N held");
 }
+
+/// One cycle with the controller stalled: the KRC's measurement is answered by the driver alone.
+fn stalled_cycle(cell: &mut Cell) {
+    let m = cell.sim.measurement().encode();
+    let (reply, _) = cell.driver.handle(&m).unwrap();
+    cell.sim.command(&reply);
+    cell.sim.step_cycle().unwrap();
+}
+
+#[test]
+fn a_controller_stalled_while_pressing_leaves_the_hand_in_place() {
+    // Adversarial finding: the controller stopped for 1.5 s while pushing 200 N; the hold faded the
+    // torque that balanced the sponge and the sponge threw the hand back 27 mm.
+    let mut cell = pressing(28);
+    cell.controller.command_force(200.0, 2.0).unwrap();
+    run(&mut cell, 2500);
+    let f0 = cell.sim.contact().normal_force;
+    let start = cell.sim.tool_pose().translation.vector;
+    let (mut moved, mut f_min, mut f_max): (f64, f64, f64) = (0.0, f0, f0);
+    for k in 0..3000 {
+        stalled_cycle(&mut cell);
+        if let Some(v) = violation(&cell.sim) {
+            panic!("stalled cycle {k}: {v}");
+        }
+        moved = moved.max((cell.sim.tool_pose().translation.vector - start).norm());
+        let f = cell.sim.contact().normal_force;
+        (f_min, f_max) = (f_min.min(f), f_max.max(f));
+    }
+    eprintln!("stall at {f0:.1} N: hand moved {:.2} mm, force {f_min:.1}..{f_max:.1} N", moved * 1e3);
+    assert!(moved < 3e-3, "the hand moved {:.1} mm in the stall", moved * 1e3);
+    assert!(f_max <= f0 + 10.0 && f_min >= 0.8 * f0, "force {f_min:.1}..{f_max:.1} N from {f0:.1} N");
+}
+
+#[test]
+fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload() {
+    // The other side of the stiff hold: what it carries on moves the arm should the surface give way.
+    let mut cell = pressing(29);
+    cell.controller.command_force(200.0, 2.0).unwrap();
+    run(&mut cell, 2500);
+    // The watchdog holds after 5 cycles without a command; then the surface goes.
+    for _ in 0..6 {
+        stalled_cycle(&mut cell);
+    }
+    let held = *cell.sim.q();
+    cell.sim.surface = None;
+    let preload = softcontact_nodes::lwr_driver::DriverConfig::default().hold_max_preload;
+    let mut farthest: f64 = 0.0;
+    for k in 0..3000 {
+        stalled_cycle(&mut cell);
+        if let Some(v) = violation(&cell.sim) {
+            panic!("stalled cycle {k}: {v}");
+        }
+        farthest = cell.sim.q().iter().zip(&held).fold(farthest, |m, (q, h)| m.max((q - h).abs()));
+    }
+    let last: Vec<f64> = cell.sim.q().iter().zip(&held).map(|(q, h)| q - h).collect();
+    eprintln!(
+        "surface gone in a stall: farthest joint {farthest:.4} rad from the held position, at the end {last:.4?}"
+    );
+    // The spring's set point is at most `preload` away: the arm settles there. On the way the rest of the
+    // torque, beyond what the preload carries, still fades (measured: 1.24 × preload at most).
+    assert!(last.iter().all(|d| d.abs() <= 1.02 * preload), "settled {last:.4?}, the preload is {preload} rad");
+    assert!(farthest <= 1.5 * preload, "a joint moved {farthest:.4} rad, the preload is {preload} rad");
+}
