@@ -137,6 +137,54 @@ pub struct DriverCounters {
     pub commands_too_old: u64,
 }
 
+impl DriverCounters {
+    /// Datagrams refused since `before`, beside those accepted: what /diagnostics says about who talks
+    /// FRI. Every datagram refused (a KRC sending nonsense, a stranger in the robot network) leaves the
+    /// arm to the KRC's own fallback, and says so.
+    pub fn refusals_since(&self, before: &DriverCounters) -> Refusals {
+        Refusals {
+            accepted: self.measurements.saturating_sub(before.measurements),
+            implausible: self.implausible.saturating_sub(before.implausible),
+            malformed: self.malformed.saturating_sub(before.malformed),
+            strangers: self.strangers.saturating_sub(before.strangers),
+        }
+    }
+}
+
+/// Datagrams accepted and refused over an interval.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Refusals {
+    pub accepted: u64,
+    pub implausible: u64,
+    pub malformed: u64,
+    pub strangers: u64,
+}
+
+impl Refusals {
+    pub fn refused(&self) -> u64 {
+        self.implausible + self.malformed + self.strangers
+    }
+
+    /// Datagrams came, and not one was accepted.
+    pub fn all_refused(&self) -> bool {
+        self.refused() > 0 && self.accepted == 0
+    }
+}
+
+impl std::fmt::Display for Refusals {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} FRI datagrams refused ({} implausible, {} malformed, {} from strangers), {} accepted",
+            self.refused(),
+            self.implausible,
+            self.malformed,
+            self.strangers,
+            self.accepted
+        )
+    }
+}
+
 /// The state the driver publishes for one measurement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriverOutput {

@@ -347,3 +347,24 @@ fn the_ft_node_removes_bias_and_tool_weight() {
     node.handle(&rec(5, 0.0), None).unwrap();
     assert_eq!((node.counters.lost, node.counters.saturated), (2, 1));
 }
+
+#[test]
+fn datagrams_all_refused_are_told_apart_from_some_refused() {
+    let mut d = LwrDriver::new(DriverConfig::default());
+    let before = d.counters;
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    let accepted = d.counters;
+    assert_eq!(accepted.refusals_since(&before).refused(), 0);
+    // A joint far beyond its limit: implausible, refused unanswered.
+    let mut wild = Q;
+    wild[3] = 40.0;
+    for seq in 2..12 {
+        assert!(d.handle(&measurement(seq, InterfaceState::Command, wild, G)).is_err());
+    }
+    assert!(d.handle(&[0u8; 3]).is_err());
+    let only_refused = d.counters.refusals_since(&accepted);
+    assert!(only_refused.all_refused(), "{only_refused}");
+    assert_eq!((only_refused.implausible, only_refused.malformed), (10, 1));
+    let some = d.counters.refusals_since(&before);
+    assert!(!some.all_refused() && some.refused() == 11 && some.accepted == 1, "{some}");
+}

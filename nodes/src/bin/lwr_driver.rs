@@ -15,7 +15,7 @@ use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::liveness::{DeadStream, StreamWatch};
-use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params};
+use softcontact_nodes::lwr_driver::{DriverCounters, DriverOutput, LwrDriver, Params, Refusals};
 use softcontact_nodes::messages::{self, DriverSession};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
@@ -33,17 +33,23 @@ struct Args {
     params: ParamArgs,
 }
 
+/// The driver's status: a dead controller, then datagrams all refused, then any refused, then holding.
 fn diagnostics(
     client: &FriClient,
     command_age: &Histogram,
     last: Option<&DriverOutput>,
     dead: Option<&DeadStream>,
+    refusals: &Refusals,
     stamp: Time,
 ) -> DiagnosticArray {
     let c = client.driver.counters;
     let us = |s: f64| (s * 1e6).round() as u64;
     let (level, message) = match (dead, last) {
         (Some(d), _) => (DiagnosticStatus::ERROR, format!("{d}; holding position")),
+        _ if refusals.all_refused() => {
+            (DiagnosticStatus::ERROR, format!("{refusals} in the last second: the KRC is not answered"))
+        }
+        _ if refusals.refused() > 0 => (DiagnosticStatus::WARN, format!("{refusals} in the last second")),
         (None, None) => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
         (None, Some(o)) if o.holding => {
             (DiagnosticStatus::WARN, format!("holding position ({:?}, quality {:?})", o.state, o.quality))
@@ -111,6 +117,9 @@ fn main() -> anyhow::Result<()> {
     let start = Instant::now();
     let mut command_watch = StreamWatch::new("/lwr/joint_torque_command", 1000.0, p.dead_after);
     let mut commands_dead: Option<DeadStream> = None;
+    // The counters at the last diagnostics, for what was refused since.
+    let mut counted = DriverCounters::default();
+    let mut all_refused_logged = false;
     while !ros::stopping(&stop) {
         let output = client.cycle(Duration::from_millis(5))?;
         // Newest torque command wins; a bad one is refused and counted, the previous one stays.
@@ -169,12 +178,21 @@ fn main() -> anyhow::Result<()> {
             (None, None) => {}
         }
         if Instant::now() >= next_diagnostics {
-            let status = diagnostics(&client, &command_age, last.as_ref(), commands_dead.as_ref(), clock.now());
+            let refusals = client.driver.counters.refusals_since(&counted);
+            if refusals.all_refused() && !all_refused_logged {
+                ros::log(&node, LogLevel::Error, &format!("{refusals} in the last second: the KRC is not answered"));
+            }
+            all_refused_logged = refusals.all_refused();
+            counted = client.driver.counters;
+            let dead = commands_dead.as_ref();
+            let status = diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now());
             publish_errors += u64::from(diag.publish(status).is_err());
             next_diagnostics += Duration::from_secs(1);
         }
     }
-    diag.publish(diagnostics(&client, &command_age, last.as_ref(), commands_dead.as_ref(), clock.now()))?;
+    let refusals = client.driver.counters.refusals_since(&counted);
+    let dead = commands_dead.as_ref();
+    diag.publish(diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now()))?;
     // The exit report: tests and `launch-scripts/sim.sh` read these lines.
     eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
