@@ -66,7 +66,7 @@ pub struct Cell {
 
 impl Cell {
     /// The cell with the F/T node set up for the LWR's hand (tared after 100 command cycles, as the
-    /// ft_sensor node does at start-up) and the estimator and controller given.
+    /// ft_sensor node does at start-up, with the node's checks) and the estimator and controller given.
     pub fn new(
         sim: SimConfig,
         controller: DeformationController,
@@ -99,10 +99,10 @@ impl Cell {
         })
     }
 
-    /// Software tare now (the /ft_sensor/bias service), for the present orientation of the hand: do it
-    /// out of contact.
+    /// Software tare now, as the /ft_sensor/bias service does it: refused (with the reason) when the
+    /// hand is in contact or moving, or the reading is unsteady.
     pub fn tare(&mut self) -> Result<(), CellError> {
-        self.ft.tare(self.orientation.as_ref()).map_err(CellError::Ft)?;
+        self.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?;
         self.tared = true;
         Ok(())
     }
@@ -113,6 +113,8 @@ impl Cell {
         let (reply, driver) = self.driver.handle(&m)?;
         self.sim.command(&reply);
         self.sim.step_cycle()?;
+        // /lwr/ee_pose, which the F/T node's tare checks for motion.
+        self.ft.observe_tool_pose(&driver.tool_pose);
         self.model.forward_kinematics(&mut self.data, &driver.q);
         let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
         self.orientation = Some(orientation);
@@ -124,8 +126,9 @@ impl Cell {
             return Ok(None);
         }
         self.commanding += 1;
-        if self.commanding == self.tare_after && !self.tared {
-            self.tare()?;
+        // The start-up tare, retried every `tare_after` cycles while refused, as the node retries it.
+        if self.commanding.is_multiple_of(self.tare_after) && !self.tared {
+            let _refused = self.tare();
         }
         let force_world = match ft.compensated.filter(|_| self.tared && !ft.invalid) {
             Some(c) => orientation * Vector3::new(c[0], c[1], c[2]),
@@ -134,9 +137,9 @@ impl Cell {
         let f = (-force_world.dot(&self.normal)).max(0.0);
         self.controller.follow_session(Some(driver.session), true, self.sim.krc_cycle());
         // As the controller node does: a failed tick sends an empty command, and the driver holds.
-        // An invalid F/T sample (saturated, an error bit) is withheld, as the F/T node withholds it from
-        // /ft_sensor/wrench: no tick, no command, and the driver's watchdog holds if it lasts.
-        let withheld = self.tared && ft.invalid;
+        // Until the F/T node has tared it publishes no /ft_sensor/wrench, and an invalid sample
+        // (saturated, an error bit) is withheld from it: no tick, no command, the driver holds.
+        let withheld = !self.tared || ft.invalid;
         let tick = (!withheld).then(|| self.controller.tick(&driver.q, &driver.dq, f, &force_world));
         let (torque, controller, refused) = match tick {
             None => (None, ControllerState { f, ..Default::default() }, None),

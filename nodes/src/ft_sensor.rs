@@ -486,6 +486,10 @@ pub struct Params {
     pub service_mapping: String,
     /// Stop after this many seconds without a record (0: wait forever).
     pub exit_after_silence: f64,
+    /// /lwr/ee_pose silent this long [s] after it flowed: the hand's orientation is unknown, so
+    /// /ft_sensor/wrench (gravity-compensated with it) is withheld and /diagnostics says ERROR until
+    /// poses flow again; /ft_sensor/wrench_raw goes on.
+    pub dead_after: f64,
     /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
@@ -510,6 +514,7 @@ impl Default for Params {
             bias_max_rotation: 5e-3,
             service_mapping: "cyclone".into(),
             exit_after_silence: 0.0,
+            dead_after: 2.0,
             use_sim_time: false,
         }
     }
@@ -569,6 +574,7 @@ impl crate::params::NodeParams for Params {
             return Err(format!("tare_after must be finite, not {}", self.tare_after));
         }
         within("exit_after_silence", self.exit_after_silence, 0.0, 86_400.0, "s (0: never)")?;
+        crate::liveness::validate_dead_after(self.dead_after)?;
         within("bias_window", self.bias_window, 10.0 / self.rate, 2.0, "s (at least 10 records)")?;
         within("bias_window", self.bias_window, 0.01, 2.0, "s")?;
         within("bias_max_force", self.bias_max_force, 0.1, 20.0, "N")?;
@@ -872,6 +878,8 @@ mod tests {
             ("tare_after", Params { tare_after: 1e300, ..Params::default() }),
             ("tare_after", Params { tare_after: f64::NEG_INFINITY, ..Params::default() }),
             ("exit_after_silence", Params { exit_after_silence: 1e300, ..Params::default() }),
+            ("dead_after", Params { dead_after: f64::NAN, ..Params::default() }),
+            ("dead_after", Params { dead_after: 0.0, ..Params::default() }),
             ("counts_per_force", Params { counts_per_force: 1e-300, ..Params::default() }),
             ("counts_per_torque", Params { counts_per_torque: 1e300, ..Params::default() }),
             ("bias_window", Params { bias_window: 0.001, ..Params::default() }),

@@ -314,3 +314,14 @@ fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload(
     assert!(last.iter().all(|d| d.abs() <= 1.02 * preload), "settled {last:.4?}, the preload is {preload} rad");
     assert!(farthest <= 1.5 * preload, "a joint moved {farthest:.4} rad, the preload is {preload} rad");
 }
+
+#[test]
+fn a_tare_while_pressing_is_refused_and_the_force_read_stays_true() {
+    // A tare in contact would zero the contact force: the controller would then push on, blind.
+    let mut cell = pressing(30);
+    let err = cell.tare().expect_err("tare in contact");
+    assert!(err.to_string().contains("tare refused"), "{err}");
+    let f_read = (0..100).filter_map(|_| cell.cycle().unwrap()).last().unwrap().controller.f;
+    let f_true = cell.sim.contact().normal_force;
+    assert!((f_read - f_true).abs() < 3.0, "read {f_read:.1} N, true {f_true:.1} N");
+}

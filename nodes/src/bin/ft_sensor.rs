@@ -3,7 +3,8 @@
 //! /lwr/ee_pose), serves /ft_sensor/bias (std_srvs/Trigger: software tare, refused in contact or in
 //! motion, with the reason in the answer), and reports stale, saturated or faulty data and network
 //! errors on /diagnostics. No datagram and no network error ends it: it asks the box to stream until it
-//! does.
+//! does. /lwr/ee_pose silent for `dead_after` after it flowed: the hand's orientation is unknown, so
+//! /ft_sensor/wrench is withheld (ERROR on /diagnostics) until poses flow again.
 
 use std::time::{Duration, Instant};
 
@@ -17,6 +18,7 @@ use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
 use softcontact_nodes::geometry;
+use softcontact_nodes::liveness::{DeadStream, StreamWatch};
 use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
@@ -72,11 +74,33 @@ fn main() -> anyhow::Result<()> {
     let mut tared = p.tare_after < 0.0;
     let mut tare_due: Option<Instant> = None;
     let mut tare_refusal: Option<String> = None;
+    let start = Instant::now();
+    let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
+    let mut poses_dead: Option<DeadStream> = None;
     while !ros::stopping(&stop) {
         while let Ok(Some((pose, _))) = poses.take() {
+            pose_watch.seen(start.elapsed().as_secs_f64());
             let (position, rotation) = geometry::pose_of(&pose.pose);
             client.node.observe_tool_pose(&Isometry3::from_parts(position.into(), rotation));
             orientation = Some(rotation * tool_to_sensor);
+        }
+        // Poses stopped (the driver or the middleware is dead): the hand may turn unseen, so the
+        // compensated wrench is withheld until they flow again.
+        match (pose_watch.dead(start.elapsed().as_secs_f64()), &poses_dead) {
+            (Some(d), None) => {
+                ros::log(&node, LogLevel::Error, &format!("{d}; /ft_sensor/wrench withheld"));
+                orientation = None;
+                poses_dead = Some(d);
+            }
+            (Some(d), Some(_)) => {
+                orientation = None;
+                poses_dead = Some(d);
+            }
+            (None, Some(_)) => {
+                ros::log(&node, LogLevel::Info, "/lwr/ee_pose flows again: /ft_sensor/wrench resumes");
+                poses_dead = None;
+            }
+            (None, None) => {}
         }
         if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
             last_status = out.status.0;
@@ -142,7 +166,9 @@ fn main() -> anyhow::Result<()> {
         if Instant::now() >= next_diagnostics {
             let c = client.node.counters;
             let status = softcontact_wire::rdt::Status(last_status);
-            let (level, message) = if silent > p.stale_after {
+            let (level, message) = if let Some(d) = &poses_dead {
+                (DiagnosticStatus::ERROR, format!("{d}: tool gravity unknown, /ft_sensor/wrench withheld"))
+            } else if silent > p.stale_after {
                 let why = if c.network_errors > 0 {
                     format!(" ({} network errors: box not up or unreachable?)", c.network_errors)
                 } else {
