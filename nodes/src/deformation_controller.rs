@@ -37,6 +37,9 @@ pub struct ControllerConfig {
     pub posture_damping: [f64; 7],
     /// Descent speed before contact [m/s].
     pub approach_speed: f64,
+    /// Farthest the approach goes from where it started [m]: with no surface within it (none there,
+    /// or a wrong `normal`) the hand stops and holds, instead of travelling to a joint limit.
+    pub max_approach: f64,
     pub onset: OnsetConfig,
     pub limits: Limits,
     /// Farthest an estimated surface may lie from the measured onset position [m]: a model placing
@@ -63,6 +66,7 @@ impl ControllerConfig {
             posture_stiffness: [20.0, 20.0, 10.0, 10.0, 2.0, 1.0, 0.5],
             posture_damping: [2.0, 2.0, 1.0, 1.0, 0.2, 0.05, 0.02],
             approach_speed: 0.01,
+            max_approach: 0.1,
             onset: OnsetConfig::default(),
             limits: Limits {
                 joint_torque: model.joints.iter().map(|j| j.limits.effort).collect(),
@@ -261,6 +265,11 @@ impl DeformationController {
         commanding
     }
 
+    /// The approach went `max_approach` without finding a surface: the hand holds there.
+    pub fn approach_exhausted(&self) -> bool {
+        self.contact_level.is_none() && self.config.approach_speed * self.time >= self.config.max_approach
+    }
+
     /// Forgets the contact, the plan and the start pose: the next tick approaches again from where the
     /// hand is. For a new KRC session, or joint states that stopped for a while — the arm may have
     /// been moved, the surface too.
@@ -402,10 +411,15 @@ impl DeformationController {
         let mut state = ControllerState { f: normal_force, f_cmd: self.f_cmd, ..Default::default() };
         let z_accel = match self.contact_level {
             None => {
-                // Approach: a constant descent along n from where the hand started.
-                let target = start.0.dot(&n) + self.config.approach_speed * self.time;
+                // Approach: a constant descent along n from where the hand started, `max_approach` at most.
+                let travel = self.config.approach_speed * self.time;
+                let (target, speed) = if travel < self.config.max_approach {
+                    (start.0.dot(&n) + travel, self.config.approach_speed)
+                } else {
+                    (start.0.dot(&n) + self.config.max_approach, 0.0)
+                };
                 let g = &self.config.gains;
-                g.stiffness * (target - along) + g.damping * (self.config.approach_speed - v.dot(&n))
+                g.stiffness * (target - along) + g.damping * (speed - v.dot(&n))
             }
             Some(level) => {
                 state.in_contact = true;
@@ -509,6 +523,8 @@ pub struct Params {
     pub posture_damping: [f64; 7],
     /// Descent speed before contact [m/s].
     pub approach_speed: f64,
+    /// Farthest the approach goes without finding a surface [m]; then the hand holds.
+    pub max_approach: f64,
     /// Onset: normal force threshold [N] and consecutive readings.
     pub onset_threshold: f64,
     pub onset_confirm: usize,
@@ -556,6 +572,7 @@ impl Default for Params {
             posture_stiffness: c.posture_stiffness,
             posture_damping: c.posture_damping,
             approach_speed: c.approach_speed,
+            max_approach: c.max_approach,
             onset_threshold: c.onset.threshold,
             onset_confirm: c.onset.confirm,
             torque_rate: c.limits.torque_rate,
@@ -590,6 +607,7 @@ impl Params {
         c.posture_stiffness = self.posture_stiffness;
         c.posture_damping = self.posture_damping;
         c.approach_speed = self.approach_speed;
+        c.max_approach = self.max_approach;
         c.onset = OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm };
         c.limits.torque_rate = self.torque_rate;
         c.limits.contact_lost_below = self.contact_lost_below;
@@ -629,6 +647,7 @@ impl crate::params::NodeParams for Params {
         all_within("posture_stiffness", &self.posture_stiffness, 1e3)?;
         all_within("posture_damping", &self.posture_damping, 1e2)?;
         within("approach_speed", self.approach_speed, 0.0, 0.05)?;
+        within("max_approach", self.max_approach, 0.0, 0.5)?;
         within("onset_threshold", self.onset_threshold, 0.0, 50.0)?;
         if !(1..=100).contains(&self.onset_confirm) {
             return Err(format!("onset_confirm must lie in 1..=100, not {}", self.onset_confirm));

@@ -41,6 +41,11 @@ fn pressing(seed: u64) -> Cell {
 
 /// The physical invariants of one cycle; the first violation, if any.
 fn violation(sim: &Simulator) -> Option<String> {
+    violation_within(sim, FORCE_LIMIT)
+}
+
+/// The same, with the contact force bounded by `force_bound`.
+fn violation_within(sim: &Simulator, force_bound: f64) -> Option<String> {
     let model = lwr4::model();
     for (i, j) in model.joints.iter().enumerate() {
         let (q, dq, tau) = (sim.q()[i], sim.dq()[i], sim.applied_torque()[i]);
@@ -56,7 +61,7 @@ fn violation(sim: &Simulator) -> Option<String> {
         }
     }
     let f = sim.contact().normal_force;
-    (!(f <= FORCE_LIMIT)).then(|| format!("contact force {f} N above the force limit {FORCE_LIMIT} N"))
+    (!(f <= force_bound)).then(|| format!("contact force {f} N above the force limit {force_bound} N"))
 }
 
 /// Runs `cycles` cycles checking the invariants; the largest distance of the hand from where it was.
@@ -324,4 +329,131 @@ fn a_tare_while_pressing_is_refused_and_the_force_read_stays_true() {
     let f_read = (0..100).filter_map(|_| cell.cycle().unwrap()).last().unwrap().controller.f;
     let f_true = cell.sim.contact().normal_force;
     assert!((f_read - f_true).abs() < 3.0, "read {f_read:.1} N, true {f_true:.1} N");
+}
+
+#[test]
+fn an_approach_that_finds_no_surface_stops_after_max_approach() {
+    // A missing object or a wrong `normal` sent the approach on until a joint limit.
+    let mut config = SimConfig::above_surface(softcontact_sim::sponge(), 31);
+    config.sensor = softcontact_sim::FtSensorConfig::gamma();
+    config.surface = None;
+    let mut controller_config = ControllerConfig::lwr4(MAX_FORCE, 0.06);
+    controller_config.max_approach = 0.03;
+    let controller = DeformationController::new(controller_config, softcontact_sim::sponge()).unwrap();
+    let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+    let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+    cell.start(2000).unwrap();
+    let start = cell.sim.tool_pose().translation.vector;
+    // 8 s at 1 cm/s would be 8 cm.
+    run(&mut cell, 8000);
+    let travelled = (cell.sim.tool_pose().translation.vector - start).norm();
+    assert!(cell.controller.approach_exhausted());
+    assert!(travelled < 0.031, "the approach went {:.1} mm, max_approach 30 mm", travelled * 1e3);
+    let still = run(&mut cell, 1000);
+    assert!(still < 1e-3, "then it holds: {:.2} mm in 1 s", still * 1e3);
+}
+
+/// How many numbers a parameter tree holds.
+fn numbers(v: &serde_yaml_ng::Value) -> usize {
+    use serde_yaml_ng::Value;
+    match v {
+        Value::Number(_) => 1,
+        Value::Sequence(s) => s.iter().map(numbers).sum(),
+        Value::Mapping(m) => m.values().map(numbers).sum(),
+        _ => 0,
+    }
+}
+
+/// Replaces the `k`-th number of a parameter tree by `new(old)`; false once past the end.
+fn replace_number(
+    v: &mut serde_yaml_ng::Value,
+    k: &mut usize,
+    new: &mut impl FnMut(&serde_yaml_ng::Number) -> serde_yaml_ng::Value,
+) -> bool {
+    use serde_yaml_ng::Value;
+    match v {
+        Value::Number(n) if *k == 0 => {
+            *v = new(n);
+            true
+        }
+        Value::Number(_) => {
+            *k -= 1;
+            false
+        }
+        Value::Sequence(s) => s.iter_mut().any(|x| replace_number(x, k, new)),
+        Value::Mapping(m) => m.values_mut().any(|x| replace_number(x, k, new)),
+        _ => false,
+    }
+}
+
+/// `params` with `count` of its numbers replaced by random or extreme ones; `None` if that no longer
+/// deserializes (a negative or fractional count, say), which refuses it as surely as `validate`.
+fn fuzzed<P: serde::Serialize + serde::de::DeserializeOwned>(
+    params: &P,
+    count: usize,
+    rng: &mut SmallRng,
+) -> Option<P> {
+    let mut tree = serde_yaml_ng::to_value(params).unwrap();
+    for _ in 0..count {
+        let mut k = rng.random_range(0..numbers(&tree));
+        replace_number(&mut tree, &mut k, &mut |old| {
+            if old.is_f64() {
+                let x = old.as_f64().unwrap();
+                let typical = if x == 0.0 { -1.0..1.0 } else { (x.abs() * 0.1)..(x.abs() * 10.0) };
+                serde_yaml_ng::Value::from(value(rng, typical))
+            } else {
+                const COUNTS: [i64; 7] = [0, 1, 2, 7, 1000, u32::MAX as i64, i64::MAX];
+                serde_yaml_ng::Value::from(if rng.random_bool(0.5) { COUNTS[rng.random_range(0..7)] } else { -1 })
+            }
+        });
+    }
+    serde_yaml_ng::from_value(tree).ok()
+}
+
+#[test]
+fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
+    // Every parameter a user can set reaches the arm through the controller's and driver's configs:
+    // a set the nodes accept must keep the limits through approach, contact, a force and a
+    // deformation command (SOFTCONTACT_FUZZ_CASES / 50 sets, at least 20).
+    use softcontact_nodes::deformation_controller::Params as ControllerParams;
+    use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
+    use softcontact_nodes::params::NodeParams;
+    let cases: usize = std::env::var("SOFTCONTACT_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
+    let sets = (cases / 50).max(20);
+    let mut rng = SmallRng::seed_from_u64(0x9A7A);
+    let (mut accepted, mut refused) = (0, 0);
+    for set in 0..sets {
+        let n = rng.random_range(1..3);
+        let controller = fuzzed(&ControllerParams::default(), n, &mut rng).filter(|p| p.validate().is_ok());
+        let n = rng.random_range(0..3);
+        let driver = fuzzed(&DriverParams::default(), n, &mut rng).filter(|p| p.validate().is_ok());
+        let (Some(cp), Some(dp)) = (controller, driver) else {
+            refused += 1;
+            continue;
+        };
+        accepted += 1;
+        let mut config = SimConfig::above_surface(softcontact_sim::sponge(), 100 + set as u64);
+        config.sensor = softcontact_sim::FtSensorConfig::gamma();
+        let controller = DeformationController::new(cp.controller_config(), cp.initial_model.clone()).unwrap();
+        let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+        let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        cell.driver = LwrDriver::new(dp.driver_config());
+        let bound = 1.2 * cp.force_limit;
+        let mut check = |cell: &mut Cell, cycles: usize, what: &str| {
+            for k in 0..cycles {
+                cell.cycle().unwrap();
+                if let Some(v) = violation_within(&cell.sim, bound) {
+                    panic!("set {set} ({what}), cycle {k}: {v}\ncontroller {cp:?}\ndriver {dp:?}");
+                }
+            }
+        };
+        check(&mut cell, 6000, "approach");
+        let force = cp.max_force.min(100.0) * 0.8;
+        let forced = cell.controller.command_force(force, 1.0);
+        check(&mut cell, 2000, &format!("force {force} N: {forced:?}"));
+        let pressed = cell.controller.command_deformation(0.01, 1.0);
+        check(&mut cell, 1500, &format!("deformation 10 mm: {pressed:?}"));
+    }
+    eprintln!("{sets} fuzzed parameter sets: {accepted} accepted and run, {refused} refused, no violation");
+    assert!(accepted >= sets / 5 && refused >= sets / 5, "{accepted} accepted, {refused} refused");
 }

@@ -64,6 +64,7 @@ fn main() -> anyhow::Result<()> {
     let (mut ticks, mut stale, mut failed, mut adopted) = (0u64, 0u64, 0u64, 0u64);
     let mut next_stale_log = Instant::now();
     let mut was_in_contact = false;
+    let mut approach_exhausted_logged = false;
     let (mut last_joint_state, mut last_session, mut ticks_in_session, mut restarts) = (None, None, 0u64, 0u64);
     let start = Instant::now();
     let mut joint_states_watch = StreamWatch::new("/lwr/joint_states", 1000.0, p.dead_after);
@@ -185,6 +186,11 @@ fn main() -> anyhow::Result<()> {
             torque_pub.publish(messages::torque_command(&names, &tau, &js.header))?;
             ticks += 1;
             ticks_in_session += 1;
+            if controller.approach_exhausted() && !approach_exhausted_logged {
+                let why = format!("no surface within max_approach {} m: holding there", p.max_approach);
+                ros::log(&node, LogLevel::Error, &why);
+            }
+            approach_exhausted_logged = controller.approach_exhausted();
             if s.in_contact != was_in_contact {
                 was_in_contact = s.in_contact;
                 ros::log(
