@@ -5,38 +5,23 @@
 //! stops the graph. Then the driver is continued with its controller gone: it must hold the arm, keep
 //! running while the KRC commands, and report the silent command stream as ERROR on /diagnostics.
 
+#[allow(dead_code)]
+mod common;
+
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
+use common::{INNER, in_isolated_namespace};
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ContactState, ControllerState};
 use softcontact_nodes::ros;
 
-const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
 /// The nodes' `dead_after` in this test [s], and how late past it a node may notice.
 const DEAD_AFTER: f64 = 1.0;
 const MARGIN: f64 = 1.0;
-
-/// Runs the named test of this binary again, inside a fresh network namespace with only `lo` (in a user
-/// namespace too, so that it needs no root).
-fn in_isolated_namespace(test: &str) {
-    let exe = std::env::current_exe().unwrap();
-    let script = format!(
-        "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
-        exe.display()
-    );
-    let out = Command::new("unshare")
-        .args(["--map-root-user", "--net", "sh", "-c", &script])
-        .env(INNER, "1")
-        .output()
-        .expect("unshare runs");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    eprintln!("{text}");
-    assert!(out.status.success() && text.contains("1 passed"), "isolated run failed:\n{text}");
-}
 
 /// The node processes, each logging to a file; killed (and continued first, if stopped) on drop.
 struct Processes {

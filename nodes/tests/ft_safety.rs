@@ -3,6 +3,9 @@
 //! once it comes up; repeated and older records are not passed on as fresh. Once in-process (the
 //! node's `RdtClient`), once with the real `ft_sensor` process in a loopback-only network namespace.
 
+#[allow(dead_code)]
+mod common;
+
 use std::net::{SocketAddr, UdpSocket};
 use std::process::{Command, Stdio};
 use std::sync::Arc;
@@ -10,13 +13,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use common::{INNER, in_isolated_namespace, signal};
 use nalgebra::Vector3;
 use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::udp::RdtClient;
 use softcontact_wire::rdt::{Calibration, RdtCommand, Record, Request, Status};
-
-const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
 
 /// A port on 127.0.0.1 that nothing listens on (bound, then closed).
 fn closed_port() -> SocketAddr {
@@ -101,23 +103,6 @@ fn the_rdt_client_outlives_a_box_that_is_not_up_and_streams_once_it_is() {
     assert_eq!(c.lost, 0, "{c:?}");
 }
 
-/// Runs the named test of this binary again, inside a fresh network namespace with only `lo`.
-fn in_isolated_namespace(test: &str) {
-    let exe = std::env::current_exe().unwrap();
-    let script = format!(
-        "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
-        exe.display()
-    );
-    let out = Command::new("unshare")
-        .args(["--map-root-user", "--net", "sh", "-c", &script])
-        .env(INNER, "1")
-        .output()
-        .expect("unshare runs");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    eprintln!("{text}");
-    assert!(out.status.success() && text.contains("1 passed"), "isolated run failed:\n{text}");
-}
-
 /// A counter of the node's exit report (`FtCounters { records: 123, … }`).
 fn counter(report: &str, name: &str) -> Option<u64> {
     let at = report.rfind(&format!("{name}: "))? + name.len() + 2;
@@ -146,8 +131,7 @@ fn the_ft_sensor_node_outlives_a_box_that_is_not_up_and_streams_once_it_is() {
     let stop = Arc::new(AtomicBool::new(false));
     let ft_box = fake_box(addr, false, stop.clone());
     std::thread::sleep(Duration::from_millis(3000));
-    // SAFETY: kill(2) on the pid of a child we have not waited for yet.
-    assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) }, 0);
+    signal(&[&child], libc::SIGINT);
     let out = child.wait_with_output().unwrap();
     stop.store(true, Ordering::Relaxed);
     let sent = ft_box.join().unwrap();

@@ -2,9 +2,12 @@
 //! machine: the test re-runs itself inside a network namespace that has only loopback (design.md
 //! section 3), where it starts the three node processes and talks to them as a controller would.
 
-use std::process::{Child, Command, Stdio};
+#[allow(dead_code)]
+mod common;
+
 use std::time::{Duration, Instant};
 
+use common::{INNER, Processes, in_isolated_namespace, spawn};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::DiagnosticArray;
@@ -12,41 +15,6 @@ use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::ros;
-
-const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
-
-/// Runs the named test of this binary again, inside a fresh network namespace with only `lo` (in a user
-/// namespace too, so that it needs no root).
-fn in_isolated_namespace(test: &str) {
-    let exe = std::env::current_exe().unwrap();
-    let script = format!(
-        "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
-        exe.display()
-    );
-    let out = Command::new("unshare")
-        .args(["--map-root-user", "--net", "sh", "-c", &script])
-        .env(INNER, "1")
-        .output()
-        .expect("unshare runs");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    eprintln!("{text}");
-    assert!(out.status.success() && text.contains("1 passed"), "isolated run failed:\n{text}");
-}
-
-struct Processes(Vec<Child>);
-
-impl Drop for Processes {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-fn spawn(bin: &str, args: &[&str]) -> Child {
-    Command::new(bin).args(args).stdin(Stdio::null()).spawn().unwrap_or_else(|e| panic!("{bin}: {e}"))
-}
 
 #[test]
 fn driver_and_ft_nodes_serve_the_graph_over_dds() {

@@ -6,54 +6,15 @@
 //! network namespace with only loopback, and checks that every stream flows afterwards and that the nodes
 //! still discover a participant that joins after the stalls.
 
-use std::process::{Child, Command, Stdio};
+mod common;
+
+use std::process::Child;
 use std::time::{Duration, Instant};
 
+use common::{INNER, Processes, in_isolated_namespace, signal, spawn};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::ContactState;
 use softcontact_nodes::ros;
-
-const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
-
-/// Runs the named test of this binary again, inside a fresh network namespace with only `lo` (in a user
-/// namespace too, so that it needs no root).
-fn in_isolated_namespace(test: &str) {
-    let exe = std::env::current_exe().unwrap();
-    let script = format!(
-        "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
-        exe.display()
-    );
-    let out = Command::new("unshare")
-        .args(["--map-root-user", "--net", "sh", "-c", &script])
-        .env(INNER, "1")
-        .output()
-        .expect("unshare runs");
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-    eprintln!("{text}");
-    assert!(out.status.success() && text.contains("1 passed"), "isolated run failed:\n{text}");
-}
-
-struct Processes(Vec<Child>);
-
-impl Drop for Processes {
-    fn drop(&mut self) {
-        for c in &mut self.0 {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-fn spawn(bin: &str, args: &[&str]) -> Child {
-    Command::new(bin).args(args).stdin(Stdio::null()).spawn().unwrap_or_else(|e| panic!("{bin}: {e}"))
-}
-
-fn signal(children: &[&Child], sig: libc::c_int) {
-    for c in children {
-        // SAFETY: kill(2) on the pid of a child we have not waited for yet.
-        assert_eq!(unsafe { libc::kill(c.id() as libc::pid_t, sig) }, 0, "kill {sig}");
-    }
-}
 
 /// Joint states (the driver publishing) and estimator states (the estimator receiving the F/T node's
 /// wrenches and the driver's poses, and publishing) received in `window`.

@@ -77,20 +77,34 @@ fn flipped(bytes: &[u8], at: u64, path: &Path) {
     std::fs::write(path, bytes).unwrap();
 }
 
-#[test]
-fn a_flipped_byte_in_a_zstd_chunk_loses_that_chunk_only_with_a_warning_that_counts_it() {
+/// A recording of `rounds` rounds, a chunk every 100, in a fresh folder (kept while the `TempDir` lives):
+/// the messages written, the file's bytes and its chunks.
+fn recorded(rounds: u32) -> (tempfile::TempDir, Written, Vec<u8>, Vec<Chunk>) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
-    let written = write_chunked(&path, 600, 100);
+    let written = write_chunked(&path, rounds, 100);
     let bytes = std::fs::read(&path).unwrap();
     let chunks = chunks(&bytes);
+    (dir, written, bytes, chunks)
+}
+
+/// `bytes` with the byte at `at` flipped, written to `path` and opened: the recording and every message
+/// read, which must end without an error (`what` says which flip in the message if not).
+fn read_flipped(bytes: &[u8], at: u64, path: &Path, what: &str) -> (Recording, Written) {
+    flipped(bytes, at, path);
+    let recording = Recording::open(path).unwrap();
+    let (read, error) = read_all(&recording);
+    assert_eq!(error, None, "{what}");
+    (recording, read)
+}
+
+#[test]
+fn a_flipped_byte_in_a_zstd_chunk_loses_that_chunk_only_with_a_warning_that_counts_it() {
+    let (dir, written, bytes, chunks) = recorded(600);
     assert!(chunks.len() >= 6, "{} chunks", chunks.len());
     let damaged = dir.path().join("damaged.mcap");
     for (k, chunk) in chunks.iter().enumerate() {
-        flipped(&bytes, chunk.data + chunk.data_len / 2, &damaged);
-        let recording = Recording::open(&damaged).unwrap();
-        let (read, error) = read_all(&recording);
-        assert_eq!(error, None, "chunk {k}");
+        let (recording, read) = read_flipped(&bytes, chunk.data + chunk.data_len / 2, &damaged, &format!("chunk {k}"));
         let want = without(&written, chunk.times);
         let lost = written.len() - want.len();
         assert_eq!(lost, 100 * samples(0).len(), "chunk {k} holds 100 rounds");
@@ -106,11 +120,7 @@ fn a_flipped_byte_in_a_zstd_chunk_loses_that_chunk_only_with_a_warning_that_coun
 
 #[test]
 fn any_flipped_byte_of_a_chunk_record_loses_at_most_that_chunk_never_a_changed_value() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("run.mcap");
-    let written = write_chunked(&path, 500, 100);
-    let bytes = std::fs::read(&path).unwrap();
-    let chunks = chunks(&bytes);
+    let (dir, written, bytes, chunks) = recorded(500);
     let chunk = &chunks[2];
     let want = without(&written, chunk.times);
     let damaged = dir.path().join("damaged.mcap");
@@ -119,10 +129,7 @@ fn any_flipped_byte_of_a_chunk_record_loses_at_most_that_chunk_never_a_changed_v
     let data = (0..150).map(|i| chunk.data + i * (chunk.length - (chunk.data - chunk.start)) / 150);
     let (mut whole, mut lost) = (0, 0);
     for at in header.into_iter().chain(data) {
-        flipped(&bytes, at, &damaged);
-        let recording = Recording::open(&damaged).unwrap();
-        let (read, error) = read_all(&recording);
-        assert_eq!(error, None, "byte {at}");
+        let (recording, read) = read_flipped(&bytes, at, &damaged, &format!("byte {at}"));
         if read == written {
             // Only a header field the reader does not need (a time bound) was hit.
             whole += 1;
@@ -192,11 +199,7 @@ fn a_flipped_byte_in_an_uncompressed_chunk_is_caught_by_its_crc_not_replayed_as_
 
 #[test]
 fn a_damaged_record_header_is_stepped_over_with_the_chunk_index() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("run.mcap");
-    let written = write_chunked(&path, 400, 100);
-    let bytes = std::fs::read(&path).unwrap();
-    let chunks = chunks(&bytes);
+    let (dir, written, bytes, chunks) = recorded(400);
     // The opcode of the second chunk becomes 0, then its length runs past the end of the file.
     let damaged = dir.path().join("damaged.mcap");
     let mut copy = bytes.clone();
