@@ -1,0 +1,271 @@
+//! The linear core: a model structure (base law plus augmentation terms with fixed shapes) becomes a design
+//! matrix whose columns are scaled to unit RMS; least squares on it, blocked cross-validation from per-fold
+//! Gram matrices, AICc, and standard errors inflated for residual autocorrelation.
+
+use nalgebra::{DMatrix, DVector};
+use std::ops::Range;
+
+use softcontact_contact::ContactModel;
+
+use crate::Series;
+
+/// An augmentation term with its shape parameter fixed; each adds one column (one linear amplitude).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Term {
+    /// 1 over all samples; coefficient offset [N].
+    Bias,
+    /// Model time over all samples; coefficient rate [N/s].
+    SensorDrift,
+    /// Maxwell branch of unit stiffness and time constant τ [s]; coefficient k_m [N/m].
+    Relax(f64),
+    /// zᵃ·tanh(ż/v₀) with v₀ [m/s]; coefficient k·h [N/mᵃ].
+    Hyst(f64),
+    /// −t·a·zᵃ⁻¹ (linearised surface-zero drift); coefficient k·r.
+    OffsetLin,
+    /// zᵃ·ln z (linearised change of the stiffness exponent); coefficient k·δa.
+    ExpDeriv,
+}
+
+/// Base law exponents a (fitted), b, c (of the baseline kind) and the surface-zero drift rate (a shape
+/// parameter refined by Gauss-Newton), plus the terms.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Structure {
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+    pub offset_rate: f64,
+    pub terms: Vec<Term>,
+}
+
+/// The series with what every fit needs precomputed.
+pub(crate) struct Data<'a> {
+    pub s: &'a Series,
+    /// Time as [`softcontact_contact::ContactModel::step`] counts it: the sum of the dt handed to it.
+    pub time: Vec<f64>,
+    pub dt: Vec<f64>,
+    pub folds: Vec<Range<usize>>,
+    /// In contact but the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0, fast unloading of a shallow
+    /// contact): [`ContactModel::step`] clamps the force to 0 there, so the contact columns are zeroed.
+    pub clamped: Vec<bool>,
+}
+
+impl<'a> Data<'a> {
+    pub fn new(s: &'a Series, folds: usize, baseline: &ContactModel) -> Self {
+        let n = s.len();
+        let dt = crate::step_sizes(s);
+        let mut time = Vec::with_capacity(n);
+        let mut acc = 0.0;
+        for &d in &dt {
+            acc += d;
+            time.push(acc);
+        }
+        let folds = (0..folds).map(|i| i * n / folds..(i + 1) * n / folds).collect();
+        let clamped =
+            (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
+        Data { s, time, dt, folds, clamped }
+    }
+}
+
+#[inline]
+fn signed_pow(x: f64, c: f64) -> f64 {
+    if c == 1.0 { x } else { x.signum() * x.abs().powf(c) }
+}
+
+#[inline]
+fn pow(z: f64, e: f64) -> f64 {
+    if e == 0.0 {
+        1.0
+    } else if e == 1.0 {
+        z
+    } else {
+        z.powf(e)
+    }
+}
+
+/// The raw (unscaled) columns of a structure: [zᵃ, zᵇ·sgn(ż)|ż|ᶜ, terms…], each zero out of contact
+/// except the sensor terms.
+pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
+    let s = d.s;
+    let n = s.len();
+    let zeff: Vec<f64> = (0..n).map(|i| s.z[i] - st.offset_rate * d.time[i]).collect();
+    let mut cols = Vec::with_capacity(2 + st.terms.len());
+    cols.push(zeff.iter().map(|&z| if z > 0.0 { pow(z, st.a) } else { 0.0 }).collect());
+    cols.push(
+        (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.b) * signed_pow(s.zdot[i], st.c) } else { 0.0 }).collect(),
+    );
+    // The smallest deformation used where a column has a negative power of z (a < 1 or ln z).
+    let zmin = 1e-3 * zeff.iter().cloned().fold(0.0, f64::max).max(1e-9);
+    for t in &st.terms {
+        let col: Vec<f64> = match *t {
+            Term::Bias => vec![1.0; n],
+            Term::SensorDrift => d.time.clone(),
+            Term::Relax(tau) => {
+                // The same exact update as ContactModel::step, with unit branch stiffness.
+                let mut x = 0.0;
+                (0..n)
+                    .map(|i| {
+                        if zeff[i] > 0.0 {
+                            let decay = (-d.dt[i] / tau).exp();
+                            x = x * decay + s.zdot[i] * tau * (1.0 - decay);
+                        } else {
+                            x = 0.0;
+                        }
+                        x
+                    })
+                    .collect()
+            }
+            Term::Hyst(v0) => {
+                (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * (s.zdot[i] / v0).tanh() } else { 0.0 }).collect()
+            }
+            Term::OffsetLin => (0..n)
+                .map(|i| if zeff[i] > 0.0 { -d.time[i] * st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 })
+                .collect(),
+            Term::ExpDeriv => {
+                (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * zeff[i].max(zmin).ln() } else { 0.0 }).collect()
+            }
+        };
+        cols.push(col);
+    }
+    for (j, col) in cols.iter_mut().enumerate() {
+        if j < 2 || !matches!(st.terms[j - 2], Term::Bias | Term::SensorDrift) {
+            for (v, &c) in col.iter_mut().zip(&d.clamped) {
+                if c {
+                    *v = 0.0;
+                }
+            }
+        }
+    }
+    cols
+}
+
+/// A least-squares fit with its held-out and in-sample scores.
+#[derive(Debug, Clone)]
+pub(crate) struct Fit {
+    /// Coefficients of the raw columns (physical units).
+    pub beta: Vec<f64>,
+    /// Standard errors of `beta`, inflated by (1+ρ)/(1−ρ) for the lag-1 autocorrelation ρ of the residual.
+    pub se: Vec<f64>,
+    /// Coefficients fitted with each fold held out.
+    pub fold_beta: Vec<Vec<f64>>,
+    pub sse: f64,
+    /// Mean held-out squared error over the blocked folds [N²].
+    pub cv_mse: f64,
+    pub aicc: f64,
+    /// Fitted prediction at every sample [N].
+    pub pred: Vec<f64>,
+}
+
+fn solve(g: &DMatrix<f64>, h: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    let p = g.nrows();
+    let ridge = 1e-12 * (0..p).map(|i| g[(i, i)]).sum::<f64>().max(1e-300);
+    let gr = g + DMatrix::identity(p, p) * ridge;
+    match gr.clone().cholesky() {
+        Some(ch) => (ch.solve(h), ch.inverse()),
+        None => {
+            let inv = gr.pseudo_inverse(1e-12).unwrap_or_else(|_| DMatrix::zeros(p, p));
+            (&inv * h, inv)
+        }
+    }
+}
+
+/// Fits `y` on the given raw columns.
+pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
+    let y = &d.s.f;
+    let n = y.len();
+    let p = cols.len();
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let r = (c.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+            if r > 0.0 && r.is_finite() { r } else { 1.0 }
+        })
+        .collect();
+    let mut gf = Vec::with_capacity(d.folds.len());
+    let mut hf = Vec::with_capacity(d.folds.len());
+    let mut yyf = Vec::with_capacity(d.folds.len());
+    let mut row = vec![0.0; p];
+    for r in &d.folds {
+        let mut g = DMatrix::<f64>::zeros(p, p);
+        let mut h = DVector::<f64>::zeros(p);
+        let mut yy = 0.0;
+        for i in r.clone() {
+            for j in 0..p {
+                row[j] = cols[j][i] / scale[j];
+            }
+            for j in 0..p {
+                h[j] += row[j] * y[i];
+                for k in 0..=j {
+                    g[(j, k)] += row[j] * row[k];
+                }
+            }
+            yy += y[i] * y[i];
+        }
+        for j in 0..p {
+            for k in 0..j {
+                g[(k, j)] = g[(j, k)];
+            }
+        }
+        gf.push(g);
+        hf.push(h);
+        yyf.push(yy);
+    }
+    let g: DMatrix<f64> = gf.iter().fold(DMatrix::zeros(p, p), |a, b| a + b);
+    let h: DVector<f64> = hf.iter().fold(DVector::zeros(p), |a, b| a + b);
+    let (beta_s, inv) = solve(&g, &h);
+    let mut pred = vec![0.0; n];
+    for (j, c) in cols.iter().enumerate() {
+        let b = beta_s[j] / scale[j];
+        for i in 0..n {
+            pred[i] += b * c[i];
+        }
+    }
+    let res: Vec<f64> = (0..n).map(|i| y[i] - pred[i]).collect();
+    let sse: f64 = res.iter().map(|r| r * r).sum();
+    let lag: f64 = res.windows(2).map(|w| w[0] * w[1]).sum();
+    let rho = if sse > 0.0 { lag / sse } else { 0.0 };
+    let rc = rho.clamp(0.0, 0.999);
+    let inflation = (1.0 + rc) / (1.0 - rc);
+    let s2 = sse / (n.saturating_sub(p).max(1)) as f64;
+    let se = (0..p).map(|j| (s2 * inflation * inv[(j, j)]).max(0.0).sqrt() / scale[j]).collect();
+    let mut fold_beta = Vec::new();
+    let mut held = 0.0;
+    for f in 0..d.folds.len() {
+        let gt = &g - &gf[f];
+        let ht = &h - &hf[f];
+        let (bf, _) = solve(&gt, &ht);
+        let out = yyf[f] - 2.0 * bf.dot(&hf[f]) + (&gf[f] * &bf).dot(&bf);
+        held += out.max(0.0);
+        fold_beta.push((0..p).map(|j| bf[j] / scale[j]).collect());
+    }
+    let nf = n as f64;
+    let pf = p as f64;
+    let aicc = nf * (sse.max(1e-300) / nf).ln() + 2.0 * pf + 2.0 * pf * (pf + 1.0) / (nf - pf - 1.0).max(1.0);
+    Fit { beta: (0..p).map(|j| beta_s[j] / scale[j]).collect(), se, fold_beta, sse, cv_mse: held / nf, aicc, pred }
+}
+
+pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
+    fit_columns(d, &columns(d, st))
+}
+
+/// Golden-section minimum of `f` on [lo, hi].
+pub(crate) fn golden(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64, iters: usize) -> f64 {
+    let phi = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+    let (mut f1, mut f2) = (f(x1), f(x2));
+    for _ in 0..iters {
+        if f1 <= f2 {
+            hi = x2;
+            x2 = x1;
+            f2 = f1;
+            x1 = hi - phi * (hi - lo);
+            f1 = f(x1);
+        } else {
+            lo = x1;
+            x1 = x2;
+            f1 = f2;
+            x2 = lo + phi * (hi - lo);
+            f2 = f(x2);
+        }
+    }
+    if f1 <= f2 { x1 } else { x2 }
+}

@@ -1,0 +1,890 @@
+//! The discrepancy workflow (design section 7): find what a contact model misses in a recording, name it
+//! from a library of physical effects, or say that nothing is missing, or that it is not in the library.
+//!
+//! Pure: a [`Series`] and a baseline [`ContactModel`] in, a [`Report`] (serialisable to the `softcontact
+//! discrepancy` JSON) and the augmented [`ContactModel`] out. No files, clocks or threads.
+//!
+//! # Method (see also this crate's README.md)
+//! 1. **Phases** ([`phases`]): `free`, `approach`, `loading`, `holding`, `unloading` from z and ż with a
+//!    velocity threshold taken from the data ([`velocity_threshold`]).
+//! 2. **Noise floor** ([`noise_floor`]): σ of the force in free space after removing a mean and a linear
+//!    trend, else from first differences in holds (σ ≈ std(Δf)/√2).
+//! 3. **Re-simulate** the baseline with [`ContactModel::step`] (the simulator's own code); residual =
+//!    measured − predicted; every RMS is over the in-contact samples (z > 0), also per phase.
+//! 4. **Anything to explain?** The baseline's k and λ are refitted (exponents fixed); if the in-contact RMS
+//!    is within [`Options::floor_margin`] of σ and the residual is nearly white, the answer is
+//!    [`Remaining::None`] with no effect named. Refusing is a first-class answer.
+//! 5. **Name**: each candidate is a physical augmentation with SI parameters (ids `sensor_bias`,
+//!    `sensor_drift`, `viscoelastic_relaxation`, `hysteresis`, `stiffness_exponent`,
+//!    `contact_offset_drift`). For a shape parameter on a grid (τ, v₀, a′) the model is linear in its
+//!    amplitudes; each candidate is fitted **jointly** with k and λ (and the effects already accepted) on
+//!    columns scaled to unit RMS. A candidate (or a pair of candidates, so that two hidden effects do not
+//!    mask each other) is accepted only if, against the current model:
+//!    - its held-out MSE over [`Options::folds`] folds contiguous in time improves by at least
+//!      [`Options::min_gain`] (relative), and its AICc by at least [`Options::min_delta_aicc`];
+//!    - it explains at least [`Options::min_share`] of the current excess held-out MSE over σ² (a
+//!      candidate explaining a sliver of a large structured residual is a proxy, not a discovery);
+//!    - every new amplitude has |t| ≥ [`Options::min_t`] with its variance inflated by (1+ρ)/(1−ρ) for the
+//!      lag-1 autocorrelation ρ of the candidate model's residual (a proxy that leaves structure behind
+//!      gets a large ρ and so a small t), **and** the same sign in every fold's fit;
+//!    - its parameters are physical (k_m > 0, 0 < h < 1, k > 0);
+//!    - no rival of another id has fitted contributions correlated beyond [`Options::collinear_corr`]
+//!      with a held-out MSE within [`Options::rival_ratio`]× and a gain at least 1/[`Options::rival_ratio`]
+//!      of the best one's: then the pair is reported `ambiguous` with the excitation that would separate it,
+//!      and nothing is named from it.
+//! 6. **Iterate**: add the accepted effect, refit everything, repeat (at most [`Options::max_rounds`]).
+//!    The end is `none` (at the noise floor), `unexplained` (structured residual no candidate explains —
+//!    an effect outside the library ends here) or `ambiguous`.
+//! 7. **Add**: the augmented [`ContactModel`] (same type; `stiffness_exponent` makes the kind `general`)
+//!    is re-simulated with [`ContactModel::step`] for the RMS after, overall and per phase.
+//!
+//! The lessons behind these choices (columns made dimensionless, joint fits, blocked folds, AICc, margins,
+//! collinearity, refusing out-of-library effects) are summarised in README.md beside this file.
+
+mod fit;
+#[cfg(test)]
+mod tests;
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind};
+
+use fit::{Data, Fit, Structure, Term};
+
+/// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
+/// free space), its rate ż [m/s] and the measured normal force f [N].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Series {
+    pub t: Vec<f64>,
+    pub z: Vec<f64>,
+    pub zdot: Vec<f64>,
+    pub f: Vec<f64>,
+}
+
+/// The fewest samples [`analyse`] accepts, in all and in contact.
+pub const MIN_SAMPLES: usize = 50;
+pub const MIN_CONTACT_SAMPLES: usize = 20;
+
+impl Series {
+    /// Checks equal lengths, finite values and strictly increasing time.
+    pub fn new(t: Vec<f64>, z: Vec<f64>, zdot: Vec<f64>, f: Vec<f64>) -> Result<Self, DiscrepancyError> {
+        let s = Series { t, z, zdot, f };
+        s.validate()?;
+        Ok(s)
+    }
+
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    pub fn validate(&self) -> Result<(), DiscrepancyError> {
+        let n = self.t.len();
+        if self.z.len() != n || self.zdot.len() != n || self.f.len() != n {
+            return Err(DiscrepancyError::Lengths { t: n, z: self.z.len(), zdot: self.zdot.len(), f: self.f.len() });
+        }
+        for (name, v) in [("t", &self.t), ("z", &self.z), ("zdot", &self.zdot), ("f", &self.f)] {
+            if let Some(index) = v.iter().position(|x| !x.is_finite()) {
+                return Err(DiscrepancyError::NonFinite { name, index });
+            }
+        }
+        if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(DiscrepancyError::Time(i + 1));
+        }
+        Ok(())
+    }
+}
+
+/// Why [`analyse`] refused its input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiscrepancyError {
+    #[error("the series' columns differ in length (t {t}, z {z}, zdot {zdot}, f {f})")]
+    Lengths { t: usize, z: usize, zdot: usize, f: usize },
+    #[error("`{name}` is not finite at sample {index}")]
+    NonFinite { name: &'static str, index: usize },
+    #[error("time stamps must increase strictly (sample {0})")]
+    Time(usize),
+    #[error(
+        "too few samples: {got} ({in_contact} in contact); need {MIN_SAMPLES} and {MIN_CONTACT_SAMPLES} in contact"
+    )]
+    TooShort { got: usize, in_contact: usize },
+    #[error("baseline model: {0}")]
+    Model(#[from] ContactError),
+}
+
+/// Phase of a sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// z ≤ 0 and not moving toward the surface.
+    Free,
+    /// z ≤ 0, moving toward the surface (ż > v_th).
+    Approach,
+    /// In contact, ż > v_th.
+    Loading,
+    /// In contact, |ż| ≤ v_th.
+    Holding,
+    /// In contact, ż < −v_th.
+    Unloading,
+}
+
+impl Phase {
+    pub const ALL: [Phase; 5] = [Phase::Free, Phase::Approach, Phase::Loading, Phase::Holding, Phase::Unloading];
+}
+
+/// The velocity threshold between moving and holding: 5 % of the 95th percentile of |ż|, at least
+/// 0.1 mm/s. The percentile ignores the few fastest samples (spikes of a differentiated position); 5 % of
+/// it is well above the jitter of a held position and well below the speed of any deliberate push.
+pub fn velocity_threshold(series: &Series) -> f64 {
+    (0.05 * p95_speed(series)).max(1e-4)
+}
+
+/// The 95th percentile of |ż| [m/s].
+fn p95_speed(series: &Series) -> f64 {
+    let mut v: Vec<f64> = series.zdot.iter().map(|x| x.abs()).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * 0.95).round() as usize]
+}
+
+/// The phase of every sample for the velocity threshold `v_th`.
+pub fn phases(series: &Series, v_th: f64) -> Vec<Phase> {
+    series
+        .z
+        .iter()
+        .zip(&series.zdot)
+        .map(|(&z, &zd)| {
+            if z <= 0.0 {
+                if zd > v_th { Phase::Approach } else { Phase::Free }
+            } else if zd > v_th {
+                Phase::Loading
+            } else if zd < -v_th {
+                Phase::Unloading
+            } else {
+                Phase::Holding
+            }
+        })
+        .collect()
+}
+
+/// Where the noise floor came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseSource {
+    /// Out-of-contact samples, after removing their mean and linear trend.
+    FreeSpace,
+    /// First differences of the force in holds: σ ≈ std(Δf)/√2.
+    HoldingDifferences,
+    /// First differences of all samples (an upper bound when nothing else is available).
+    AllDifferences,
+}
+
+/// The force noise σ [N] and how it was measured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct NoiseFloor {
+    pub sigma: f64,
+    pub source: NoiseSource,
+    pub samples: usize,
+}
+
+/// The fewest samples a noise estimate uses.
+pub const MIN_NOISE_SAMPLES: usize = 20;
+
+/// σ of the force noise: from out-of-contact samples (mean and linear trend removed) when there are at
+/// least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else from all first differences.
+pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
+    let free: Vec<usize> = (0..series.len()).filter(|&i| series.z[i] <= 0.0).collect();
+    if free.len() >= MIN_NOISE_SAMPLES {
+        let n = free.len() as f64;
+        let tm = free.iter().map(|&i| series.t[i]).sum::<f64>() / n;
+        let fm = free.iter().map(|&i| series.f[i]).sum::<f64>() / n;
+        let (mut stt, mut stf) = (0.0, 0.0);
+        for &i in &free {
+            stt += (series.t[i] - tm).powi(2);
+            stf += (series.t[i] - tm) * (series.f[i] - fm);
+        }
+        let slope = if stt > 0.0 { stf / stt } else { 0.0 };
+        let sse: f64 = free.iter().map(|&i| (series.f[i] - fm - slope * (series.t[i] - tm)).powi(2)).sum();
+        return NoiseFloor { sigma: (sse / (n - 2.0)).sqrt(), source: NoiseSource::FreeSpace, samples: free.len() };
+    }
+    let diffs = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
+        (1..series.len()).filter(|&i| keep(i)).map(|i| series.f[i] - series.f[i - 1]).collect()
+    };
+    let std = |d: &[f64]| {
+        let m = d.iter().sum::<f64>() / d.len() as f64;
+        (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (d.len() as f64 - 1.0)).sqrt()
+    };
+    let hold = diffs(&|i| phases[i] == Phase::Holding && phases[i - 1] == Phase::Holding);
+    if hold.len() >= MIN_NOISE_SAMPLES {
+        return NoiseFloor {
+            sigma: std(&hold) / 2f64.sqrt(),
+            source: NoiseSource::HoldingDifferences,
+            samples: hold.len(),
+        };
+    }
+    let all = diffs(&|_| true);
+    NoiseFloor { sigma: std(&all) / 2f64.sqrt(), source: NoiseSource::AllDifferences, samples: all.len() }
+}
+
+/// The dt handed to [`ContactModel::step`] at each sample: the spacing of the time stamps (the first
+/// sample gets the second's spacing).
+pub fn step_sizes(series: &Series) -> Vec<f64> {
+    let n = series.len();
+    (0..n)
+        .map(|i| {
+            if i > 0 {
+                series.t[i] - series.t[i - 1]
+            } else if n > 1 {
+                series.t[1] - series.t[0]
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The measured force `model` predicts at every sample, stepped with [`ContactModel::step`] from a fresh
+/// state.
+pub fn simulate(model: &ContactModel, series: &Series) -> Result<Vec<f64>, DiscrepancyError> {
+    let mut state = model.effect_state();
+    let dt = step_sizes(series);
+    (0..series.len()).map(|i| Ok(model.step(&mut state, series.z[i], series.zdot[i], dt[i])?.1)).collect()
+}
+
+/// Thresholds of [`analyse`]; the defaults are the documented method.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// Folds contiguous in time for held-out scores.
+    pub folds: usize,
+    /// Rounds of name-and-add.
+    pub max_rounds: usize,
+    /// The residual is at the noise floor when its in-contact RMS ≤ floor_margin·σ (and it is nearly white:
+    /// lag-1 autocorrelation ≤ [`Options::max_white_rho`]). 1.2 lets a structure of up to 0.66 σ hide in
+    /// the noise: smaller than any effect worth naming, larger than the error of σ from a second of free
+    /// space.
+    pub floor_margin: f64,
+    pub max_white_rho: f64,
+    /// Smallest relative improvement of the held-out MSE (0.05 = 5 %).
+    pub min_gain: f64,
+    /// Smallest share of the current excess held-out MSE (over σ²) an accepted option must explain. A
+    /// candidate that explains a small part of a large structured residual is the nearest proxy of an
+    /// effect outside the library, not a discovery: 0.5 demands it explain most of what is there.
+    pub min_share: f64,
+    /// Smallest AICc decrease (10: "very strong" on Burnham and Anderson's scale).
+    pub min_delta_aicc: f64,
+    /// Smallest |t| of every new amplitude, with the autocorrelation-inflated variance.
+    pub min_t: f64,
+    /// |corr| of two candidates' fitted contributions beyond which they are collinear.
+    pub collinear_corr: f64,
+    /// Held-out scores within this factor "explain nearly as much" (PySR's 1.5×).
+    pub rival_ratio: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            folds: 5,
+            max_rounds: 4,
+            floor_margin: 1.2,
+            max_white_rho: 0.5,
+            min_gain: 0.05,
+            min_share: 0.5,
+            min_delta_aicc: 10.0,
+            min_t: 3.0,
+            collinear_corr: 0.9,
+            rival_ratio: 1.5,
+        }
+    }
+}
+
+/// What is left after the workflow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Remaining {
+    /// The residual is at the noise floor.
+    None,
+    /// A structured residual that no candidate explains.
+    Unexplained,
+    /// Two candidates explain the same residual; the recording cannot tell them apart.
+    Ambiguous,
+}
+
+/// The baseline as given.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Baseline {
+    pub kind: Kind,
+    /// In-contact residual RMS of the baseline as given [N].
+    pub rms: f64,
+}
+
+/// The baseline's k and λ refitted on this recording (exponents fixed), before any effect.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Refit {
+    pub stiffness: f64,
+    pub damping: f64,
+    pub rms: f64,
+}
+
+/// A named effect with its SI parameters.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct NamedEffect {
+    pub id: String,
+    /// NAME_SI_UNIT → value, from the final joint fit.
+    pub parameters: BTreeMap<String, f64>,
+    /// NAME_SI_UNIT → half-width of the 95 % interval (autocorrelation-inflated), for the terminal table.
+    #[serde(skip)]
+    pub uncertainty: BTreeMap<String, f64>,
+    /// In-contact RMS before and after this effect was added [N].
+    pub rms_before: f64,
+    pub rms_after: f64,
+}
+
+/// Two candidates the recording cannot tell apart.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ambiguity {
+    pub between: [String; 2],
+    pub would_separate: String,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PhaseRms {
+    pub rms_before: f64,
+    pub rms_after: f64,
+}
+
+/// The result of [`analyse`]; serialises to the design's discrepancy JSON (without `model_file`, which the
+/// CLI adds), with `refit` and `noise_source` besides.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Report {
+    pub baseline: Baseline,
+    pub refit: Refit,
+    pub noise_floor: f64,
+    pub noise_source: NoiseSource,
+    pub effects: Vec<NamedEffect>,
+    pub ambiguous: Vec<Ambiguity>,
+    /// Per phase (only phases with samples): RMS of the baseline as given and of the final model. Out of
+    /// contact (`free`, `approach`) the RMS is over that phase's own samples.
+    pub phases: BTreeMap<Phase, PhaseRms>,
+    pub final_rms: f64,
+    pub remaining: Remaining,
+    /// The augmented model (the baseline refitted when nothing was named).
+    #[serde(skip)]
+    pub model: ContactModel,
+    #[serde(skip)]
+    pub velocity_threshold: f64,
+    /// Lag-1 autocorrelation of the final in-contact residual (≈ 0 when white).
+    #[serde(skip)]
+    pub final_lag1: f64,
+}
+
+/// A candidate family of the library.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Family {
+    SensorBias,
+    SensorDrift,
+    Relaxation,
+    Hysteresis,
+    StiffnessExponent,
+    OffsetDrift,
+}
+
+impl Family {
+    const ALL: [Family; 6] = [
+        Family::SensorBias,
+        Family::SensorDrift,
+        Family::Relaxation,
+        Family::Hysteresis,
+        Family::StiffnessExponent,
+        Family::OffsetDrift,
+    ];
+
+    fn id(self) -> &'static str {
+        match self {
+            Family::SensorBias => "sensor_bias",
+            Family::SensorDrift => "sensor_drift",
+            Family::Relaxation => "viscoelastic_relaxation",
+            Family::Hysteresis => "hysteresis",
+            Family::StiffnessExponent => "stiffness_exponent",
+            Family::OffsetDrift => "contact_offset_drift",
+        }
+    }
+
+    /// The term this family adds (None for the exponent, which changes a).
+    fn term(self, shape: f64) -> Option<Term> {
+        match self {
+            Family::SensorBias => Some(Term::Bias),
+            Family::SensorDrift => Some(Term::SensorDrift),
+            Family::Relaxation => Some(Term::Relax(shape)),
+            Family::Hysteresis => Some(Term::Hyst(shape)),
+            Family::OffsetDrift => Some(Term::OffsetLin),
+            Family::StiffnessExponent => None,
+        }
+    }
+
+    fn apply(self, st: &Structure, shape: f64) -> Structure {
+        let mut st = st.clone();
+        match self.term(shape) {
+            Some(t) => st.terms.push(t),
+            None => st.a = shape,
+        }
+        st
+    }
+
+    /// Shape grid: τ 0.05–20 s (log), v₀ 1–100 % of the 95th-percentile speed (log), a′ 0.8–2.5.
+    fn grid(self, p95_speed: f64, a: f64) -> Vec<f64> {
+        let log = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
+            (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
+        };
+        match self {
+            Family::Relaxation => log(0.05, 20.0, 14),
+            Family::Hysteresis => log(0.01 * p95_speed, p95_speed, 9),
+            Family::StiffnessExponent => {
+                (0..=17).map(|i| 0.8 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
+            }
+            _ => vec![0.0],
+        }
+    }
+
+    fn has_shape(self) -> bool {
+        matches!(self, Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent)
+    }
+}
+
+/// The excitation that separates two candidates.
+fn would_separate(a: Family, b: Family) -> String {
+    use Family::*;
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    match (a, b) {
+        (SensorBias, SensorDrift) => "a longer recording with free space (a lift-off) at its end: a constant offset stays, a drift grows",
+        (SensorDrift, OffsetDrift) | (SensorBias, OffsetDrift) => {
+            "free space late in the recording (a lift-off): a sensor offset shows there, a moving surface zero does not; pushes to two depths also separate them unless the law is linear"
+        }
+        (Relaxation, Hysteresis) => {
+            "a hold of several seconds (relaxation decays under held deformation, hysteresis does not act at rest) and pushes at two speeds"
+        }
+        (Relaxation, _) | (_, Relaxation) => "a hold of several seconds after a fast push: only relaxation decays at rest",
+        (Hysteresis, StiffnessExponent) => {
+            "slow pushes to the same depths at two speeds: hysteresis differs between loading and unloading, the exponent does not"
+        }
+        (StiffnessExponent, OffsetDrift) => "repeated pushes to the same depth minutes apart: a moving zero shifts them, an exponent does not",
+        (SensorBias, _) | (SensorDrift, _) => "free space before and after contact: a sensor offset shows without contact",
+        _ => "a hold of several seconds, pushes at two speeds and to two depths, and free space before and after",
+    }
+    .to_string()
+}
+
+/// A fitted candidate option (one family, or a pair).
+#[derive(Clone)]
+struct Cand {
+    fams: Vec<(Family, f64)>,
+    st: Structure,
+    fit: Fit,
+    t: Vec<f64>,
+    stable: Vec<bool>,
+    physical: bool,
+}
+
+fn term_index(st: &Structure, fam: Family, shape: f64) -> Option<usize> {
+    let t = fam.term(shape)?;
+    st.terms.iter().position(|x| *x == t).map(|i| i + 2)
+}
+
+/// Fits the option and computes each new member's t and fold stability.
+fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
+    let st = fams.iter().fold(cur.clone(), |s, &(f, sh)| f.apply(&s, sh));
+    let fit = fit::fit(d, &st);
+    let k = fit.beta[0];
+    let mut physical = k > 0.0;
+    let mut t = Vec::new();
+    let mut stable = Vec::new();
+    for &(f, sh) in fams {
+        if let Some(j) = term_index(&st, f, sh) {
+            let b = fit.beta[j];
+            t.push(b / fit.se[j]);
+            stable.push(fit.fold_beta.iter().all(|fb| fb[j].signum() == b.signum()));
+            match f {
+                Family::Relaxation => physical &= b > 0.0,
+                Family::Hysteresis => physical &= b > 0.0 && b / k < 1.0,
+                _ => {}
+            }
+        } else {
+            // The exponent: t from the linearised column zᵃ′·ln z at the fitted a′ (its coefficient is k·δa);
+            // fold stability from the linear test at the current a with the other members.
+            let mut sd = st.clone();
+            sd.terms.push(Term::ExpDeriv);
+            let fd = fit::fit(d, &sd);
+            let se_a = fd.se[fd.se.len() - 1] / fd.beta[0].abs().max(1e-300);
+            let delta = sh - cur.a;
+            t.push(delta / se_a);
+            let mut lin = fams.iter().filter(|x| x.0 != f).fold(cur.clone(), |s, &(g, gs)| g.apply(&s, gs));
+            lin.terms.push(Term::ExpDeriv);
+            let fl = fit::fit(d, &lin);
+            let j = fl.beta.len() - 1;
+            stable.push(fl.fold_beta.iter().all(|fb| fb[j].signum() == delta.signum()));
+        }
+    }
+    Cand { fams: fams.to_vec(), st, fit, t, stable, physical }
+}
+
+/// The best shape of a family by held-out MSE on the grid, refined by golden section on the in-sample SSE
+/// between the grid neighbours.
+fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64) -> Cand {
+    let grid = fam.grid(p95, cur.a);
+    let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
+    let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
+    let mut shape = grid[best];
+    if fam.has_shape() && grid.len() > 2 {
+        let lo = grid[best.saturating_sub(1)];
+        let hi = grid[(best + 1).min(grid.len() - 1)];
+        let logscale = fam != Family::StiffnessExponent;
+        type Map = fn(f64) -> f64;
+        let (tx, fx): (Map, Map) = if logscale { (f64::ln, f64::exp) } else { (|x| x, |x| x) };
+        let sh = golden(|x| fit::fit(d, &fam.apply(cur, fx(x))).sse, tx(lo), tx(hi), 14);
+        shape = fx(sh);
+        if fam == Family::StiffnessExponent && (shape - cur.a).abs() < 1e-3 {
+            shape = grid[best];
+        }
+    }
+    assess(d, cur, &[(fam, shape)])
+}
+
+use fit::golden;
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for i in 0..a.len() {
+        sab += (a[i] - ma) * (b[i] - mb);
+        saa += (a[i] - ma).powi(2);
+        sbb += (b[i] - mb).powi(2);
+    }
+    if saa > 0.0 && sbb > 0.0 { sab / (saa * sbb).sqrt() } else { 0.0 }
+}
+
+/// The augmented model of a structure and its fit; `order` lists the accepted families in order.
+fn to_model(base: &ContactModel, st: &Structure, fit: &Fit, order: &[(Family, f64)]) -> ContactModel {
+    let k = if fit.beta[0] > 0.0 { fit.beta[0] } else { base.stiffness };
+    let mut m = base.clone();
+    m.stiffness = k;
+    m.damping = fit.beta[1].max(0.0);
+    if (st.a - base.exponents.a).abs() > 1e-12 {
+        m.kind = Kind::General;
+        m.exponents = Exponents { a: st.a, b: st.b, c: st.c };
+    }
+    m.effects = order
+        .iter()
+        .filter_map(|&(f, sh)| {
+            let b = |fam: Family| term_index(st, fam, sh).map_or(0.0, |j| fit.beta[j]);
+            match f {
+                Family::SensorBias => Some(Effect::SensorBias { offset: b(f) }),
+                Family::SensorDrift => Some(Effect::SensorDrift { rate: b(f) }),
+                Family::Relaxation => {
+                    Some(Effect::ViscoelasticRelaxation { stiffness: b(f).max(0.0), time_constant: sh })
+                }
+                Family::Hysteresis => {
+                    Some(Effect::Hysteresis { fraction: (b(f) / k).clamp(0.0, 0.999), velocity_scale: sh })
+                }
+                Family::OffsetDrift => Some(Effect::ContactOffsetDrift { rate: st.offset_rate }),
+                Family::StiffnessExponent => None,
+            }
+        })
+        .collect();
+    m
+}
+
+/// In-contact RMS, per-phase RMS and lag-1 autocorrelation of the in-contact residual.
+struct Gap {
+    rms: f64,
+    phases: BTreeMap<Phase, f64>,
+    lag1: f64,
+}
+
+fn gap(series: &Series, phases: &[Phase], pred: &[f64]) -> Gap {
+    let res: Vec<f64> = (0..series.len()).map(|i| series.f[i] - pred[i]).collect();
+    let rms_of = |keep: &dyn Fn(usize) -> bool| -> Option<f64> {
+        let (s, n) = (0..res.len()).filter(|&i| keep(i)).fold((0.0, 0usize), |(s, n), i| (s + res[i] * res[i], n + 1));
+        (n > 0).then(|| (s / n as f64).sqrt())
+    };
+    let rms = rms_of(&|i| series.z[i] > 0.0).unwrap_or(0.0);
+    let phases_rms = Phase::ALL.iter().filter_map(|&p| rms_of(&|i| phases[i] == p).map(|r| (p, r))).collect();
+    let (mut lag, mut ss) = (0.0, 0.0);
+    for i in 0..res.len() {
+        if series.z[i] > 0.0 {
+            ss += res[i] * res[i];
+            if i > 0 && series.z[i - 1] > 0.0 {
+                lag += res[i] * res[i - 1];
+            }
+        }
+    }
+    Gap { rms, phases: phases_rms, lag1: if ss > 0.0 { lag / ss } else { 0.0 } }
+}
+
+/// Refines the surface-zero drift rate of a structure whose last accepted term is [`Term::OffsetLin`] by
+/// Gauss-Newton on the exact law (z − r·t)ᵃ; returns the structure without the linear column and the
+/// standard error of r.
+fn refine_offset(d: &Data, st: &Structure) -> (Structure, f64) {
+    let mut st = st.clone();
+    let mut se = 0.0;
+    for _ in 0..8 {
+        let f = fit::fit(d, &st);
+        let j = st.terms.iter().position(|t| *t == Term::OffsetLin).map_or(0, |i| i + 2);
+        let k = f.beta[0].abs().max(1e-300);
+        let delta = f.beta[j] / k;
+        se = f.se[j] / k;
+        st.offset_rate += delta;
+        if delta.abs() <= 1e-4 * st.offset_rate.abs() {
+            break;
+        }
+    }
+    st.terms.retain(|t| *t != Term::OffsetLin);
+    (st, se)
+}
+
+/// Half-widths (95 %) of a structure's parameters, keyed like the report.
+fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, offset_se: f64) -> BTreeMap<String, f64> {
+    let z = 1.96;
+    let k = fit.beta[0].abs().max(1e-300);
+    let mut u = BTreeMap::new();
+    let shape_se = |term_of: &dyn Fn(f64) -> Term| -> f64 {
+        // The Jacobian column of the fitted term with respect to its shape, added to the design.
+        let j = term_index(st, fam, sh).unwrap_or(2);
+        let eps = 1e-3;
+        let col = |x: f64| {
+            let mut s = st.clone();
+            s.terms[j - 2] = term_of(x);
+            fit::columns(d, &s).swap_remove(j)
+        };
+        let (up, dn) = (col(sh * (1.0 + eps)), col(sh * (1.0 - eps)));
+        let jac: Vec<f64> = up.iter().zip(&dn).map(|(a, b)| fit.beta[j] * (a - b) / (2.0 * eps * sh)).collect();
+        let mut cols = fit::columns(d, st);
+        cols.push(jac);
+        let f = fit::fit_columns(d, &cols);
+        f.se[f.se.len() - 1]
+    };
+    match fam {
+        Family::SensorBias => {
+            u.insert("offset_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+        }
+        Family::SensorDrift => {
+            u.insert("rate_n_per_s".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+        }
+        Family::Relaxation => {
+            u.insert("stiffness_n_per_m".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+            u.insert("time_constant_s".into(), z * shape_se(&Term::Relax));
+        }
+        Family::Hysteresis => {
+            u.insert("fraction".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)] / k);
+            u.insert("velocity_scale_m_per_s".into(), z * shape_se(&Term::Hyst));
+        }
+        Family::StiffnessExponent => {
+            let mut sd = st.clone();
+            sd.terms.push(Term::ExpDeriv);
+            let f = fit::fit(d, &sd);
+            u.insert("exponent".into(), z * f.se[f.se.len() - 1] / f.beta[0].abs().max(1e-300));
+        }
+        Family::OffsetDrift => {
+            u.insert("rate_m_per_s".into(), z * offset_se);
+        }
+    }
+    u
+}
+
+fn parameters(model: &ContactModel, fam: Family) -> BTreeMap<String, f64> {
+    let mut p = BTreeMap::new();
+    if fam == Family::StiffnessExponent {
+        p.insert("exponent".into(), model.exponents.a);
+        return p;
+    }
+    for e in &model.effects {
+        match (*e, fam) {
+            (Effect::SensorBias { offset }, Family::SensorBias) => {
+                p.insert("offset_n".into(), offset);
+            }
+            (Effect::SensorDrift { rate }, Family::SensorDrift) => {
+                p.insert("rate_n_per_s".into(), rate);
+            }
+            (Effect::ViscoelasticRelaxation { stiffness, time_constant }, Family::Relaxation) => {
+                p.insert("stiffness_n_per_m".into(), stiffness);
+                p.insert("time_constant_s".into(), time_constant);
+            }
+            (Effect::Hysteresis { fraction, velocity_scale }, Family::Hysteresis) => {
+                p.insert("fraction".into(), fraction);
+                p.insert("velocity_scale_m_per_s".into(), velocity_scale);
+            }
+            (Effect::ContactOffsetDrift { rate }, Family::OffsetDrift) => {
+                p.insert("rate_m_per_s".into(), rate);
+            }
+            _ => {}
+        }
+    }
+    p
+}
+
+/// The whole workflow: phases, noise floor, baseline gap, naming, adding; see the crate documentation.
+pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> Result<Report, DiscrepancyError> {
+    series.validate()?;
+    baseline.validate()?;
+    let in_contact = series.z.iter().filter(|&&z| z > 0.0).count();
+    if series.len() < MIN_SAMPLES.max(10 * options.folds) || in_contact < MIN_CONTACT_SAMPLES {
+        return Err(DiscrepancyError::TooShort { got: series.len(), in_contact });
+    }
+    let o = options;
+    let v_th = velocity_threshold(series);
+    let ph = phases(series, v_th);
+    let noise = noise_floor(series, &ph);
+    let fscale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
+    let sigma = noise.sigma.max(1e-9 * fscale).max(1e-300);
+    let p95 = p95_speed(series).max(1e-4);
+
+    let base_gap = gap(series, &ph, &simulate(baseline, series)?);
+    let d = Data::new(series, o.folds, baseline);
+    let ex = baseline.exponents;
+    let mut st = Structure { a: ex.a, b: ex.b, c: ex.c, offset_rate: 0.0, terms: vec![] };
+    let mut cur = fit::fit(&d, &st);
+    let mut order: Vec<(Family, f64)> = vec![];
+    let mut model = to_model(baseline, &st, &cur, &order);
+    let mut cur_gap = gap(series, &ph, &simulate(&model, series)?);
+    let refit = Refit { stiffness: model.stiffness, damping: model.damping, rms: cur_gap.rms };
+    let mut stages: Vec<(f64, f64)> = vec![]; // (rms_before, rms_after) per accepted family
+    let mut offset_se = 0.0;
+    let mut ambiguous = vec![];
+    let at_floor = |g: &Gap| g.rms <= o.floor_margin * sigma && g.lag1 <= o.max_white_rho;
+
+    for _ in 0..o.max_rounds {
+        if at_floor(&cur_gap) {
+            break;
+        }
+        let left: Vec<Family> = Family::ALL.into_iter().filter(|f| order.iter().all(|x| x.0 != *f)).collect();
+        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95)).collect();
+        let passes = |c: &Cand| {
+            c.physical
+                && c.fit.cv_mse <= cur.cv_mse * (1.0 - o.min_gain)
+                && cur.cv_mse - c.fit.cv_mse >= o.min_share * (cur.cv_mse - sigma * sigma)
+                && c.fit.aicc <= cur.aicc - o.min_delta_aicc
+                && c.t.iter().all(|t| t.abs() >= o.min_t)
+                && c.stable.iter().all(|&s| s)
+        };
+        let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c)).cloned().collect();
+        for i in 0..singles.len() {
+            for j in i + 1..singles.len() {
+                let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]]);
+                let best_single = singles[i].fit.cv_mse.min(singles[j].fit.cv_mse);
+                if passes(&pair) && pair.fit.cv_mse <= best_single * (1.0 - o.min_gain) {
+                    options.push(pair);
+                }
+            }
+        }
+        let Some(best) = options.into_iter().min_by(|a, b| a.fit.cv_mse.total_cmp(&b.fit.cv_mse)) else {
+            break;
+        };
+        // Collinear rivals: judged on the single-family fits.
+        let gain = |c: &Cand| cur.cv_mse - c.fit.cv_mse;
+        let contribution = |c: &Cand| -> Vec<f64> { c.fit.pred.iter().zip(&cur.pred).map(|(a, b)| a - b).collect() };
+        for &(f, _) in &best.fams {
+            let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
+            let cm = contribution(mine);
+            for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
+                if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
+                    && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
+                    && gain(rival) * o.rival_ratio >= gain(mine)
+                {
+                    let r = rival.fams[0].0;
+                    if !ambiguous.iter().any(|a: &Ambiguity| a.between.contains(&r.id().to_string())) {
+                        ambiguous.push(Ambiguity {
+                            between: [f.id().to_string(), r.id().to_string()],
+                            would_separate: would_separate(f, r),
+                        });
+                    }
+                }
+            }
+        }
+        if !ambiguous.is_empty() {
+            break;
+        }
+        // Accept, larger gain first within a pair.
+        let mut fams = best.fams.clone();
+        if fams.len() == 2 {
+            let g: Vec<f64> =
+                fams.iter().map(|x| singles.iter().find(|c| c.fams[0].0 == x.0).map_or(0.0, gain)).collect();
+            if g[1] > g[0] {
+                fams.swap(0, 1);
+            }
+        }
+        let mut next = best.st.clone();
+        if fams.iter().any(|x| x.0 == Family::OffsetDrift) {
+            let (s, se) = refine_offset(&d, &next);
+            next = s;
+            offset_se = se;
+        }
+        for (n, &fam) in fams.iter().enumerate() {
+            // Each member's own gap: the intermediate model with the members so far.
+            let partial = if n + 1 == fams.len() {
+                next.clone()
+            } else {
+                let mut s = st.clone();
+                s = fam.0.apply(&s, fam.1);
+                if fam.0 == Family::OffsetDrift { refine_offset(&d, &s).0 } else { s }
+            };
+            let pf = fit::fit(&d, &partial);
+            order.push(fam);
+            let m = to_model(baseline, &partial, &pf, &order);
+            let g = gap(series, &ph, &simulate(&m, series)?);
+            stages.push((cur_gap.rms, g.rms));
+            cur_gap = g;
+        }
+        st = next;
+        cur = fit::fit(&d, &st);
+        model = to_model(baseline, &st, &cur, &order);
+        model.validate()?;
+        cur_gap = gap(series, &ph, &simulate(&model, series)?);
+        if let Some(last) = stages.last_mut() {
+            last.1 = cur_gap.rms;
+        }
+    }
+
+    let remaining = if !ambiguous.is_empty() {
+        Remaining::Ambiguous
+    } else if at_floor(&cur_gap) {
+        Remaining::None
+    } else {
+        Remaining::Unexplained
+    };
+    let effects = order
+        .iter()
+        .zip(&stages)
+        .map(|(&(f, sh), &(before, after))| NamedEffect {
+            id: f.id().to_string(),
+            parameters: parameters(&model, f),
+            uncertainty: uncertainty(&d, &st, &cur, f, sh, offset_se),
+            rms_before: before,
+            rms_after: after,
+        })
+        .collect();
+    let phases_out = base_gap
+        .phases
+        .iter()
+        .map(|(&p, &before)| (p, PhaseRms { rms_before: before, rms_after: cur_gap.phases[&p] }))
+        .collect();
+    Ok(Report {
+        baseline: Baseline { kind: baseline.kind, rms: base_gap.rms },
+        refit,
+        noise_floor: sigma,
+        noise_source: noise.source,
+        effects,
+        ambiguous,
+        phases: phases_out,
+        final_rms: cur_gap.rms,
+        remaining,
+        model,
+        velocity_threshold: v_th,
+        final_lag1: cur_gap.lag1,
+    })
+}

@@ -1,0 +1,413 @@
+//! Synthetic recordings from a TRUE model stepped with `ContactModel::step` (the simulator's own effect
+//! code), Gaussian noise, realistic excitation; the analysis sees only the series and a baseline without
+//! the hidden effects.
+
+use rand::SeedableRng;
+use rand::rngs::SmallRng;
+use rand_distr::{Distribution, Normal};
+use softcontact_contact::{ContactModel, Effect, Exponents, Kind};
+
+use crate::{Options, Remaining, Report, Series, analyse};
+
+/// A piece of the commanded deformation.
+#[derive(Clone, Copy)]
+enum Seg {
+    Hold(f64),
+    /// Quintic move to z [m] in T [s].
+    Move(f64, f64),
+    /// z = z₀ + A(1 − cos 2πft)/2 for the duration: pushes of amplitude A [m] at f [Hz].
+    Push {
+        amp: f64,
+        freq: f64,
+        dur: f64,
+    },
+}
+
+/// The excitation: free space, approach, 1 Hz pushes (identification), quintic moves with holds (control),
+/// lift-offs.
+#[derive(Clone, Copy)]
+struct Exc {
+    fs: f64,
+    start_in_contact: bool,
+    liftoffs: bool,
+    /// Depth scale (1 = pushes between 2 and 7 mm).
+    depth: f64,
+}
+
+impl Exc {
+    fn new(fs: f64) -> Self {
+        Exc { fs, start_in_contact: false, liftoffs: true, depth: 1.0 }
+    }
+
+    fn trajectory(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let mm = 1e-3 * self.depth;
+        let mut segs = vec![];
+        let z0 = if self.start_in_contact {
+            2.0 * mm
+        } else {
+            segs.extend([Seg::Hold(1.0), Seg::Move(2.0 * mm, 1.0)]);
+            -3.0 * mm
+        };
+        segs.extend([
+            Seg::Push { amp: 4.0 * mm, freq: 1.0, dur: 5.0 },
+            Seg::Move(7.0 * mm, 0.5),
+            Seg::Hold(3.0),
+            Seg::Move(3.0 * mm, 0.5),
+            Seg::Hold(3.0),
+        ]);
+        if self.liftoffs {
+            segs.extend([Seg::Move(-3.0 * mm, 0.5), Seg::Hold(1.0), Seg::Move(5.0 * mm, 0.7), Seg::Hold(2.5)]);
+            segs.extend([Seg::Move(-3.0 * mm, 0.5), Seg::Hold(1.0)]);
+        } else {
+            segs.extend([Seg::Move(5.0 * mm, 0.7), Seg::Hold(2.5)]);
+        }
+        let (mut t, mut z, mut zd) = (vec![], vec![], vec![]);
+        let mut start = z0;
+        let mut t0 = 0.0;
+        let dt = 1.0 / self.fs;
+        for seg in segs {
+            let dur = match seg {
+                Seg::Hold(d) | Seg::Move(_, d) => d,
+                Seg::Push { dur, .. } => dur,
+            };
+            let n = (dur * self.fs).round() as usize;
+            for i in 0..n {
+                let tau = (i as f64 + 1.0) * dt;
+                let (zz, v) = match seg {
+                    Seg::Hold(_) => (start, 0.0),
+                    Seg::Move(to, d) => {
+                        let s = tau / d;
+                        let p = 10.0 * s.powi(3) - 15.0 * s.powi(4) + 6.0 * s.powi(5);
+                        let dp = (30.0 * s * s - 60.0 * s.powi(3) + 30.0 * s.powi(4)) / d;
+                        (start + (to - start) * p, (to - start) * dp)
+                    }
+                    Seg::Push { amp, freq, .. } => {
+                        let w = 2.0 * std::f64::consts::PI * freq;
+                        (start + amp * (1.0 - (w * tau).cos()) / 2.0, amp * w * (w * tau).sin() / 2.0)
+                    }
+                };
+                t.push(t0 + tau);
+                z.push(zz);
+                zd.push(v);
+            }
+            t0 += n as f64 * dt;
+            start = *z.last().unwrap();
+        }
+        (t, z, zd)
+    }
+}
+
+/// Steps the true model over the trajectory (dt = 1/fs) and adds noise and an optional extra force
+/// `extra(t, z, ż)` (an effect outside the library).
+fn record(truth: &ContactModel, exc: Exc, sigma: f64, seed: u64, extra: &dyn Fn(f64, f64, f64) -> f64) -> Series {
+    let (t, z, zd) = exc.trajectory();
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sigma).unwrap();
+    let mut state = truth.effect_state();
+    let dt = 1.0 / exc.fs;
+    let f = (0..t.len())
+        .map(|i| {
+            let (_, measured) = truth.step(&mut state, z[i], zd[i], dt).unwrap();
+            measured + extra(t[i], z[i], zd[i]) + noise.sample(&mut rng)
+        })
+        .collect();
+    Series::new(t, z, zd, f).unwrap()
+}
+
+fn kv() -> ContactModel {
+    ContactModel::new(Kind::KelvinVoigt, 2000.0, 30.0).unwrap()
+}
+fn hc() -> ContactModel {
+    ContactModel::new(Kind::HuntCrossley, 3.0e4, 3.0e5).unwrap()
+}
+fn af() -> ContactModel {
+    ContactModel::new(Kind::AzadFeatherstone, 3.0e4, 2.0e3).unwrap()
+}
+fn general() -> ContactModel {
+    ContactModel::general(8.8e3, 40.0, Exponents { a: 1.3, b: 0.0, c: 1.0 }).unwrap()
+}
+
+fn with(m: &ContactModel, effects: &[Effect]) -> ContactModel {
+    let mut m = m.clone();
+    m.effects = effects.to_vec();
+    m
+}
+
+fn ids(r: &Report) -> Vec<&str> {
+    let mut v: Vec<&str> = r.effects.iter().map(|e| e.id.as_str()).collect();
+    v.sort();
+    v
+}
+
+fn show(name: &str, r: &Report) {
+    let eff: Vec<String> = r
+        .effects
+        .iter()
+        .map(|e| {
+            let p: Vec<String> =
+                e.parameters.iter().map(|(k, v)| format!("{k}={v:.4e}±{:.1e}", e.uncertainty[k])).collect();
+            format!("{} [{}]", e.id, p.join(", "))
+        })
+        .collect();
+    let amb: Vec<String> = r.ambiguous.iter().map(|a| format!("{}|{}", a.between[0], a.between[1])).collect();
+    eprintln!(
+        "{name:<34} σ={:.3} base={:.3} refit={:.3} final={:.3} lag1={:.2} {:?} {} {}",
+        r.noise_floor,
+        r.baseline.rms,
+        r.refit.rms,
+        r.final_rms,
+        r.final_lag1,
+        r.remaining,
+        eff.join("; "),
+        amb.join("; ")
+    );
+}
+
+fn param(r: &Report, id: &str, name: &str) -> f64 {
+    r.effects.iter().find(|e| e.id == id).map(|e| e.parameters[name]).unwrap()
+}
+
+fn within(name: &str, got: f64, truth: f64, rel: f64) {
+    assert!((got - truth).abs() <= rel * truth.abs(), "{name}: got {got}, truth {truth}, tolerance {rel}");
+}
+
+/// Shrink of the gap relative to the ideal (down to the noise floor).
+fn shrink_ratio(r: &Report) -> f64 {
+    let ideal = 1.0 - r.noise_floor / r.baseline.rms;
+    (1.0 - r.final_rms / r.baseline.rms) / ideal
+}
+
+struct Case {
+    name: &'static str,
+    truth: ContactModel,
+    exc: Exc,
+    sigma: f64,
+    id: &'static str,
+    check: fn(&Report),
+}
+
+fn effect_cases() -> Vec<Case> {
+    vec![
+        Case {
+            name: "sensor_bias 0.5 N",
+            truth: with(&kv(), &[Effect::SensorBias { offset: 0.5 }]),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "sensor_bias",
+            check: |r| within("offset", param(r, "sensor_bias", "offset_n"), 0.5, 0.1),
+        },
+        Case {
+            name: "sensor_drift 0.04 N/s",
+            truth: with(&hc(), &[Effect::SensorDrift { rate: 0.04 }]),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "sensor_drift",
+            check: |r| within("rate", param(r, "sensor_drift", "rate_n_per_s"), 0.04, 0.15),
+        },
+        Case {
+            name: "relaxation 300 N/m 1.5 s",
+            truth: with(&kv(), &[Effect::ViscoelasticRelaxation { stiffness: 300.0, time_constant: 1.5 }]),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "viscoelastic_relaxation",
+            check: |r| {
+                within("k_m", param(r, "viscoelastic_relaxation", "stiffness_n_per_m"), 300.0, 0.3);
+                within("τ", param(r, "viscoelastic_relaxation", "time_constant_s"), 1.5, 0.3);
+            },
+        },
+        Case {
+            name: "hysteresis 6 % 2 mm/s",
+            truth: with(&af(), &[Effect::Hysteresis { fraction: 0.06, velocity_scale: 0.002 }]),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "hysteresis",
+            check: |r| {
+                within("h", param(r, "hysteresis", "fraction"), 0.06, 0.3);
+                within("v0", param(r, "hysteresis", "velocity_scale_m_per_s"), 0.002, 0.5);
+            },
+        },
+        Case {
+            name: "stiffness_exponent 1.3 (KV base)",
+            truth: general(),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "stiffness_exponent",
+            check: |r| within("a", param(r, "stiffness_exponent", "exponent"), 1.3, 0.08),
+        },
+        Case {
+            name: "contact_offset_drift 15 µm/s",
+            truth: with(&hc(), &[Effect::ContactOffsetDrift { rate: 1.5e-5 }]),
+            exc: Exc::new(200.0),
+            sigma: 0.1,
+            id: "contact_offset_drift",
+            check: |r| within("rate", param(r, "contact_offset_drift", "rate_m_per_s"), 1.5e-5, 0.25),
+        },
+    ]
+}
+
+/// The baseline the analysis gets: the truth without its effects, and for the exponent case the KV kind.
+fn baseline_of(truth: &ContactModel, id: &str) -> ContactModel {
+    if id == "stiffness_exponent" { kv() } else { with(truth, &[]) }
+}
+
+#[test]
+fn each_effect_alone_is_named_exactly() {
+    let mut ratios = vec![];
+    let mut failures = vec![];
+    for (i, c) in effect_cases().into_iter().enumerate() {
+        let s = record(&c.truth, c.exc, c.sigma, 100 + i as u64, &|_, _, _| 0.0);
+        let r = analyse(&s, &baseline_of(&c.truth, c.id), &Options::default()).unwrap();
+        show(c.name, &r);
+        if ids(&r) != vec![c.id] {
+            failures.push(format!("{}: named {:?}, ambiguous {:?}", c.name, ids(&r), r.ambiguous));
+            continue;
+        }
+        (c.check)(&r);
+        ratios.push(shrink_ratio(&r));
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+    ratios.sort_by(f64::total_cmp);
+    let median = ratios[ratios.len() / 2];
+    eprintln!("gap shrink / ideal: {ratios:.3?}, median {median:.3}");
+    assert!(median >= 0.8, "median shrink {median} of ideal");
+}
+
+#[test]
+fn perturbed_baseline_still_names_the_effect() {
+    let truth = with(&kv(), &[Effect::ViscoelasticRelaxation { stiffness: 300.0, time_constant: 1.5 }]);
+    let s = record(&truth, Exc::new(100.0), 0.1, 7, &|_, _, _| 0.0);
+    let mut base = with(&truth, &[]);
+    base.stiffness *= 1.04;
+    base.damping *= 0.95;
+    let r = analyse(&s, &base, &Options::default()).unwrap();
+    show("relaxation, baseline k+4 % λ−5 %", &r);
+    assert_eq!(ids(&r), vec!["viscoelastic_relaxation"]);
+    within("τ", param(&r, "viscoelastic_relaxation", "time_constant_s"), 1.5, 0.3);
+}
+
+#[test]
+fn two_effects_together_are_both_found() {
+    let truth = with(
+        &kv(),
+        &[Effect::ViscoelasticRelaxation { stiffness: 300.0, time_constant: 1.5 }, Effect::SensorBias { offset: 0.4 }],
+    );
+    let s = record(&truth, Exc::new(200.0), 0.1, 11, &|_, _, _| 0.0);
+    let r = analyse(&s, &with(&truth, &[]), &Options::default()).unwrap();
+    show("relaxation + bias", &r);
+    assert_eq!(ids(&r), vec!["sensor_bias", "viscoelastic_relaxation"]);
+    within("offset", param(&r, "sensor_bias", "offset_n"), 0.4, 0.15);
+    within("τ", param(&r, "viscoelastic_relaxation", "time_constant_s"), 1.5, 0.3);
+    assert_eq!(r.remaining, Remaining::None);
+}
+
+#[test]
+fn null_cases_name_nothing() {
+    let kinds = [kv(), hc(), af(), general()];
+    let sigmas = [0.05, 0.1, 0.2, 0.3];
+    let rates = [100.0, 200.0, 50.0, 500.0, 1000.0];
+    let mut false_names = vec![];
+    let mut n = 0;
+    for i in 0..24usize {
+        let truth = kinds[i % 4].clone();
+        let mut truth = truth;
+        truth.stiffness *= [1.0, 0.5, 2.0][i % 3];
+        let exc = Exc {
+            fs: rates[i % 5],
+            start_in_contact: i % 3 == 1,
+            liftoffs: i % 4 != 3,
+            depth: [1.0, 1.5, 0.7][(i / 3) % 3],
+        };
+        let s = record(&truth, exc, sigmas[(i / 4) % 4], 1000 + i as u64, &|_, _, _| 0.0);
+        let mut base = truth.clone();
+        if i % 2 == 1 {
+            base.stiffness *= 1.0 + 0.04 * [1.0, -1.0][(i / 2) % 2];
+            base.damping *= 0.95;
+        }
+        let r = analyse(&s, &base, &Options::default()).unwrap();
+        show(&format!("null {i} {:?} fs={}", truth.kind, exc.fs), &r);
+        n += 1;
+        if !r.effects.is_empty() {
+            false_names.push(format!("null {i}: {:?}", ids(&r)));
+        }
+    }
+    eprintln!("{n} null cases, {} false names", false_names.len());
+    assert!(false_names.is_empty(), "{false_names:#?}");
+}
+
+#[test]
+fn out_of_library_effects_end_unexplained() {
+    type Extra = Box<dyn Fn(f64, f64, f64) -> f64>;
+    let cases: [(&str, Extra); 3] = [
+        ("force ∝ ż² (5000 N s²/m²)", Box::new(|_, z, zd| if z > 0.0 { 5000.0 * zd * zd } else { 0.0 })),
+        ("3.3 Hz disturbance 0.4 N", Box::new(|t, _, _| 0.4 * (2.0 * std::f64::consts::PI * 3.3 * t).sin())),
+        (
+            "3.3 Hz in contact 0.4 N",
+            Box::new(|t, z, _| if z > 0.0 { 0.4 * (2.0 * std::f64::consts::PI * 3.3 * t).sin() } else { 0.0 }),
+        ),
+    ];
+    let mut bad = vec![];
+    for (i, (name, extra)) in cases.iter().enumerate() {
+        for (j, m) in [kv(), hc()].iter().enumerate() {
+            let s = record(m, Exc::new(200.0), 0.1, 50 + (2 * i + j) as u64, extra.as_ref());
+            let r = analyse(&s, m, &Options::default()).unwrap();
+            show(name, &r);
+            if !r.effects.is_empty() || r.remaining == Remaining::None {
+                bad.push(format!("{name} {:?}: {:?} {:?}", m.kind, ids(&r), r.remaining));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{bad:#?}");
+}
+
+#[test]
+fn report_serialises_to_the_contract() {
+    let truth = with(&kv(), &[Effect::SensorBias { offset: 0.5 }]);
+    let s = record(&truth, Exc::new(100.0), 0.1, 3, &|_, _, _| 0.0);
+    let r = analyse(&s, &kv(), &Options::default()).unwrap();
+    let v = serde_json::to_value(&r).unwrap();
+    assert_eq!(v["baseline"]["kind"], "kelvin_voigt");
+    for key in ["noise_floor", "final_rms"] {
+        assert!(v[key].is_f64(), "{key}");
+    }
+    assert_eq!(v["effects"][0]["id"], "sensor_bias");
+    assert!(v["effects"][0]["parameters"]["offset_n"].is_f64());
+    assert!(v["effects"][0]["rms_before"].is_f64() && v["effects"][0]["rms_after"].is_f64());
+    assert!(v["ambiguous"].as_array().unwrap().is_empty());
+    for p in ["free", "approach", "loading", "holding", "unloading"] {
+        assert!(v["phases"][p]["rms_before"].is_f64(), "{p}");
+        assert!(v["phases"][p]["rms_after"].is_f64(), "{p}");
+    }
+    assert_eq!(v["remaining"], "none");
+    // The augmented model is the same type and re-simulates to the reported gap.
+    assert_eq!(r.model.effects.len(), 1);
+    let again = crate::simulate(&r.model, &s).unwrap();
+    let rms = {
+        let v: Vec<f64> = (0..s.len()).filter(|&i| s.z[i] > 0.0).map(|i| (s.f[i] - again[i]).powi(2)).collect();
+        (v.iter().sum::<f64>() / v.len() as f64).sqrt()
+    };
+    assert!((rms - r.final_rms).abs() < 1e-12);
+}
+
+#[test]
+fn bad_input_is_refused() {
+    assert!(Series::new(vec![0.0, 1.0], vec![0.0], vec![0.0, 0.0], vec![0.0, 0.0]).is_err());
+    assert!(Series::new(vec![0.0, 0.0], vec![0.0; 2], vec![0.0; 2], vec![0.0; 2]).is_err());
+    assert!(Series::new(vec![0.0, 1.0], vec![0.0, f64::NAN], vec![0.0; 2], vec![0.0; 2]).is_err());
+    let s = Series::new(vec![0.0, 1.0], vec![0.01; 2], vec![0.0; 2], vec![1.0; 2]).unwrap();
+    assert!(analyse(&s, &kv(), &Options::default()).is_err());
+}
+
+#[test]
+fn indistinguishable_effects_are_reported_ambiguous() {
+    // Linear law, no free space at all: a sensor drift and a moving surface zero give the same force.
+    let truth = with(&kv(), &[Effect::SensorDrift { rate: 0.04 }]);
+    let exc = Exc { start_in_contact: true, liftoffs: false, ..Exc::new(100.0) };
+    let s = record(&truth, exc, 0.1, 21, &|_, _, _| 0.0);
+    let r = analyse(&s, &kv(), &Options::default()).unwrap();
+    show("drift, no free space (KV)", &r);
+    assert!(r.effects.is_empty(), "named {:?}", ids(&r));
+    assert_eq!(r.remaining, Remaining::Ambiguous);
+    let mut pair = r.ambiguous[0].between.clone();
+    pair.sort();
+    assert_eq!(pair, ["contact_offset_drift".to_string(), "sensor_drift".to_string()]);
+}
