@@ -600,6 +600,15 @@ fn to_model(base: &ContactModel, st: &Structure, fit: &Fit, order: &[(Family, f6
     m
 }
 
+/// Samples in contact (z > 0) where `model`'s surface force is clamped at zero.
+fn clamp_mask(model: &ContactModel, series: &Series) -> Result<Vec<bool>, DiscrepancyError> {
+    let mut state = model.effect_state();
+    let dt = step_sizes(series);
+    (0..series.len())
+        .map(|i| Ok(series.z[i] > 0.0 && model.step(&mut state, series.z[i], series.zdot[i], dt[i])?.0 <= 0.0))
+        .collect()
+}
+
 /// In-contact RMS, per-phase RMS and lag-1 autocorrelation of the in-contact residual.
 struct Gap {
     rms: f64,
@@ -745,7 +754,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     let p95 = p95_speed(series).max(1e-4);
 
     let base_gap = gap(series, &ph, &simulate(baseline, series)?);
-    let d = Data::new(series, o.folds, baseline);
+    let mut d = Data::new(series, o.folds, baseline);
     let ex = baseline.exponents;
     let mut st = Structure { a: ex.a, b: ex.b, c: ex.c, offset_rate: 0.0, terms: vec![] };
     let mut cur = fit::fit(&d, &st);
@@ -841,6 +850,11 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             cur_gap = g;
         }
         st = next;
+        cur = fit::fit(&d, &st);
+        model = to_model(baseline, &st, &cur, &order);
+        // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
+        // re-mask with the augmented model and refit.
+        d.clamped = clamp_mask(&model, series)?;
         cur = fit::fit(&d, &st);
         model = to_model(baseline, &st, &cur, &order);
         model.validate()?;

@@ -411,3 +411,67 @@ fn indistinguishable_effects_are_reported_ambiguous() {
     pair.sort();
     assert_eq!(pair, ["contact_offset_drift".to_string(), "sensor_drift".to_string()]);
 }
+
+#[test]
+fn null_cases_name_nothing_even_without_the_noise_floor_stop() {
+    // With the "anything to explain?" stop disabled, every candidate meets the gates on pure noise.
+    let options = Options { floor_margin: 0.0, ..Options::default() };
+    let kinds = [kv(), hc(), af(), general()];
+    let mut false_names = vec![];
+    for i in 0..8usize {
+        let exc = Exc { fs: [100.0, 200.0, 50.0, 500.0][i % 4], start_in_contact: i % 3 == 2, ..Exc::new(100.0) };
+        let s = record(&kinds[i % 4], exc, [0.05, 0.2][i % 2], 2000 + i as u64, &|_, _, _| 0.0);
+        let r = analyse(&s, &kinds[i % 4], &options).unwrap();
+        show(&format!("null (no floor stop) {i}"), &r);
+        if !r.effects.is_empty() {
+            false_names.push(format!("{i}: {:?}", ids(&r)));
+        }
+    }
+    assert!(false_names.is_empty(), "{false_names:#?}");
+}
+
+#[test]
+fn effects_across_rates_and_noise() {
+    // Each effect at 50 Hz / σ 0.05 N, 1 kHz / σ 0.2 N and 100 Hz starting in contact / σ 0.1 N, at
+    // about 4-5 σ of size.
+    let configs = [
+        (Exc::new(50.0), 0.05, 0.5),
+        (Exc::new(1000.0), 0.2, 2.0),
+        (Exc { start_in_contact: true, liftoffs: true, ..Exc::new(100.0) }, 0.1, 1.0),
+    ];
+    let mut table = vec![];
+    let mut ratios = vec![];
+    for (ci, &(exc, sigma, size)) in configs.iter().enumerate() {
+        let cases: Vec<(&str, ContactModel, ContactModel)> = vec![
+            ("sensor_bias", with(&kv(), &[Effect::SensorBias { offset: 0.5 * size }]), kv()),
+            ("sensor_drift", with(&af(), &[Effect::SensorDrift { rate: 0.04 * size }]), af()),
+            (
+                "viscoelastic_relaxation",
+                with(&hc(), &[Effect::ViscoelasticRelaxation { stiffness: 300.0 * size, time_constant: 0.8 }]),
+                hc(),
+            ),
+            ("hysteresis", with(&kv(), &[Effect::Hysteresis { fraction: 0.05 * size, velocity_scale: 0.003 }]), kv()),
+            ("stiffness_exponent", general(), kv()),
+            ("contact_offset_drift", with(&kv(), &[Effect::ContactOffsetDrift { rate: 1.5e-5 * size }]), kv()),
+        ];
+        for (j, (id, truth, base)) in cases.into_iter().enumerate() {
+            let s = record(&truth, exc, sigma, 300 + (10 * ci + j) as u64, &|_, _, _| 0.0);
+            let r = analyse(&s, &base, &Options::default()).unwrap();
+            show(&format!("{id} cfg {ci}"), &r);
+            let got = ids(&r);
+            let verdict = if got == vec![id] {
+                ratios.push(shrink_ratio(&r));
+                "named"
+            } else if got.is_empty() {
+                "missed"
+            } else {
+                "wrong"
+            };
+            table.push(format!("{id} cfg {ci}: {verdict} {got:?} {:?}", r.remaining));
+        }
+    }
+    eprintln!("{}", table.join("\n"));
+    assert!(table.iter().all(|l| l.contains(": named")), "{table:#?}");
+    ratios.sort_by(f64::total_cmp);
+    assert!(ratios[ratios.len() / 2] >= 0.8, "{ratios:?}");
+}
