@@ -39,7 +39,7 @@
 //!    is re-simulated with [`ContactModel::step`] for the RMS after, overall and per phase.
 //!
 //! The lessons behind these choices (columns made dimensionless, joint fits, blocked folds, AICc, margins,
-//! collinearity, refusing out-of-library effects) are summarised in README.md beside this file.
+//! collinearity, refusing out-of-library effects) are summarised in the crate's README.md (crates/discrepancy).
 
 mod fit;
 #[cfg(test)]
