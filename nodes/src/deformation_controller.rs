@@ -148,6 +148,9 @@ pub struct DeformationController {
     f_cmd: f64,
     contact_lost: bool,
     force_limited: bool,
+    /// When the back-off in progress began [s]: the guard waits for it to end before it looks again.
+    /// Any new plan ends that wait (a command right after a back-off once pushed on, unguarded).
+    back_off_since: Option<f64>,
     /// The measured force of the previous tick and its smoothed rate [N/s], to back off before the
     /// force limit is passed rather than after.
     force_trend: Option<(f64, f64)>,
@@ -178,6 +181,7 @@ impl DeformationController {
             f_cmd: 0.0,
             contact_lost: false,
             force_limited: false,
+            back_off_since: None,
             force_trend: None,
             session: None,
             limiter: TorqueLimiter::new(),
@@ -285,6 +289,7 @@ impl DeformationController {
         self.f_cmd = 0.0;
         self.contact_lost = false;
         self.force_limited = false;
+        self.back_off_since = None;
         self.force_trend = None;
         self.limiter.reset();
     }
@@ -296,6 +301,7 @@ impl DeformationController {
     /// Follows `segments` from now on; the first must start at the present reference.
     fn follow(&mut self, segments: Vec<Segment>) -> Result<(), ControlError> {
         self.plan = Some((Trajectory::new(segments).ok_or(ControlError::Duration)?, self.time));
+        self.back_off_since = None;
         Ok(())
     }
 
@@ -444,7 +450,7 @@ impl DeformationController {
                 // above max_force when the back-off ends, back off again.
                 let limits = &self.config.limits;
                 let backing_off =
-                    self.force_limited && self.time - self.plan.as_ref().map_or(0.0, |p| p.1) < BACK_OFF_DURATION;
+                    self.force_limited && self.back_off_since.is_some_and(|t| self.time - t < BACK_OFF_DURATION);
                 let too_much = if self.force_limited { limits.max_force } else { limits.force_limit };
                 if normal_force + force_rate.max(0.0) * FORCE_LOOKAHEAD > too_much && !backing_off {
                     self.force_limited = true;
@@ -455,6 +461,7 @@ impl DeformationController {
                     let to = Reference { position: state.z - lift.max(BACK_OFF_MIN_STEP), ..Default::default() };
                     let back_off = Quintic::new(from, to, BACK_OFF_DURATION).ok_or(ControlError::Duration)?;
                     self.follow(vec![Segment::Move(back_off)])?;
+                    self.back_off_since = Some(self.time);
                 }
                 let reference = self.reference();
                 state.z_cmd = reference.position;

@@ -116,7 +116,7 @@ fn nodes_notice_a_dead_middleware() {
     let mut procs = Processes { logs: logs.clone(), children: Vec::new() };
     procs.spawn("sim_arm", env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=60"]);
     procs.spawn("lwr_driver", env!("CARGO_BIN_EXE_lwr_driver"), &["-p", &dead_after]);
-    procs.spawn("ft_sensor", env!("CARGO_BIN_EXE_ft_sensor"), &[]);
+    procs.spawn("ft_sensor", env!("CARGO_BIN_EXE_ft_sensor"), &["-p", &dead_after]);
     procs.spawn("contact_estimator", env!("CARGO_BIN_EXE_contact_estimator"), &["-p", &dead_after]);
     procs.spawn("deformation_controller", env!("CARGO_BIN_EXE_deformation_controller"), &["-p", &dead_after]);
 
@@ -149,7 +149,20 @@ fn nodes_notice_a_dead_middleware() {
     procs.signal("lwr_driver", libc::SIGSTOP);
     let stopped = Instant::now();
     let mut exits: Vec<(&str, f64, ExitStatus)> = Vec::new();
-    while exits.len() < 2 && stopped.elapsed().as_secs_f64() < DEAD_AFTER + MARGIN + 2.0 {
+    let mut ft_reported = None;
+    while (exits.len() < 2 || ft_reported.is_none()) && stopped.elapsed().as_secs_f64() < DEAD_AFTER + MARGIN + 2.0 {
+        // The F/T node cannot compensate the hand's weight without poses: it withholds and reports.
+        while let Ok(Some((d, _))) = diagnostics.take() {
+            for s in d.status {
+                if s.name.starts_with("ft_sensor")
+                    && s.level == DiagnosticStatus::ERROR
+                    && s.message.contains("/lwr/ee_pose")
+                    && ft_reported.is_none()
+                {
+                    ft_reported = Some((stopped.elapsed().as_secs_f64(), s.message));
+                }
+            }
+        }
         for name in ["contact_estimator", "deformation_controller"] {
             if !exits.iter().any(|(n, _, _)| *n == name)
                 && let Some(status) = procs.exited(name)
@@ -175,6 +188,13 @@ fn nodes_notice_a_dead_middleware() {
         eprintln!("{name}: {line}");
         assert!(line.contains(stream), "{name} names {stream}: {line}");
     }
+
+    let (after, message) = ft_reported.unwrap_or_else(|| {
+        panic!("the F/T node reports the silent poses on /diagnostics:\n{}", procs.log("ft_sensor"))
+    });
+    eprintln!("ft_sensor: /diagnostics ERROR {after:.2} s after the driver stopped: {message}");
+    assert!(after >= DEAD_AFTER - 0.05, "ft_sensor reported {after:.2} s after, dead_after {DEAD_AFTER} s");
+    assert!(procs.exited("ft_sensor").is_none(), "the F/T node never exits for it:\n{}", procs.log("ft_sensor"));
 
     // The driver again, its controller gone: the KRC still commands, the driver holds and reports.
     drain(&diagnostics);

@@ -200,6 +200,7 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
     let mut cell = pressing(26);
     let surface = cell.sim.surface.as_ref().unwrap().config().point;
     let (mut accepted, mut refused) = (0, 0);
+    let mut recent = std::collections::VecDeque::new();
     for case in 0..cases {
         let result = match rng.random_range(0..4) {
             0 => cell.controller.command_force(value(&mut rng, -50.0..400.0), value(&mut rng, 0.0..5.0)),
@@ -231,10 +232,15 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
         }
         // Each input is followed by 50 ms of control, invariants checked every cycle.
         for k in 0..50 {
-            cell.cycle().unwrap();
+            let tick = cell.cycle().unwrap();
             if let Some(v) = violation(&cell.sim) {
-                panic!("case {case} ({result:?}), cycle {k}: {v}");
+                let state = tick.map(|t| t.controller);
+                panic!("case {case} ({result:?}), cycle {k}: {v}\nbefore: {recent:#?}\nnow: {state:?}");
             }
+        }
+        recent.push_back(format!("case {case}: {result:?}; then {:.1} N", cell.sim.contact().normal_force));
+        if recent.len() > 4 {
+            recent.pop_front();
         }
     }
     eprintln!("{cases} fuzz cases: {accepted} accepted, {refused} refused, no violation");
@@ -439,7 +445,7 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
         cell.driver = LwrDriver::new(dp.driver_config());
         let bound = 1.2 * cp.force_limit;
-        let mut check = |cell: &mut Cell, cycles: usize, what: &str| {
+        let check = |cell: &mut Cell, cycles: usize, what: &str| {
             for k in 0..cycles {
                 cell.cycle().unwrap();
                 if let Some(v) = violation_within(&cell.sim, bound) {
@@ -456,4 +462,34 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
     }
     eprintln!("{sets} fuzzed parameter sets: {accepted} accepted and run, {refused} refused, no violation");
     assert!(accepted >= sets / 5 && refused >= sets / 5, "{accepted} accepted, {refused} refused");
+}
+
+#[test]
+fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
+    // Found by the 10 000-case fuzz: the guard waited 0.2 s from the start of the newest plan, not of
+    // the back-off, so a deep deformation command just after a back-off pushed on, unguarded, to 301 N.
+    let mut cell = pressing(32);
+    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    // A model far too soft, within the plausible offset: a force command overshoots into the guard.
+    let too_soft = ContactModel::new(Kind::AzadFeatherstone, 18_000.0, 0.0).unwrap();
+    cell.controller.adopt_estimate(too_soft, &surface, None).unwrap();
+    cell.controller.command_force(MAX_FORCE * 0.95, 0.5).unwrap();
+    let mut limited = false;
+    for _ in 0..1000 {
+        limited = cell.cycle().unwrap().is_some_and(|t| t.controller.force_limited);
+        if limited {
+            break;
+        }
+    }
+    assert!(limited, "the guard fired");
+    cell.controller.command_deformation(0.058, 0.4).unwrap();
+    let mut peak: f64 = 0.0;
+    for k in 0..2000 {
+        cell.cycle().unwrap();
+        peak = peak.max(cell.sim.contact().normal_force);
+        if let Some(v) = violation(&cell.sim) {
+            panic!("cycle {k}: {v}");
+        }
+    }
+    eprintln!("deformation command after a back-off: peak {peak:.1} N");
 }
