@@ -214,8 +214,8 @@ fn a_hold_for_a_stale_command_hands_its_torque_to_the_spring_and_overspeed_drops
     let (k, limit) = (config.hold_stiffness, config.hold_max_preload);
     let mut d = LwrDriver::new(config.clone());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
-    // Joints 2 and 4 need more than the preload can carry (5000 N·m/rad × 0.02 rad = 100 N·m).
-    let total = [1.0, 150.0, 0.5, -95.0, -0.2, 1.0, 0.3];
+    // Joints 2 and 4 need more than the preload can carry (3000 × 0.05 = 150 N·m, 1500 × 0.05 = 75 N·m).
+    let total = [1.0, 170.0, 0.5, -95.0, -0.2, 1.0, 0.3];
     d.set_command(&total).unwrap();
     let beyond_gravity: [f64; 7] = std::array::from_fn(|i| total[i] - G[i] as f64);
     let mut seq = 2;

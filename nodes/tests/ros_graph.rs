@@ -236,7 +236,7 @@ fn parameters_are_served_by_the_standard_services() {
     .values;
     assert_eq!(values[0].int_value, 7, "the override is what the node runs with");
     assert_eq!(values[1].string_value, "127.0.0.1:49938");
-    assert_eq!(values[2].double_array, vec![5000.0, 5000.0, 5000.0, 5000.0, 1000.0, 500.0, 500.0]);
+    assert_eq!(values[2].double_array, vec![3000.0, 3000.0, 1000.0, 1500.0, 300.0, 150.0, 150.0]);
     let mut changed = values[0].clone();
     changed.int_value = 3;
     let results = call(

@@ -321,7 +321,7 @@ fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload(
         "surface gone in a stall: farthest joint {farthest:.4} rad from the held position, at the end {last:.4?}"
     );
     // The spring's set point is at most `preload` away: the arm settles there. On the way the rest of the
-    // torque, beyond what the preload carries, still fades (measured: 1.24 × preload at most).
+    // torque, beyond what the preload carries, still fades.
     assert!(last.iter().all(|d| d.abs() <= 1.02 * preload), "settled {last:.4?}, the preload is {preload} rad");
     assert!(farthest <= 1.5 * preload, "a joint moved {farthest:.4} rad, the preload is {preload} rad");
 }
@@ -405,7 +405,8 @@ fn fuzzed<P: serde::Serialize + serde::de::DeserializeOwned>(
         replace_number(&mut tree, &mut k, &mut |old| {
             if old.is_f64() {
                 let x = old.as_f64().unwrap();
-                let typical = if x == 0.0 { -1.0..1.0 } else { (x.abs() * 0.1)..(x.abs() * 10.0) };
+                // A user's edit: half to twice the default (or an extreme, a third of the time).
+                let typical = if x == 0.0 { -1.0..1.0 } else { (x.abs() * 0.5)..(x.abs() * 2.0) };
                 serde_yaml_ng::Value::from(value(rng, typical))
             } else {
                 const COUNTS: [i64; 7] = [0, 1, 2, 7, 1000, u32::MAX as i64, i64::MAX];
@@ -420,15 +421,18 @@ fn fuzzed<P: serde::Serialize + serde::de::DeserializeOwned>(
 fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
     // Every parameter a user can set reaches the arm through the controller's and driver's configs:
     // a set the nodes accept must keep the limits through approach, contact, a force and a
-    // deformation command (SOFTCONTACT_FUZZ_CASES / 50 sets, at least 20).
+    // deformation command (SOFTCONTACT_FUZZ_CASES / 200 accepted sets run, at least 6).
     use softcontact_nodes::deformation_controller::Params as ControllerParams;
     use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
     use softcontact_nodes::params::NodeParams;
     let cases: usize = std::env::var("SOFTCONTACT_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
-    let sets = (cases / 50).max(20);
+    let wanted = (cases / 200).max(6);
     let mut rng = SmallRng::seed_from_u64(0x9A7A);
     let (mut accepted, mut refused) = (0, 0);
-    for set in 0..sets {
+    for set in 0..wanted * 50 {
+        if accepted == wanted {
+            break;
+        }
         let n = rng.random_range(1..3);
         let controller = fuzzed(&ControllerParams::default(), n, &mut rng).filter(|p| p.validate().is_ok());
         let n = rng.random_range(0..3);
@@ -460,8 +464,8 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         let pressed = cell.controller.command_deformation(0.01, 1.0);
         check(&mut cell, 1500, &format!("deformation 10 mm: {pressed:?}"));
     }
-    eprintln!("{sets} fuzzed parameter sets: {accepted} accepted and run, {refused} refused, no violation");
-    assert!(accepted >= sets / 5 && refused >= sets / 5, "{accepted} accepted, {refused} refused");
+    eprintln!("fuzzed parameter sets: {accepted} accepted and run, {refused} refused, no violation");
+    assert!(accepted == wanted && refused > 0, "{accepted} accepted, {refused} refused");
 }
 
 #[test]
