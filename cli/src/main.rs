@@ -3,12 +3,12 @@
 mod any_topic;
 mod bench;
 mod demo;
+mod discrepancy_cmd;
 mod force_cmd;
 mod identify_cmd;
 mod model_cmd;
 mod record_cmd;
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -32,15 +32,7 @@ enum Command {
     /// Fit every contact model to a recording (5-fold cross-validated fitness) and choose one.
     Identify(identify_cmd::IdentifyArgs),
     /// Find where simulation and measurement disagree, name the missing effect, add it, show the gap.
-    Discrepancy {
-        file: PathBuf,
-        #[arg(long)]
-        model: Option<PathBuf>,
-        #[arg(long)]
-        json: Option<PathBuf>,
-        #[arg(long)]
-        out: Option<PathBuf>,
-    },
+    Discrepancy(discrepancy_cmd::DiscrepancyArgs),
     /// Record ROS 2 topics to MCAP (like `ros2 bag record`).
     Record(record_cmd::RecordArgs),
     /// Publish a recording with its recorded timing (like `ros2 bag play`).
@@ -58,17 +50,11 @@ enum Command {
     },
 }
 
-fn not_built(command: &str, plan: &str) -> anyhow::Result<()> {
-    anyhow::bail!("`softcontact {command}` is not built yet: {plan}")
-}
-
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Identify(args) => identify_cmd::run(&args),
-        Command::Discrepancy { .. } => {
-            not_built("discrepancy", "it needs the simulator, the estimator and the MCAP reader")
-        }
+        Command::Discrepancy(args) => discrepancy_cmd::run(&args),
         Command::Record(args) => record_cmd::record(&args),
         Command::Replay(args) => record_cmd::replay(&args),
         Command::Model(args) => model_cmd::run(args),

@@ -313,7 +313,10 @@ pub struct ForcePairing {
 pub struct Paired {
     pub position: Vector3<f64>,
     pub velocity: Vector3<f64>,
+    /// The contact's normal force, f ≥ 0 [N].
     pub normal_force: f64,
+    /// The sensor's reading along the normal, unclamped [N]: in free space its noise and bias.
+    pub normal_reading: f64,
 }
 
 impl ForcePairing {
@@ -361,6 +364,7 @@ impl ForcePairing {
             return None;
         }
         let force = rotation * self.tool_to_sensor * force_in_sensor;
-        Some(Paired { position, velocity: self.velocity, normal_force: (-force.dot(&self.normal)).max(0.0) })
+        let normal_reading = -force.dot(&self.normal);
+        Some(Paired { position, velocity: self.velocity, normal_force: normal_reading.max(0.0), normal_reading })
     }
 }

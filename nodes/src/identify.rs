@@ -133,7 +133,8 @@ pub struct SyntheticReading {
 /// (for the offline tools' tests and benchmarks): the tool faces down 5 mm above a horizontal surface
 /// at height `surface_z`, approaches at 1 cm/s, then pushes at 1 Hz between 2 mm and `depth` of
 /// deformation; `rate` readings a second, the force on the sensor in its own frame (through the URDF's
-/// tool→sensor rotation) with Gaussian noise of `noise` N per axis.
+/// tool→sensor rotation) with Gaussian noise of `noise` N per axis. The model's effects (relaxation,
+/// sensor bias, …) are in the readings, hidden from the tools that read them.
 pub fn synthetic_pushes(
     model: &softcontact_contact::ContactModel,
     surface_z: f64,
@@ -160,6 +161,7 @@ pub fn synthetic_pushes(
     let touch = approach / speed;
     let n = (seconds * rate) as usize;
     let mut out = Vec::with_capacity(n);
+    let mut effects = model.effect_state();
     for i in 0..n {
         let t = i as f64 / rate;
         // Deformation z (positive into the surface) and its rate: the ramp, then 1 Hz pushes from z = 0
@@ -175,7 +177,8 @@ pub fn synthetic_pushes(
             let target = mid - amp * (w * s).cos();
             (blend * target + (1.0 - blend) * speed * s, blend * amp * w * (w * s).sin() + (1.0 - blend) * speed)
         };
-        let f = if z > 0.0 { model.force(z, zdot)? } else { 0.0 };
+        // What the sensor reads of the surface, with the model's effects (the simulator's code).
+        let f = model.step(&mut effects, z, zdot, 1.0 / rate)?.1;
         let stamp = Time::from_secs_f64(1.7e9 + t);
         let header = |frame: &str| Header { stamp, frame_id: frame.into() };
         let force_world = Vector3::new(0.0, 0.0, f);

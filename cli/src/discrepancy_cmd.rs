@@ -1,0 +1,166 @@
+//! `softcontact discrepancy FILE`: where the identified contact model (or `--model`) and the recording
+//! disagree, which physical effect is missing, and the augmented model that closes the gap
+//! (design.md section 7; the method is `crates/discrepancy`). This command only reads the recording
+//! into a [`Series`] along the contact normal, runs [`analyse`] and shows the result.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use softcontact_bag::Recording;
+use softcontact_contact::ContactModel;
+use softcontact_discrepancy::{Options, Report, Series, analyse};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
+use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_nodes::contact_estimator::ForcePairing;
+use softcontact_nodes::geometry;
+
+use crate::identify_cmd::{self, IdentifyArgs, POSE, TF_STATIC, TWIST, WRENCH};
+
+#[derive(Debug, clap::Args)]
+pub struct DiscrepancyArgs {
+    /// A ROS 2 recording: an .mcap file or a rosbag2 folder with /ft_sensor/wrench and /lwr/ee_pose.
+    pub file: PathBuf,
+    /// The baseline contact model (model YAML); default: the best model identified from the recording.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Write the result as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Folder for the augmented model (`<name>.augmented.yaml`).
+    #[arg(long, default_value = "out/discrepancy")]
+    pub out: PathBuf,
+    /// Contact direction in the world, the way the hand moves to compress the surface.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
+    pub normal: Vec<f64>,
+    /// Onset threshold of the normal force [N].
+    #[arg(long, default_value_t = 1.0)]
+    pub onset: f64,
+    /// Time between the samples analysed [s].
+    #[arg(long, default_value_t = 0.01)]
+    pub sample_period: f64,
+}
+
+/// The recording along the normal from the contact position: one sample per `sample_period`.
+fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) -> anyhow::Result<Series> {
+    let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
+    let n = Vector3::new(x, y, z).normalize();
+    let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, n, 0.05);
+    let (mut t, mut zs, mut zdot, mut f) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for m in recording.messages() {
+        let m = m?;
+        match m.topic() {
+            TF_STATIC => {
+                let tf = m.decode::<TFMessage>()?;
+                let (tool, sensor) =
+                    (softcontact_dynamics::lwr4::TOOL_FRAME, softcontact_dynamics::lwr4::FT_SENSOR_FRAME);
+                if let Some(r) = geometry::static_rotation(&[&tf], tool, sensor) {
+                    pairing.tool_to_sensor = r;
+                }
+            }
+            POSE => {
+                let p = m.decode::<PoseStamped>()?;
+                let (position, rotation) = geometry::pose_of(&p.pose);
+                pairing.pose(p.header.stamp.as_secs_f64(), position, rotation);
+            }
+            TWIST => pairing.twist(geometry::vector_of(&m.decode::<TwistStamped>()?.twist.linear)),
+            WRENCH => {
+                let w = m.decode::<WrenchStamped>()?;
+                let stamp = w.header.stamp.as_secs_f64();
+                if t.last().is_some_and(|last| stamp < last + args.sample_period * (1.0 - 1e-6)) {
+                    continue;
+                }
+                if let Some(p) = pairing.force(stamp, geometry::vector_of(&w.wrench.force)) {
+                    t.push(stamp);
+                    zs.push((p.position - surface).dot(&n));
+                    zdot.push(p.velocity.dot(&n));
+                    f.push(p.normal_reading);
+                }
+            }
+            _ => {}
+        }
+    }
+    anyhow::ensure!(t.len() >= 100, "only {} force readings paired with a pose: too short to analyse", t.len());
+    Ok(Series::new(t, zs, zdot, f)?)
+}
+
+fn print_report(report: &Report, name: &str) {
+    println!("{name}: baseline {} — in-contact residual RMS {:.3} N", report.baseline.kind.id(), report.baseline.rms);
+    println!(
+        "noise floor {:.3} N ({:?}); k, λ refitted: {:.1}, {:.1} → RMS {:.3} N",
+        report.noise_floor, report.noise_source, report.refit.stiffness, report.refit.damping, report.refit.rms
+    );
+    if report.effects.is_empty() {
+        println!("no effect named");
+    } else {
+        println!("\n{:<26}{:<48}{:>12}{:>12}", "effect", "parameters (± 95 %)", "RMS before", "RMS after");
+        for e in &report.effects {
+            let parameters: Vec<String> = e
+                .parameters
+                .iter()
+                .map(|(k, v)| match e.uncertainty.get(k) {
+                    Some(u) => format!("{k} {v:.4e} ± {u:.1e}"),
+                    None => format!("{k} {v:.4e}"),
+                })
+                .collect();
+            println!("{:<26}{:<48}{:>10.3} N{:>10.3} N", e.id, parameters.join(", "), e.rms_before, e.rms_after);
+        }
+    }
+    for a in &report.ambiguous {
+        println!("ambiguous between {} and {}: {}", a.between[0], a.between[1], a.would_separate);
+    }
+    println!("\n{:<12}{:>12}{:>12}", "phase", "RMS before", "RMS after");
+    for (phase, rms) in &report.phases {
+        println!("{:<12}{:>10.3} N{:>10.3} N", format!("{phase:?}").to_lowercase(), rms.rms_before, rms.rms_after);
+    }
+    let remaining = match report.remaining {
+        softcontact_discrepancy::Remaining::None => "none: the residual is at the noise floor",
+        softcontact_discrepancy::Remaining::Unexplained => {
+            "unexplained: a structured residual that no effect of the library explains"
+        }
+        softcontact_discrepancy::Remaining::Ambiguous => "ambiguous: the recording cannot tell the candidates apart",
+    };
+    println!("\nfinal RMS {:.3} N; remaining: {remaining}", report.final_rms);
+}
+
+pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
+    let baseline = match &args.model {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            Some(ContactModel::from_yaml(&text).with_context(|| format!("{} is not a contact model", path.display()))?)
+        }
+        None => None,
+    };
+    let recording = Recording::open(&args.file)?;
+    for w in recording.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let id_args = IdentifyArgs {
+        file: args.file.clone(),
+        json: None,
+        normal: args.normal.clone(),
+        onset: args.onset,
+        sample_period: args.sample_period,
+    };
+    let bar = indicatif::ProgressBar::new(recording.message_count());
+    bar.set_message("identify");
+    let id = identify_cmd::identify(&recording, &id_args, |n| bar.set_position(n))?;
+    bar.finish_and_clear();
+    let surface = id.contact_position();
+    let baseline = baseline.unwrap_or_else(|| id.model.model.clone());
+    let series = series(&recording, &id_args, &surface)?;
+    let report = analyse(&series, &baseline, &Options::default())?;
+    let name = args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    print_report(&report, name);
+
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let model_file = args.out.join(format!("{name}.augmented.yaml"));
+    std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
+    println!("augmented model: {}", model_file.display());
+    if let Some(path) = &args.json {
+        let mut value = serde_json::to_value(&report)?;
+        value["model_file"] = serde_json::Value::from(model_file.display().to_string());
+        identify_cmd::write_json(path, &value)?;
+    }
+    Ok(())
+}
