@@ -19,26 +19,15 @@ use crate::identify_cmd::{self, IdentifyArgs, POSE, TF_STATIC, TWIST, WRENCH};
 
 #[derive(Debug, clap::Args)]
 pub struct DiscrepancyArgs {
-    /// A ROS 2 recording: an .mcap file or a rosbag2 folder with /ft_sensor/wrench and /lwr/ee_pose.
-    pub file: PathBuf,
+    /// The recording and how to read it, as `identify` takes them (`--json`: the design's discrepancy JSON).
+    #[command(flatten)]
+    pub recording: IdentifyArgs,
     /// The baseline contact model (model YAML); default: the best model identified from the recording.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Write the result as JSON here.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
     /// Folder for the augmented model (`<name>.augmented.yaml`).
     #[arg(long, default_value = "out/discrepancy")]
     pub out: PathBuf,
-    /// Contact direction in the world, the way the hand moves to compress the surface.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
-    pub normal: Vec<f64>,
-    /// Onset threshold of the normal force [N].
-    #[arg(long, default_value_t = 1.0)]
-    pub onset: f64,
-    /// Time between the samples analysed [s].
-    #[arg(long, default_value_t = 0.01)]
-    pub sample_period: f64,
 }
 
 /// The recording along the normal from the contact position: one sample per `sample_period`.
@@ -131,33 +120,27 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let recording = Recording::open(&args.file)?;
+    let id_args = &args.recording;
+    let recording = Recording::open(&id_args.file)?;
     for w in recording.warnings() {
         eprintln!("warning: {w}");
     }
-    let id_args = IdentifyArgs {
-        file: args.file.clone(),
-        json: None,
-        normal: args.normal.clone(),
-        onset: args.onset,
-        sample_period: args.sample_period,
-    };
     let bar = indicatif::ProgressBar::new(recording.message_count());
     bar.set_message("identify");
-    let id = identify_cmd::identify(&recording, &id_args, |n| bar.set_position(n))?;
+    let id = identify_cmd::identify(&recording, id_args, |n| bar.set_position(n))?;
     bar.finish_and_clear();
     let surface = id.contact_position();
     let baseline = baseline.unwrap_or_else(|| id.model.model.clone());
-    let series = series(&recording, &id_args, &surface)?;
+    let series = series(&recording, id_args, &surface)?;
     let report = analyse(&series, &baseline, &Options::default())?;
-    let name = args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
     print_report(&report, name);
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let model_file = args.out.join(format!("{name}.augmented.yaml"));
     std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
     println!("augmented model: {}", model_file.display());
-    if let Some(path) = &args.json {
+    if let Some(path) = &id_args.json {
         let mut value = serde_json::to_value(&report)?;
         value["model_file"] = serde_json::Value::from(model_file.display().to_string());
         identify_cmd::write_json(path, &value)?;

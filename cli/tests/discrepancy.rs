@@ -66,13 +66,9 @@ fn a_clean_recording_gets_no_name() {
 /// relaxation with τ 0.08 s (0.3 s hidden) and then two proxies. Run with `--ignored`.
 #[test]
 #[ignore = "known gap: the surface position is not refitted with the effects"]
-fn a_hidden_relaxation_is_named_and_a_clean_recording_gets_no_name() {
+fn a_hidden_relaxation_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let clean = ContactModel::new(Kind::AzadFeatherstone, 25_000.0, 1100.0).unwrap();
-    let (report, _, shown) = analyse(dir.path(), "clean", &clean);
-    assert_eq!(ids(&report), Vec::<String>::new(), "{shown}");
-    assert_eq!(report["remaining"], "none", "{shown}");
-
     let mut relaxing = clean.clone();
     relaxing.effects.push(Effect::ViscoelasticRelaxation { stiffness: 300.0, time_constant: 0.3 });
     let (report, augmented, shown) = analyse(dir.path(), "relaxing", &relaxing);
