@@ -4,6 +4,7 @@ mod any_topic;
 mod bench;
 mod demo;
 mod discrepancy_cmd;
+mod discrepancy_figures;
 mod force_cmd;
 mod identify_cmd;
 mod model_cmd;
