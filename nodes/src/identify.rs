@@ -2,7 +2,7 @@
 //! instead of a sliding window, with the frames the recording carries.
 
 use nalgebra::Vector3;
-use softcontact_contact::{ContactError, Kind};
+use softcontact_contact::{ContactError, Fit, FitConfig, Kind, Sample};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 
@@ -26,6 +26,11 @@ pub struct Identifier {
     pub unpaired: u64,
     pub contact_time: Option<f64>,
     first_time: Option<f64>,
+    /// The estimator's window samples, mirrored (its window is private): every kind is refitted to
+    /// them at the estimated surface.
+    samples: Vec<Sample>,
+    next_sample: f64,
+    config: EstimatorConfig,
 }
 
 /// The result: every candidate's fit (cross-validated), the chosen model and the surface position.
@@ -38,6 +43,10 @@ pub struct Identification {
     pub samples: usize,
     /// Seconds from the first force reading to the onset.
     pub contact_time: f64,
+    /// Every candidate kind fitted at the estimated surface (`contact_position()`), cross-validated, in
+    /// the order of `model.estimate.fits` (those are fitted at the force onset, seed 001's method). The
+    /// selected kind's entry is `model.model`.
+    pub at_surface: Vec<Fit>,
 }
 
 impl Identifier {
@@ -46,7 +55,7 @@ impl Identifier {
     pub fn new(config: EstimatorConfig, stale_after: f64) -> anyhow::Result<Self> {
         let normal = config.normal;
         Ok(Self {
-            estimator: ContactEstimatorNode::new(config)?,
+            estimator: ContactEstimatorNode::new(config.clone())?,
             pairing: ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, stale_after),
             frames: FramesFrom::Urdf,
             tool_frame: softcontact_dynamics::lwr4::TOOL_FRAME.into(),
@@ -54,6 +63,9 @@ impl Identifier {
             unpaired: 0,
             contact_time: None,
             first_time: None,
+            samples: Vec::new(),
+            next_sample: 0.0,
+            config,
         })
     }
 
@@ -87,6 +99,17 @@ impl Identifier {
         if out.in_contact && self.contact_time.is_none() {
             self.contact_time = Some(t);
         }
+        // ContactEstimatorNode::update's sampling rule, from its onset on (the test below checks that the
+        // samples agree); memory bounded as the window is, dropping the oldest in amortised O(1).
+        if self.contact_time.is_some() && t >= self.next_sample {
+            self.next_sample = t + self.config.sample_period;
+            if out.in_contact && out.normal_force > self.config.onset.threshold {
+                self.samples.push(Sample::new(out.deformation, out.deformation_rate, out.normal_force)?);
+                if self.samples.len() >= 2 * self.config.window {
+                    self.samples.drain(..self.config.window);
+                }
+            }
+        }
         Ok(())
     }
 
@@ -97,7 +120,12 @@ impl Identifier {
             .ok_or(ContactError::NotEnoughData { kind: "a contact (force above the onset threshold)" })?;
         let samples = self.estimator.samples();
         let model = self.estimator.refit()?;
+        // The window keeps the last `window` samples; the deformation moves to the estimated surface.
+        let kept = &self.samples[self.samples.len().saturating_sub(self.config.window)..];
+        let moved: Vec<Sample> = kept.iter().map(|s| Sample { z: s.z - model.offset, ..*s }).collect();
+        let at_surface = surface_fits(&model.estimate.fits, &moved, &self.config.fit)?;
         Ok(Identification {
+            at_surface,
             model,
             frames: self.frames,
             readings: self.readings,
@@ -106,6 +134,15 @@ impl Identifier {
             contact_time: contact_time - self.first_time.unwrap_or(contact_time),
         })
     }
+}
+
+/// Each kind refitted to samples measured from the surface, with its onset fit as the prior (as the
+/// estimator does for the selected kind).
+fn surface_fits(at_onset: &[Fit], moved: &[Sample], cfg: &FitConfig) -> Result<Vec<Fit>, ContactError> {
+    at_onset
+        .iter()
+        .map(|f| softcontact_contact::fit(f.kind, f.exponents, moved, Some((f.stiffness, f.damping)), cfg))
+        .collect()
 }
 
 impl Identification {
@@ -144,6 +181,37 @@ pub fn synthetic_pushes(
     noise: f64,
     seed: u64,
 ) -> anyhow::Result<Vec<SyntheticReading>> {
+    let (approach, speed, (lo, hi)) = (0.005, 0.01, (0.002, depth));
+    let touch = approach / speed;
+    let pushes = |t: f64| {
+        // Deformation z (positive into the surface) and its rate: the ramp, then 1 Hz pushes from z = 0
+        // that swing between lo and hi (a smooth start: the cosine begins at its minimum).
+        if t < touch {
+            (speed * t - approach, speed)
+        } else {
+            let s = t - touch;
+            let w = std::f64::consts::TAU;
+            let blend = (s / 0.5).min(1.0);
+            let mid = (lo + hi) / 2.0;
+            let amp = (hi - lo) / 2.0;
+            let target = mid - amp * (w * s).cos();
+            (blend * target + (1.0 - blend) * speed * s, blend * amp * w * (w * s).sin() + (1.0 - blend) * speed)
+        }
+    };
+    synthetic_readings(model, surface_z, pushes, seconds, rate, noise, seed)
+}
+
+/// As [`synthetic_pushes`], with the deformation z (positive into the surface) and its rate at time t
+/// given by `profile`, e.g. a press and hold.
+pub fn synthetic_readings(
+    model: &softcontact_contact::ContactModel,
+    surface_z: f64,
+    profile: impl Fn(f64) -> (f64, f64),
+    seconds: f64,
+    rate: f64,
+    noise: f64,
+    seed: u64,
+) -> anyhow::Result<Vec<SyntheticReading>> {
     use rand::{Rng, SeedableRng};
     use softcontact_msgs::builtin_interfaces::Time;
     use softcontact_msgs::geometry_msgs as geo;
@@ -157,26 +225,12 @@ pub fn synthetic_pushes(
     };
     let tool = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
     let to_sensor = (tool * ForcePairing::urdf_tool_to_sensor()?).inverse();
-    let (approach, speed, (lo, hi)) = (0.005, 0.01, (0.002, depth));
-    let touch = approach / speed;
     let n = (seconds * rate) as usize;
     let mut out = Vec::with_capacity(n);
     let mut effects = model.effect_state();
     for i in 0..n {
         let t = i as f64 / rate;
-        // Deformation z (positive into the surface) and its rate: the ramp, then 1 Hz pushes from z = 0
-        // that swing between lo and hi (a smooth start: the cosine begins at its minimum).
-        let (z, zdot) = if t < touch {
-            (speed * t - approach, speed)
-        } else {
-            let s = t - touch;
-            let w = std::f64::consts::TAU;
-            let blend = (s / 0.5).min(1.0);
-            let mid = (lo + hi) / 2.0;
-            let amp = (hi - lo) / 2.0;
-            let target = mid - amp * (w * s).cos();
-            (blend * target + (1.0 - blend) * speed * s, blend * amp * w * (w * s).sin() + (1.0 - blend) * speed)
-        };
+        let (z, zdot) = profile(t);
         // What the sensor reads of the surface, with the model's effects (the simulator's code).
         let f = model.step(&mut effects, z, zdot, 1.0 / rate)?.1;
         let stamp = Time::from_secs_f64(1.7e9 + t);
@@ -211,4 +265,32 @@ pub fn synthetic_pushes(
         });
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use softcontact_contact::ContactModel;
+
+    /// The mirrored samples are the estimator's: the selected kind refitted at the surface is exactly
+    /// the estimator's model, whether the window holds every sample or only the last ones.
+    #[test]
+    fn the_selected_kind_at_the_surface_is_the_estimators_model() {
+        let truth = ContactModel::new(Kind::HuntCrossley, 30_000.0, 40_000.0).unwrap();
+        let readings = synthetic_pushes(&truth, 0.3, 0.03, 8.0, 1000.0, 0.2, 3).unwrap();
+        for window in [300, 2000] {
+            let fit = FitConfig { score_about_overall_mean: true, ..Default::default() };
+            let mut identifier = Identifier::new(EstimatorConfig { window, fit, ..Default::default() }, 0.05).unwrap();
+            for r in &readings {
+                identifier.pose(&r.pose);
+                identifier.twist(&r.twist);
+                identifier.wrench(&r.wrench).unwrap();
+            }
+            let id = identifier.finish().unwrap();
+            assert_eq!(id.at_surface.len(), id.model.estimate.fits.len());
+            let selected = id.at_surface.iter().find(|f| f.kind == id.selected()).unwrap();
+            assert_eq!(selected.model().unwrap(), id.model.model, "window {window}");
+            assert_eq!(selected.samples, id.samples.min(window), "window {window}");
+        }
+    }
 }
