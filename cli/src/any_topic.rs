@@ -7,7 +7,7 @@ use softcontact_msgs::RosType;
 use softcontact_nodes::ros;
 
 /// The topics of design.md section 3, their types and the QoS their publishers offer.
-pub const GRAPH_TOPICS: [(&str, &str, Qos); 13] = [
+pub const GRAPH_TOPICS: [(&str, &str, Qos); 14] = [
     ("/lwr/joint_states", "sensor_msgs/msg/JointState", Qos::SENSOR),
     ("/lwr/joint_torque_command", "sensor_msgs/msg/JointState", Qos::RELIABLE),
     ("/lwr/ee_pose", "geometry_msgs/msg/PoseStamped", Qos::SENSOR),
@@ -16,6 +16,7 @@ pub const GRAPH_TOPICS: [(&str, &str, Qos); 13] = [
     ("/tf_static", "tf2_msgs/msg/TFMessage", Qos::LATCHED),
     ("/ft_sensor/wrench_raw", "geometry_msgs/msg/WrenchStamped", Qos::SENSOR),
     ("/ft_sensor/wrench", "geometry_msgs/msg/WrenchStamped", Qos::SENSOR),
+    ("/ft_sensor/tare", "geometry_msgs/msg/WrenchStamped", Qos::RELIABLE),
     ("/contact_estimator/model", "softcontact_msgs/msg/ContactModel", Qos::RELIABLE),
     ("/contact_estimator/state", "softcontact_msgs/msg/ContactState", Qos::SENSOR),
     ("/deformation_controller/force_command", "softcontact_msgs/msg/ForceCommand", Qos::RELIABLE),

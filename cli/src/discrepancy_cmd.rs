@@ -9,12 +9,13 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use softcontact_bag::Recording;
 use softcontact_contact::ContactModel;
-use softcontact_discrepancy::{Options, Report, Series, analyse};
+use softcontact_discrepancy::{Options, Report, Series, analyse, phases, simulate};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::geometry;
 
+use crate::discrepancy_figures;
 use crate::identify_cmd::{self, IdentifyArgs, POSE, TF_STATIC, TWIST, WRENCH};
 
 #[derive(Debug, clap::Args)]
@@ -30,12 +31,15 @@ pub struct DiscrepancyArgs {
     pub out: PathBuf,
 }
 
+/// The F/T node's tares (their stamps zero the sensor's drifted offset).
+const TARE: &str = "/ft_sensor/tare";
+
 /// The recording along the normal from the contact position: one sample per `sample_period`.
 fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) -> anyhow::Result<Series> {
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let n = Vector3::new(x, y, z).normalize();
     let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, n, 0.05);
-    let (mut t, mut zs, mut zdot, mut f) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut t, mut zs, mut zdot, mut f, mut tares) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for m in recording.messages() {
         let m = m?;
         match m.topic() {
@@ -52,6 +56,7 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 let (position, rotation) = geometry::pose_of(&p.pose);
                 pairing.pose(p.header.stamp.as_secs_f64(), position, rotation);
             }
+            TARE => tares.push(m.decode::<WrenchStamped>()?.header.stamp.as_secs_f64()),
             TWIST => pairing.twist(geometry::vector_of(&m.decode::<TwistStamped>()?.twist.linear)),
             WRENCH => {
                 let w = m.decode::<WrenchStamped>()?;
@@ -70,14 +75,20 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
         }
     }
     anyhow::ensure!(t.len() >= 100, "only {} force readings paired with a pose: too short to analyse", t.len());
-    Ok(Series::new(t, zs, zdot, f)?)
+    Ok(Series::new(t, zs, zdot, f)?.with_tares(tares)?)
 }
 
 fn print_report(report: &Report, name: &str) {
     println!("{name}: baseline {} — in-contact residual RMS {:.3} N", report.baseline.kind.id(), report.baseline.rms);
     println!(
-        "noise floor {:.3} N ({:?}); k, λ refitted: {:.1}, {:.1} → RMS {:.3} N",
-        report.noise_floor, report.noise_source, report.refit.stiffness, report.refit.damping, report.refit.rms
+        "noise floor {:.3} N ({:?}); k, λ and the surface refitted: {:.1}, {:.1}, {:+.3} ± {:.3} mm → RMS {:.3} N",
+        report.noise_floor,
+        report.noise_source,
+        report.refit.stiffness,
+        report.refit.damping,
+        1e3 * report.refit.contact_shift,
+        1e3 * report.refit.contact_shift_ci,
+        report.refit.rms
     );
     if report.effects.is_empty() {
         println!("no effect named");
@@ -140,6 +151,18 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     let model_file = args.out.join(format!("{name}.augmented.yaml"));
     std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
     println!("augmented model: {}", model_file.display());
+    let at_surface = series.shifted(report.contact_shift);
+    let figures = discrepancy_figures::Figures {
+        name,
+        series: &at_surface,
+        phases: &phases(&at_surface, report.velocity_threshold),
+        before: &simulate(&baseline, &series)?,
+        after: &simulate(&report.model, &at_surface)?,
+        noise_floor: report.noise_floor,
+    };
+    for path in discrepancy_figures::write(&args.out, &figures)? {
+        println!("figure: {}", path.display());
+    }
     if let Some(path) = &id_args.json {
         let mut value = serde_json::to_value(&report)?;
         value["model_file"] = serde_json::Value::from(model_file.display().to_string());

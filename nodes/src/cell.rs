@@ -36,6 +36,8 @@ pub struct Tick {
     pub ft: FtOutput,
     /// The F/T node has tared: it publishes /ft_sensor/wrench.
     pub tared: bool,
+    /// The bias of a tare taken since the previous tick (the node publishes it on /ft_sensor/tare).
+    pub tare: Option<[f64; 6]>,
     /// The contact force on the hand in the world, from the sensor (zero until tared) [N].
     pub force_world: Vector3<f64>,
     pub controller: ControllerState,
@@ -61,6 +63,7 @@ pub struct Cell {
     /// Command cycles before the F/T node tares itself (the ft_sensor node's `tare_after`).
     tare_after: usize,
     tared: bool,
+    pending_tare: Option<[f64; 6]>,
     commanding: usize,
 }
 
@@ -95,6 +98,7 @@ impl Cell {
             orientation: None,
             tare_after: 100,
             tared: false,
+            pending_tare: None,
             commanding: 0,
         })
     }
@@ -102,7 +106,7 @@ impl Cell {
     /// Software tare now, as the /ft_sensor/bias service does it: refused (with the reason) when the
     /// hand is in contact or moving, or the reading is unsteady.
     pub fn tare(&mut self) -> Result<(), CellError> {
-        self.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?;
+        self.pending_tare = Some(self.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?);
         self.tared = true;
         Ok(())
     }
@@ -163,6 +167,7 @@ impl Cell {
             driver,
             ft,
             tared: self.tared,
+            tare: self.pending_tare.take(),
             force_world,
             controller,
             torque,

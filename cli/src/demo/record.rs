@@ -20,6 +20,7 @@ struct Channels {
     ee_pose: u16,
     ee_twist: u16,
     wrench: u16,
+    tare: u16,
     controller_state: u16,
     estimator_state: u16,
     model: u16,
@@ -45,6 +46,7 @@ impl Recorder {
             ee_pose: w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR)?,
             ee_twist: w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR)?,
             wrench: w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR)?,
+            tare: w.add_topic::<WrenchStamped>("/ft_sensor/tare", Qos::RELIABLE)?,
             controller_state: w.add_topic::<ControllerState>("/deformation_controller/state", Qos::SENSOR)?,
             estimator_state: w.add_topic::<ContactState>("/contact_estimator/state", Qos::SENSOR)?,
             model: w.add_topic::<ContactModel>("/contact_estimator/model", Qos::RELIABLE)?,
@@ -77,6 +79,9 @@ impl Observer for Recorder {
         self.writer.write(c.joint_states, ns, &m.joint_state)?;
         self.writer.write(c.ee_pose, ns, &m.ee_pose)?;
         self.writer.write(c.ee_twist, ns, &m.ee_twist)?;
+        if let Some(bias) = tick.tare {
+            self.writer.write(c.tare, ns, &messages::wrench(&bias, t))?;
+        }
         if let Some(w) = tick.ft.compensated.filter(|_| tick.tared && !tick.ft.invalid) {
             self.writer.write(c.wrench, ns, &messages::wrench(&w, t))?;
         }

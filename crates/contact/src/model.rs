@@ -93,7 +93,8 @@ pub enum Effect {
     ContactOffsetDrift { rate: f64 },
     /// Constant offset [N] of the measured normal force.
     SensorBias { offset: f64 },
-    /// Offset of the measured normal force growing at a constant rate [N/s].
+    /// Offset of the measured normal force growing at a constant rate [N/s] since the sensor's last tare
+    /// ([`EffectState::tare`]).
     SensorDrift { rate: f64 },
 }
 
@@ -231,8 +232,18 @@ fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
 pub struct EffectState {
     /// Time since the model was applied [s].
     pub time: f64,
+    /// Time since the sensor was last tared (or since the model was applied) [s]: a tare zeroes the
+    /// offset the sensor has drifted, so [`Effect::SensorDrift`] counts from it.
+    pub since_tare: f64,
     /// Force of each viscoelastic branch, in the order of `effects`.
     pub branch_force: Vec<f64>,
+}
+
+impl EffectState {
+    /// The sensor was tared: the offset it has drifted since the last tare is zeroed.
+    pub fn tare(&mut self) {
+        self.since_tare = 0.0;
+    }
 }
 
 impl ContactModel {
@@ -352,7 +363,7 @@ impl ContactModel {
 
     /// A fresh state for [`ContactModel::step`].
     pub fn effect_state(&self) -> EffectState {
-        EffectState { time: 0.0, branch_force: vec![0.0; self.effects.len()] }
+        EffectState { time: 0.0, since_tare: 0.0, branch_force: vec![0.0; self.effects.len()] }
     }
 
     /// Advances the effects with memory by dt and returns (surface force, measured force): the force
@@ -360,6 +371,7 @@ impl ContactModel {
     pub fn step(&self, state: &mut EffectState, z: f64, zdot: f64, dt: f64) -> Result<(f64, f64), ContactError> {
         let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
         state.time += dt;
+        state.since_tare += dt;
         let mut z_eff = z;
         let mut scale = 1.0;
         for e in &self.effects {
@@ -391,7 +403,7 @@ impl ContactModel {
                     surface += *s;
                 }
                 Effect::SensorBias { offset: b } => offset += b,
-                Effect::SensorDrift { rate } => offset += rate * state.time,
+                Effect::SensorDrift { rate } => offset += rate * state.since_tare,
                 _ => {}
             }
         }

@@ -14,25 +14,29 @@ use crate::Series;
 pub(crate) enum Term {
     /// 1 over all samples; coefficient offset [N].
     Bias,
-    /// Model time over all samples; coefficient rate [N/s].
+    /// Time since the last tare over all samples; coefficient rate [N/s].
     SensorDrift,
     /// Maxwell branch of unit stiffness and time constant τ [s]; coefficient k_m [N/m].
     Relax(f64),
     /// zᵃ·tanh(ż/v₀) with v₀ [m/s]; coefficient k·h [N/mᵃ].
     Hyst(f64),
+    /// −a·zᵃ⁻¹ (linearised shift of the surface position); coefficient k·δz₀. Always in the structure: the
+    /// contact position is refitted with every candidate, so that no effect absorbs an error of the onset.
+    Shift,
     /// −t·a·zᵃ⁻¹ (linearised surface-zero drift); coefficient k·r.
     OffsetLin,
     /// zᵃ·ln z (linearised change of the stiffness exponent); coefficient k·δa.
     ExpDeriv,
 }
 
-/// Base law exponents a (fitted), b, c (of the baseline kind) and the surface-zero drift rate (a shape
-/// parameter refined by Gauss-Newton), plus the terms.
+/// Base law exponents a (fitted), b, c (of the baseline kind), the surface position's shift [m] and its drift
+/// rate [m/s] (refined by Gauss-Newton on the exact law), plus the terms.
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Structure {
     pub a: f64,
     pub b: f64,
     pub c: f64,
+    pub shift: f64,
     pub offset_rate: f64,
     pub terms: Vec<Term>,
 }
@@ -42,6 +46,8 @@ pub(crate) struct Data<'a> {
     pub s: &'a Series,
     /// Time as [`softcontact_contact::ContactModel::step`] counts it: the sum of the dt handed to it.
     pub time: Vec<f64>,
+    /// Time since the sensor's last tare, counted the same way.
+    pub since_tare: Vec<f64>,
     pub dt: Vec<f64>,
     pub folds: Vec<Range<usize>>,
     /// In contact but the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0, fast unloading of a shallow
@@ -59,10 +65,19 @@ impl<'a> Data<'a> {
             acc += d;
             time.push(acc);
         }
+        let mut since = 0.0;
+        let since_tare = dt
+            .iter()
+            .zip(s.tared_before())
+            .map(|(&d, tared)| {
+                since = if tared { d } else { since + d };
+                since
+            })
+            .collect();
         let folds = (0..folds).map(|i| i * n / folds..(i + 1) * n / folds).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
-        Data { s, time, dt, folds, clamped }
+        Data { s, time, since_tare, dt, folds, clamped }
     }
 }
 
@@ -87,7 +102,7 @@ fn pow(z: f64, e: f64) -> f64 {
 pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
     let s = d.s;
     let n = s.len();
-    let zeff: Vec<f64> = (0..n).map(|i| s.z[i] - st.offset_rate * d.time[i]).collect();
+    let zeff: Vec<f64> = (0..n).map(|i| s.z[i] - st.shift - st.offset_rate * d.time[i]).collect();
     let mut cols = Vec::with_capacity(2 + st.terms.len());
     cols.push(zeff.iter().map(|&z| if z > 0.0 { pow(z, st.a) } else { 0.0 }).collect());
     cols.push(
@@ -98,7 +113,7 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
     for t in &st.terms {
         let col: Vec<f64> = match *t {
             Term::Bias => vec![1.0; n],
-            Term::SensorDrift => d.time.clone(),
+            Term::SensorDrift => d.since_tare.clone(),
             Term::Relax(tau) => {
                 // The same exact update as ContactModel::step, with unit branch stiffness.
                 let mut x = 0.0;
@@ -116,6 +131,9 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
             }
             Term::Hyst(v0) => {
                 (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * (s.zdot[i] / v0).tanh() } else { 0.0 }).collect()
+            }
+            Term::Shift => {
+                (0..n).map(|i| if zeff[i] > 0.0 { -st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 }).collect()
             }
             Term::OffsetLin => (0..n)
                 .map(|i| if zeff[i] > 0.0 { -d.time[i] * st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 })

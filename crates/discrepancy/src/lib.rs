@@ -53,14 +53,19 @@ use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind};
 use fit::{Data, Fit, Structure, Term};
 
 /// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
-/// free space), its rate ż [m/s] and the measured normal force f [N].
+/// free space), its rate ż [m/s] and the measured normal force f [N]; and the times [s] the sensor was
+/// tared (a tare zeroes the sensor's drifted offset: [`softcontact_contact::EffectState::tare`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
     pub t: Vec<f64>,
     pub z: Vec<f64>,
     pub zdot: Vec<f64>,
     pub f: Vec<f64>,
+    pub tares: Vec<f64>,
 }
+
+/// Relaxation branches (time constants) the workflow names at most.
+pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
 /// The fewest samples [`analyse`] accepts, in all and in contact.
 pub const MIN_SAMPLES: usize = 50;
@@ -69,9 +74,34 @@ pub const MIN_CONTACT_SAMPLES: usize = 20;
 impl Series {
     /// Checks equal lengths, finite values and strictly increasing time.
     pub fn new(t: Vec<f64>, z: Vec<f64>, zdot: Vec<f64>, f: Vec<f64>) -> Result<Self, DiscrepancyError> {
-        let s = Series { t, z, zdot, f };
+        let s = Series { t, z, zdot, f, tares: Vec::new() };
         s.validate()?;
         Ok(s)
+    }
+
+    /// The same samples with the sensor tared at these times [s] (any order; non-finite ones are refused).
+    pub fn with_tares(mut self, mut tares: Vec<f64>) -> Result<Self, DiscrepancyError> {
+        if let Some(index) = tares.iter().position(|x| !x.is_finite()) {
+            return Err(DiscrepancyError::NonFinite { name: "tares", index });
+        }
+        tares.sort_by(f64::total_cmp);
+        self.tares = tares;
+        Ok(self)
+    }
+
+    /// Per sample: whether the sensor was tared since the previous sample (at or before the first one).
+    pub fn tared_before(&self) -> Vec<bool> {
+        let mut next = 0;
+        self.t
+            .iter()
+            .map(|&t| {
+                let before = next;
+                while next < self.tares.len() && self.tares[next] <= t {
+                    next += 1;
+                }
+                next > before
+            })
+            .collect()
     }
 
     pub fn len(&self) -> usize {
@@ -80,6 +110,11 @@ impl Series {
 
     pub fn is_empty(&self) -> bool {
         self.t.is_empty()
+    }
+
+    /// The same samples with the surface moved `dz` deeper along the normal: z − dz.
+    pub fn shifted(&self, dz: f64) -> Series {
+        Series { z: self.z.iter().map(|z| z - dz).collect(), ..self.clone() }
     }
 
     pub fn validate(&self) -> Result<(), DiscrepancyError> {
@@ -133,6 +168,10 @@ pub enum Phase {
 }
 
 impl Phase {
+    pub fn in_contact(self) -> bool {
+        matches!(self, Phase::Loading | Phase::Holding | Phase::Unloading)
+    }
+
     pub const ALL: [Phase; 5] = [Phase::Free, Phase::Approach, Phase::Loading, Phase::Holding, Phase::Unloading];
 }
 
@@ -252,9 +291,23 @@ pub fn step_sizes(series: &Series) -> Vec<f64> {
 /// The measured force `model` predicts at every sample, stepped with [`ContactModel::step`] from a fresh
 /// state.
 pub fn simulate(model: &ContactModel, series: &Series) -> Result<Vec<f64>, DiscrepancyError> {
+    Ok(steps(model, series)?.into_iter().map(|(_, measured)| measured).collect())
+}
+
+/// (surface force, measured force) at every sample, stepped with [`ContactModel::step`] from a fresh state,
+/// the sensor tared where the series says.
+fn steps(model: &ContactModel, series: &Series) -> Result<Vec<(f64, f64)>, DiscrepancyError> {
     let mut state = model.effect_state();
     let dt = step_sizes(series);
-    (0..series.len()).map(|i| Ok(model.step(&mut state, series.z[i], series.zdot[i], dt[i])?.1)).collect()
+    let tared = series.tared_before();
+    (0..series.len())
+        .map(|i| {
+            if tared[i] {
+                state.tare();
+            }
+            Ok(model.step(&mut state, series.z[i], series.zdot[i], dt[i])?)
+        })
+        .collect()
 }
 
 /// Thresholds of [`analyse`]; the defaults are the documented method.
@@ -328,6 +381,10 @@ pub struct Baseline {
 pub struct Refit {
     pub stiffness: f64,
     pub damping: f64,
+    /// The surface position refitted along the normal [m] (positive: deeper than the given one), and the
+    /// half-width of its 95 % interval.
+    pub contact_shift: f64,
+    pub contact_shift_ci: f64,
     pub rms: f64,
 }
 
@@ -372,6 +429,10 @@ pub struct Report {
     /// contact (`free`, `approach`) the RMS is over that phase's own samples.
     pub phases: BTreeMap<Phase, PhaseRms>,
     pub final_rms: f64,
+    /// The surface position of the augmented model, along the normal from the given one [m]; re-simulate
+    /// the recording with `series.shifted(contact_shift)`.
+    pub contact_shift: f64,
+    pub contact_shift_ci: f64,
     pub remaining: Remaining,
     /// The augmented model (the baseline refitted when nothing was named).
     #[serde(skip)]
@@ -427,6 +488,17 @@ impl Family {
         }
     }
 
+    /// The structure without this family's term (None for the exponent, which has no term to remove).
+    fn remove(self, st: &Structure, shape: f64) -> Option<Structure> {
+        let term = self.term(shape)?;
+        let mut st = st.clone();
+        st.terms.retain(|t| *t != term);
+        if self == Family::OffsetDrift {
+            st.offset_rate = 0.0;
+        }
+        Some(st)
+    }
+
     fn apply(self, st: &Structure, shape: f64) -> Structure {
         let mut st = st.clone();
         match self.term(shape) {
@@ -436,13 +508,20 @@ impl Family {
         st
     }
 
-    /// Shape grid: τ 0.05–20 s (log), v₀ 1–100 % of the 95th-percentile speed (log), a′ 0.8–2.5.
-    fn grid(self, p95_speed: f64, a: f64) -> Vec<f64> {
+    /// Shape grid: τ 0.05–20 s (log; a second branch at least 3× from the first), v₀ 1–100 % of the
+    /// 95th-percentile speed (log), a′ 0.8–2.5.
+    fn grid(self, p95_speed: f64, st: &Structure) -> Vec<f64> {
+        let a = st.a;
         let log = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
             (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
         };
         match self {
-            Family::Relaxation => log(0.05, 20.0, 14),
+            Family::Relaxation => log(0.05, 20.0, 14)
+                .into_iter()
+                .filter(|&tau| {
+                    st.terms.iter().all(|t| !matches!(*t, Term::Relax(other) if (tau / other).ln().abs() < 3f64.ln()))
+                })
+                .collect(),
             Family::Hysteresis => log(0.01 * p95_speed, p95_speed, 9),
             Family::StiffnessExponent => {
                 (0..=17).map(|i| 0.8 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
@@ -535,7 +614,7 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
 /// The best shape of a family by held-out MSE on the grid, refined by golden section on the in-sample SSE
 /// between the grid neighbours.
 fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64) -> Cand {
-    let grid = fam.grid(p95, cur.a);
+    let grid = fam.grid(p95, cur);
     let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
     let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
     let mut shape = grid[best];
@@ -602,63 +681,74 @@ fn to_model(base: &ContactModel, st: &Structure, fit: &Fit, order: &[(Family, f6
 
 /// Samples in contact (z > 0) where `model`'s surface force is clamped at zero.
 fn clamp_mask(model: &ContactModel, series: &Series) -> Result<Vec<bool>, DiscrepancyError> {
-    let mut state = model.effect_state();
-    let dt = step_sizes(series);
-    (0..series.len())
-        .map(|i| Ok(series.z[i] > 0.0 && model.step(&mut state, series.z[i], series.zdot[i], dt[i])?.0 <= 0.0))
-        .collect()
+    Ok(steps(model, series)?.iter().zip(&series.z).map(|(&(surface, _), &z)| z > 0.0 && surface <= 0.0).collect())
 }
 
 /// In-contact RMS, per-phase RMS and lag-1 autocorrelation of the in-contact residual.
 struct Gap {
     rms: f64,
+    /// RMS out of contact (0 without such samples).
+    free_rms: f64,
     phases: BTreeMap<Phase, f64>,
     lag1: f64,
 }
 
 fn gap(series: &Series, phases: &[Phase], pred: &[f64]) -> Gap {
     let res: Vec<f64> = (0..series.len()).map(|i| series.f[i] - pred[i]).collect();
+    let contact = |i: usize| phases[i].in_contact();
     let rms_of = |keep: &dyn Fn(usize) -> bool| -> Option<f64> {
         let (s, n) = (0..res.len()).filter(|&i| keep(i)).fold((0.0, 0usize), |(s, n), i| (s + res[i] * res[i], n + 1));
         (n > 0).then(|| (s / n as f64).sqrt())
     };
-    let rms = rms_of(&|i| series.z[i] > 0.0).unwrap_or(0.0);
+    let rms = rms_of(&contact).unwrap_or(0.0);
+    let free_rms = rms_of(&|i| !contact(i)).unwrap_or(0.0);
     let phases_rms = Phase::ALL.iter().filter_map(|&p| rms_of(&|i| phases[i] == p).map(|r| (p, r))).collect();
     let (mut lag, mut ss) = (0.0, 0.0);
     for i in 0..res.len() {
-        if series.z[i] > 0.0 {
+        if contact(i) {
             ss += res[i] * res[i];
-            if i > 0 && series.z[i - 1] > 0.0 {
+            if i > 0 && contact(i - 1) {
                 lag += res[i] * res[i - 1];
             }
         }
     }
-    Gap { rms, phases: phases_rms, lag1: if ss > 0.0 { lag / ss } else { 0.0 } }
+    Gap { rms, free_rms, phases: phases_rms, lag1: if ss > 0.0 { lag / ss } else { 0.0 } }
 }
 
-/// Refines the surface-zero drift rate of a structure whose last accepted term is [`Term::OffsetLin`] by
-/// Gauss-Newton on the exact law (z − r·t)ᵃ; returns the structure without the linear column and the
-/// standard error of r.
-fn refine_offset(d: &Data, st: &Structure) -> (Structure, f64) {
+/// Refines the surface position (always) and its drift rate (when [`Term::OffsetLin`] is in the structure)
+/// by Gauss-Newton on the exact law (z − z₀ − r·t)ᵃ: each fit's linearised coefficients k·δz₀ and k·δr are
+/// moved into the structure until they vanish. Both linear columns stay in the structure, so that every
+/// later fit refits the position and the drift jointly with its candidate. Returns the standard errors of
+/// z₀ and r too.
+fn refine_surface(d: &Data, st: &Structure) -> (Structure, f64, f64) {
     let mut st = st.clone();
-    let mut se = 0.0;
-    for _ in 0..8 {
+    let (mut se_shift, mut se_rate) = (0.0, 0.0);
+    let index = |st: &Structure, term: Term| st.terms.iter().position(|t| *t == term).map(|i| i + 2);
+    for _ in 0..12 {
         let f = fit::fit(d, &st);
-        let j = st.terms.iter().position(|t| *t == Term::OffsetLin).map_or(0, |i| i + 2);
         let k = f.beta[0].abs().max(1e-300);
-        let delta = f.beta[j] / k;
-        se = f.se[j] / k;
-        st.offset_rate += delta;
-        if delta.abs() <= 1e-4 * st.offset_rate.abs() {
+        let mut converged = true;
+        if let Some(j) = index(&st, Term::Shift) {
+            let delta = f.beta[j] / k;
+            se_shift = f.se[j] / k;
+            st.shift += delta;
+            converged &= delta.abs() <= 1e-3 * se_shift.max(1e-12);
+        }
+        if let Some(j) = index(&st, Term::OffsetLin) {
+            let delta = f.beta[j] / k;
+            se_rate = f.se[j] / k;
+            st.offset_rate += delta;
+            converged &= delta.abs() <= 1e-4 * st.offset_rate.abs();
+        }
+        if converged {
             break;
         }
     }
-    st.terms.retain(|t| *t != Term::OffsetLin);
-    (st, se)
+    (st, se_shift, se_rate)
 }
 
 /// Half-widths (95 %) of a structure's parameters, keyed like the report.
-fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, offset_se: f64) -> BTreeMap<String, f64> {
+fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, rate_se: f64) -> BTreeMap<String, f64> {
     let z = 1.96;
     let k = fit.beta[0].abs().max(1e-300);
     let mut u = BTreeMap::new();
@@ -700,13 +790,13 @@ fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, offset
             u.insert("exponent".into(), z * f.se[f.se.len() - 1] / f.beta[0].abs().max(1e-300));
         }
         Family::OffsetDrift => {
-            u.insert("rate_m_per_s".into(), z * offset_se);
+            u.insert("rate_m_per_s".into(), z * rate_se);
         }
     }
     u
 }
 
-fn parameters(model: &ContactModel, fam: Family) -> BTreeMap<String, f64> {
+fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String, f64> {
     let mut p = BTreeMap::new();
     if fam == Family::StiffnessExponent {
         p.insert("exponent".into(), model.exponents.a);
@@ -720,7 +810,9 @@ fn parameters(model: &ContactModel, fam: Family) -> BTreeMap<String, f64> {
             (Effect::SensorDrift { rate }, Family::SensorDrift) => {
                 p.insert("rate_n_per_s".into(), rate);
             }
-            (Effect::ViscoelasticRelaxation { stiffness, time_constant }, Family::Relaxation) => {
+            (Effect::ViscoelasticRelaxation { stiffness, time_constant }, Family::Relaxation)
+                if time_constant == shape =>
+            {
                 p.insert("stiffness_n_per_m".into(), stiffness);
                 p.insert("time_constant_s".into(), time_constant);
             }
@@ -747,34 +839,73 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     }
     let o = options;
     let v_th = velocity_threshold(series);
-    let ph = phases(series, v_th);
-    let noise = noise_floor(series, &ph);
     let fscale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
-    let sigma = noise.sigma.max(1e-9 * fscale).max(1e-300);
     let p95 = p95_speed(series).max(1e-4);
 
-    let base_gap = gap(series, &ph, &simulate(baseline, series)?);
+    // The baseline's k, λ and the surface position refitted (the position's column stays in every later
+    // fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more.
     let mut d = Data::new(series, o.folds, baseline);
     let ex = baseline.exponents;
-    let mut st = Structure { a: ex.a, b: ex.b, c: ex.c, offset_rate: 0.0, terms: vec![] };
-    let mut cur = fit::fit(&d, &st);
+    let start = Structure { a: ex.a, b: ex.b, c: ex.c, shift: 0.0, offset_rate: 0.0, terms: vec![Term::Shift] };
     let mut order: Vec<(Family, f64)> = vec![];
+    let (mut st, _, _) = refine_surface(&d, &start);
+    d.clamped = clamp_mask(&to_model(baseline, &st, &fit::fit(&d, &st), &order), &series.shifted(st.shift))?;
+    let (refined, mut shift_se, _) = refine_surface(&d, &st);
+    st = refined;
+    let mut cur = fit::fit(&d, &st);
     let mut model = to_model(baseline, &st, &cur, &order);
-    let mut cur_gap = gap(series, &ph, &simulate(&model, series)?);
-    let refit = Refit { stiffness: model.stiffness, damping: model.damping, rms: cur_gap.rms };
+
+    // Phases and the noise floor at the refitted surface (recomputed when it moves): samples the given
+    // surface put in free space but that carry contact force would otherwise inflate σ.
+    let at_surface = |shift: f64| {
+        let shifted = series.shifted(shift);
+        let ph = phases(&shifted, v_th);
+        let noise = noise_floor(&shifted, &ph);
+        let free: Vec<usize> = (0..series.len()).filter(|&i| !ph[i].in_contact()).collect();
+        (ph, noise, free)
+    };
+    let (mut ph, mut noise, mut free) = at_surface(st.shift);
+    let sigma_of = |noise: &NoiseFloor| noise.sigma.max(1e-9 * fscale).max(1e-300);
+    let mut sigma = sigma_of(&noise);
+    let free_mse = |free: &[usize], pred: &[f64]| -> f64 {
+        free.iter().map(|&i| (series.f[i] - pred[i]).powi(2)).sum::<f64>() / free.len().max(1) as f64
+    };
+
+    let mut cur_gap = gap(series, &ph, &simulate(&model, &series.shifted(st.shift))?);
+    let refit = Refit {
+        stiffness: model.stiffness,
+        damping: model.damping,
+        contact_shift: st.shift,
+        contact_shift_ci: 1.96 * shift_se,
+        rms: cur_gap.rms,
+    };
     let mut stages: Vec<(f64, f64)> = vec![]; // (rms_before, rms_after) per accepted family
-    let mut offset_se = 0.0;
+    let mut rate_se = 0.0;
     let mut ambiguous = vec![];
-    let at_floor = |g: &Gap| g.rms <= o.floor_margin * sigma && g.lag1 <= o.max_white_rho;
+    // At the floor in contact and out of it: a linear law's refitted surface absorbs a sensor offset in
+    // contact, and only free space shows it.
+    let at_floor = |g: &Gap, sigma: f64| g.rms.max(g.free_rms) <= o.floor_margin * sigma && g.lag1 <= o.max_white_rho;
 
     for _ in 0..o.max_rounds {
-        if at_floor(&cur_gap) {
+        if at_floor(&cur_gap, sigma) {
             break;
         }
-        let left: Vec<Family> = Family::ALL.into_iter().filter(|f| order.iter().all(|x| x.0 != *f)).collect();
+        // Each family once, but relaxation up to twice: real elastomers relax on several time scales (a fast
+        // and a slow Maxwell branch are one effect id with two time constants).
+        let times = |f: Family| order.iter().filter(|x| x.0 == f).count();
+        let left: Vec<Family> = Family::ALL
+            .into_iter()
+            .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
+            .collect();
         let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95)).collect();
+        // A candidate must not fit free space worse than the current model: there the force is the sensor's
+        // alone, and an offset that helps in contact but not there stands in for the surface position.
+        let free_ok = |c: &Cand| {
+            free.is_empty() || free_mse(&free, &c.fit.pred) <= 1.5 * free_mse(&free, &cur.pred).max(sigma * sigma)
+        };
         let passes = |c: &Cand| {
             c.physical
+                && free_ok(c)
                 && c.fit.cv_mse <= cur.cv_mse * (1.0 - o.min_gain)
                 && cur.cv_mse - c.fit.cv_mse >= o.min_share * (cur.cv_mse - sigma * sigma)
                 && c.fit.aicc <= cur.aicc - o.min_delta_aicc
@@ -827,46 +958,59 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 fams.swap(0, 1);
             }
         }
-        let mut next = best.st.clone();
+        let (next, se_shift, se_rate) = refine_surface(&d, &best.st);
+        shift_se = se_shift;
         if fams.iter().any(|x| x.0 == Family::OffsetDrift) {
-            let (s, se) = refine_offset(&d, &next);
-            next = s;
-            offset_se = se;
+            rate_se = se_rate;
         }
         for (n, &fam) in fams.iter().enumerate() {
             // Each member's own gap: the intermediate model with the members so far.
-            let partial = if n + 1 == fams.len() {
-                next.clone()
-            } else {
-                let mut s = st.clone();
-                s = fam.0.apply(&s, fam.1);
-                if fam.0 == Family::OffsetDrift { refine_offset(&d, &s).0 } else { s }
-            };
+            let partial =
+                if n + 1 == fams.len() { next.clone() } else { refine_surface(&d, &fam.0.apply(&st, fam.1)).0 };
             let pf = fit::fit(&d, &partial);
             order.push(fam);
             let m = to_model(baseline, &partial, &pf, &order);
-            let g = gap(series, &ph, &simulate(&m, series)?);
+            let g = gap(series, &ph, &simulate(&m, &series.shifted(partial.shift))?);
             stages.push((cur_gap.rms, g.rms));
             cur_gap = g;
         }
         st = next;
         cur = fit::fit(&d, &st);
+        // Backward check: an effect accepted in an earlier round may have stood in for what this round
+        // named (a moving surface zero for a slow relaxation branch); drop it when the model without it
+        // is held-out nearly as good.
+        let earlier = order.len() - fams.len();
+        for i in (0..earlier).rev() {
+            let (f, sh) = order[i];
+            let Some(reduced) = f.remove(&st, sh) else { continue };
+            let (reduced, _, _) = refine_surface(&d, &reduced);
+            let fr = fit::fit(&d, &reduced);
+            if fr.cv_mse <= cur.cv_mse * (1.0 + o.min_gain) && fr.aicc <= cur.aicc + o.min_delta_aicc {
+                order.remove(i);
+                stages.remove(i);
+                st = reduced;
+                cur = fr;
+            }
+        }
         model = to_model(baseline, &st, &cur, &order);
         // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
         // re-mask with the augmented model and refit.
-        d.clamped = clamp_mask(&model, series)?;
+        d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         cur = fit::fit(&d, &st);
         model = to_model(baseline, &st, &cur, &order);
         model.validate()?;
-        cur_gap = gap(series, &ph, &simulate(&model, series)?);
+        (ph, noise, free) = at_surface(st.shift);
+        sigma = sigma_of(&noise);
+        cur_gap = gap(series, &ph, &simulate(&model, &series.shifted(st.shift))?);
         if let Some(last) = stages.last_mut() {
             last.1 = cur_gap.rms;
         }
     }
 
+    let base_gap = gap(series, &ph, &simulate(baseline, series)?);
     let remaining = if !ambiguous.is_empty() {
         Remaining::Ambiguous
-    } else if at_floor(&cur_gap) {
+    } else if at_floor(&cur_gap, sigma) {
         Remaining::None
     } else {
         Remaining::Unexplained
@@ -876,8 +1020,8 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         .zip(&stages)
         .map(|(&(f, sh), &(before, after))| NamedEffect {
             id: f.id().to_string(),
-            parameters: parameters(&model, f),
-            uncertainty: uncertainty(&d, &st, &cur, f, sh, offset_se),
+            parameters: parameters(&model, f, sh),
+            uncertainty: uncertainty(&d, &st, &cur, f, sh, rate_se),
             rms_before: before,
             rms_after: after,
         })
@@ -896,6 +1040,8 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         ambiguous,
         phases: phases_out,
         final_rms: cur_gap.rms,
+        contact_shift: st.shift,
+        contact_shift_ci: 1.96 * shift_se,
         remaining,
         model,
         velocity_threshold: v_th,

@@ -378,11 +378,13 @@ fn report_serialises_to_the_contract() {
         assert!(v["phases"][p]["rms_after"].is_f64(), "{p}");
     }
     assert_eq!(v["remaining"], "none");
-    // The augmented model is the same type and re-simulates to the reported gap.
+    // The augmented model is the same type and re-simulates, at the refitted surface, to the reported gap.
     assert_eq!(r.model.effects.len(), 1);
-    let again = crate::simulate(&r.model, &s).unwrap();
+    let at_surface = s.shifted(r.contact_shift);
+    let again = crate::simulate(&r.model, &at_surface).unwrap();
     let rms = {
-        let v: Vec<f64> = (0..s.len()).filter(|&i| s.z[i] > 0.0).map(|i| (s.f[i] - again[i]).powi(2)).collect();
+        let v: Vec<f64> =
+            (0..s.len()).filter(|&i| at_surface.z[i] > 0.0).map(|i| (s.f[i] - again[i]).powi(2)).collect();
         (v.iter().sum::<f64>() / v.len() as f64).sqrt()
     };
     assert!((rms - r.final_rms).abs() < 1e-12);
@@ -462,6 +464,10 @@ fn effects_across_rates_and_noise() {
             let verdict = if got == vec![id] {
                 ratios.push(shrink_ratio(&r));
                 "named"
+            } else if got.is_empty() && r.refit.rms <= Options::default().floor_margin * r.noise_floor {
+                // Nothing left to name: the baseline with its surface refitted is at the noise floor
+                // (an exponent of 1.3 against a linear law with the surface moved, at σ 0.2 N).
+                "invisible"
             } else if got.is_empty() {
                 "missed"
             } else {
@@ -471,7 +477,37 @@ fn effects_across_rates_and_noise() {
         }
     }
     eprintln!("{}", table.join("\n"));
-    assert!(table.iter().all(|l| l.contains(": named")), "{table:#?}");
+    assert!(table.iter().all(|l| l.contains(": named") || l.contains(": invisible")), "{table:#?}");
+    assert!(table.iter().filter(|l| l.contains(": invisible")).count() <= 1, "{table:#?}");
     ratios.sort_by(f64::total_cmp);
     assert!(ratios[ratios.len() / 2] >= 0.8, "{ratios:?}");
+}
+
+#[test]
+fn a_sensor_drift_restarting_at_each_tare_is_named() {
+    // The sensor drifts 0.05 N/s and is tared at 1/3 and 2/3 of the recording (a tare zeroes the drifted
+    // offset): the drift column must restart there, as the model's own EffectState::tare does.
+    let truth = with(&af(), &[Effect::SensorDrift { rate: 0.05 }]);
+    let exc = Exc::new(100.0);
+    let (t, z, zd) = exc.trajectory();
+    let tares = vec![t[t.len() / 3], t[2 * t.len() / 3]];
+    let mut rng = SmallRng::seed_from_u64(77);
+    let noise = Normal::new(0.0, 0.05).unwrap();
+    let mut state = truth.effect_state();
+    let mut next = 0;
+    let f = (0..t.len())
+        .map(|i| {
+            if next < tares.len() && tares[next] <= t[i] {
+                state.tare();
+                next += 1;
+            }
+            truth.step(&mut state, z[i], zd[i], 1.0 / exc.fs).unwrap().1 + noise.sample(&mut rng)
+        })
+        .collect();
+    let s = Series::new(t, z, zd, f).unwrap().with_tares(tares).unwrap();
+    let r = analyse(&s, &af(), &Options::default()).unwrap();
+    show("drift with tares", &r);
+    assert_eq!(ids(&r), vec!["sensor_drift"]);
+    within("rate", param(&r, "sensor_drift", "rate_n_per_s"), 0.05, 0.1);
+    assert_eq!(r.remaining, Remaining::None);
 }

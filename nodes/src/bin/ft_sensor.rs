@@ -48,6 +48,9 @@ fn main() -> anyhow::Result<()> {
     let mut node = ros::node_with_parameters("ft_sensor", declared)?;
     let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
     let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    // Every tare taken (its bias, stamped when taken): a recording then shows where the sensor's drifted
+    // offset was zeroed, which the discrepancy workflow needs to tell a drift from a moving surface.
+    let tare_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/tare", ros::reliable_qos())?;
     let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
     let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
@@ -121,6 +124,7 @@ fn main() -> anyhow::Result<()> {
                     Ok(b) => {
                         tared = true;
                         tare_refusal = None;
+                        tare_pub.publish(messages::wrench(&b, clock.now()))?;
                         ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
                     }
                     Err(e) => {
@@ -138,6 +142,7 @@ fn main() -> anyhow::Result<()> {
                 Ok(b) => {
                     tared = true;
                     tare_refusal = None;
+                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
                     ros::log(&node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
                     TriggerResponse { success: true, message: format!("bias set to {b:?}") }
                 }
