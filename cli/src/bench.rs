@@ -86,6 +86,19 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 3)]
         reps: usize,
     },
+    /// The discrepancy workflow: its hidden-effect corpus made in the lockstep cell (the detection table
+    /// and the goals), and the whole workflow's time on a 1 kHz recording on one core.
+    Discrepancy {
+        /// Threads for the corpus (each case is an independent cell).
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Write the corpus outcomes and the timing as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Only the timing, not the corpus.
+        #[arg(long)]
+        timing_only: bool,
+    },
 }
 
 /// Name, what Pinocchio calls it, and the goal ratio (ours / Pinocchio) where the project set one.
@@ -197,6 +210,9 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
         BenchCommand::Demo { reps } => crate::demo::bench(reps),
+        BenchCommand::Discrepancy { threads, json, timing_only } => {
+            crate::demo::corpus::bench(threads, json, timing_only)
+        }
     }
 }
 

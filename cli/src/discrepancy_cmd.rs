@@ -123,7 +123,17 @@ fn print_report(report: &Report, name: &str) {
     println!("\nfinal RMS {:.3} N; remaining: {remaining}", report.final_rms);
 }
 
-pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
+/// What the workflow found in one recording, with what it was found from.
+pub struct Analysis {
+    pub name: String,
+    pub baseline: ContactModel,
+    /// The recording along the normal from identify's contact position.
+    pub series: Series,
+    pub report: Report,
+}
+
+/// Reads the recording, identifies it (or takes `--model`) and runs the workflow.
+pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<Analysis> {
     let baseline = match &args.model {
         Some(path) => {
             let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
@@ -136,7 +146,11 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     for w in recording.warnings() {
         eprintln!("warning: {w}");
     }
-    let bar = indicatif::ProgressBar::new(recording.message_count());
+    let bar = if progress {
+        indicatif::ProgressBar::new(recording.message_count())
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     bar.set_message("identify");
     let id = identify_cmd::identify(&recording, id_args, |n| bar.set_position(n))?;
     bar.finish_and_clear();
@@ -144,7 +158,14 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     let baseline = baseline.unwrap_or_else(|| id.model.model.clone());
     let series = series(&recording, id_args, &surface)?;
     let report = analyse(&series, &baseline, &Options::default())?;
-    let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
+    let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording").to_string();
+    Ok(Analysis { name, baseline, series, report })
+}
+
+pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
+    let Analysis { name, baseline, series, report } = analyse_file(args, true)?;
+    let name = name.as_str();
+    let id_args = &args.recording;
     print_report(&report, name);
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;

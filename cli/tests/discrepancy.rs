@@ -111,3 +111,26 @@ fn bad_input_gets_a_clear_error_and_a_non_zero_exit() {
         assert!(shown.contains(says) && !shown.contains("panicked"), "{args:?}: {shown}");
     }
 }
+
+/// The hidden-effect corpus made in the lockstep cell (`softcontact bench discrepancy`, the table in
+/// docs/discrepancy-corpus.md) meets the goals: ≥ 90 % of effect cases named exactly, no false
+/// name on ≥ 20 nulls, median gap shrink ≥ 80 % of the ideal.
+#[test]
+fn the_hidden_effect_corpus_meets_its_goals() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("corpus.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .args(["bench", "discrepancy", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    let shown = text(&out);
+    assert!(out.status.success(), "{shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let c = &v["corpus"];
+    let count = |key: &str| c[key].as_u64().unwrap();
+    assert!(count("effect_cases") >= 12 && count("null_cases") >= 20, "{shown}");
+    assert!(count("named_exactly") * 10 >= 9 * count("effect_cases"), "{shown}");
+    assert_eq!(count("false_names_on_nulls"), 0, "{shown}");
+    assert!(c["median_shrink_of_ideal"].as_f64().unwrap() >= 0.8, "{shown}");
+}

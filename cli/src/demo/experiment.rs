@@ -30,6 +30,8 @@ pub struct SurfaceSpec {
     /// The controller's limits on this surface: force [N], deformation [m].
     pub max_force: f64,
     pub max_deformation: f64,
+    /// The simulated F/T sensor (the demo's drifts as a Gamma warming up; tared before each experiment).
+    pub sensor: FtSensorConfig,
 }
 
 /// How much of the experiments to run (the full set is seed 001's).
@@ -178,7 +180,7 @@ pub fn run_surface(
 ) -> anyhow::Result<SurfaceRun> {
     let normal = Vector3::new(0.0, 0.0, -1.0);
     let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
-    sim.sensor = FtSensorConfig::gamma_drifting();
+    sim.sensor = spec.sensor.clone();
     let params = contact_estimator::Params::default();
     // Identification keeps every sample of every run (seed 001 fits all of them at once).
     let identification = contact_estimator::EstimatorConfig { window: 100_000, ..params.estimator_config() };

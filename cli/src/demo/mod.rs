@@ -1,6 +1,7 @@
 //! `softcontact demo`: seed 001's identification and control experiments on a simulated LWR IV, for a
 //! sponge and a dice, printed in the paper's table layouts beside the paper's numbers.
 
+pub mod corpus;
 mod experiment;
 mod figures;
 mod graph;
@@ -11,6 +12,7 @@ mod report;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use softcontact_sim::FtSensorConfig;
 
 use experiment::{Plan, SurfaceRun, SurfaceSpec};
 use report::{Report, SurfaceReport};
@@ -48,6 +50,7 @@ fn surfaces() -> [SurfaceSpec; 2] {
             push_forces: (220.0, 80.0),
             max_force: 300.0,
             max_deformation: 0.06,
+            sensor: FtSensorConfig::gamma_drifting(),
         },
         SurfaceSpec {
             name: "dice",
@@ -56,6 +59,7 @@ fn surfaces() -> [SurfaceSpec; 2] {
             push_forces: (110.0, 40.0),
             max_force: 150.0,
             max_deformation: 0.08,
+            sensor: FtSensorConfig::gamma_drifting(),
         },
     ]
 }

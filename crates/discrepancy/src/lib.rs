@@ -235,21 +235,31 @@ pub struct NoiseFloor {
 /// The fewest samples a noise estimate uses.
 pub const MIN_NOISE_SAMPLES: usize = 20;
 
-/// σ of the force noise: from out-of-contact samples (mean and linear trend removed) when there are at
-/// least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else from all first differences.
+/// σ of the force noise: from out-of-contact samples (mean and linear trend in the time since the last
+/// tare removed) when there are at least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else
+/// from all first differences.
 pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
+    // The trend is in the time since the last tare: a drifting sensor's offset restarts at each tare.
+    let mut since = 0.0;
+    let tared = series.tared_before();
+    let clock: Vec<f64> = (0..series.len())
+        .map(|i| {
+            since = if i == 0 || tared[i] { 0.0 } else { since + series.t[i] - series.t[i - 1] };
+            since
+        })
+        .collect();
     let free: Vec<usize> = (0..series.len()).filter(|&i| series.z[i] <= 0.0).collect();
     if free.len() >= MIN_NOISE_SAMPLES {
         let n = free.len() as f64;
-        let tm = free.iter().map(|&i| series.t[i]).sum::<f64>() / n;
+        let tm = free.iter().map(|&i| clock[i]).sum::<f64>() / n;
         let fm = free.iter().map(|&i| series.f[i]).sum::<f64>() / n;
         let (mut stt, mut stf) = (0.0, 0.0);
         for &i in &free {
-            stt += (series.t[i] - tm).powi(2);
-            stf += (series.t[i] - tm) * (series.f[i] - fm);
+            stt += (clock[i] - tm).powi(2);
+            stf += (clock[i] - tm) * (series.f[i] - fm);
         }
         let slope = if stt > 0.0 { stf / stt } else { 0.0 };
-        let sse: f64 = free.iter().map(|&i| (series.f[i] - fm - slope * (series.t[i] - tm)).powi(2)).sum();
+        let sse: f64 = free.iter().map(|&i| (series.f[i] - fm - slope * (clock[i] - tm)).powi(2)).sum();
         return NoiseFloor { sigma: (sse / (n - 2.0)).sqrt(), source: NoiseSource::FreeSpace, samples: free.len() };
     }
     let diffs = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
