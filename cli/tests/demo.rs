@@ -84,6 +84,32 @@ fn the_demo_reproduces_seed_001_and_beats_its_numbers() {
         assert!(id.status.success(), "identify: {}", String::from_utf8_lossy(&id.stderr));
         let id: Value = serde_json::from_slice(&std::fs::read(&identified).unwrap()).unwrap();
         assert_eq!(id["selected"], kind, "{name}: identify on the demo's recording");
+
+        // The discrepancy workflow names what the simulated surface hides (relaxation and hysteresis) and
+        // nothing else, and closes most of the gap.
+        let found = out.join(format!("{name}_discrepancy.json"));
+        let run = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+            .arg("discrepancy")
+            .arg(out.join(format!("{name}.mcap")))
+            .arg("--out")
+            .arg(&out)
+            .arg("--json")
+            .arg(&found)
+            .output()
+            .unwrap();
+        let shown = String::from_utf8_lossy(&run.stdout);
+        assert!(run.status.success(), "discrepancy: {shown}{}", String::from_utf8_lossy(&run.stderr));
+        let found: Value = serde_json::from_slice(&std::fs::read(&found).unwrap()).unwrap();
+        let mut ids: Vec<&str> =
+            found["effects"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
+        ids.sort();
+        ids.dedup();
+        assert_eq!(ids, ["hysteresis", "viscoelastic_relaxation"], "{name}: {shown}");
+        let (before, after) = (found["refit"]["rms"].as_f64().unwrap(), found["final_rms"].as_f64().unwrap());
+        assert!(after < 0.06 * before, "{name}: in-contact RMS {before} → {after} N\n{shown}");
+        assert!(
+            out.join(format!("{name}.residual.svg")).exists() && out.join(format!("{name}.augmented.yaml")).exists()
+        );
     }
     for figure in ["fig2_identification.svg", "fig3_control_sponge.svg", "fig4_control_dice.svg"] {
         let svg = std::fs::read_to_string(out.join(figure)).unwrap();
