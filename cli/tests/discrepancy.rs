@@ -134,3 +134,38 @@ fn the_hidden_effect_corpus_meets_its_goals() {
     assert_eq!(count("false_names_on_nulls"), 0, "{shown}");
     assert!(c["median_shrink_of_ideal"].as_f64().unwrap() >= 0.8, "{shown}");
 }
+
+/// Recordings a lab's own logger would write, by both Python writers (mcap-ros2-support: one .mcap file;
+/// rosbags: a rosbag2 folder), at 500 Hz and 1 kHz, the wrench stamped 1 ms after the pose, of a foam with
+/// a relaxation branch (300 N/m, 0.5 s) that `cli/tests/discrepancy_peers.py` computes on its own: the
+/// workflow names the relaxation, nothing else, with its parameters, and closes the gap.
+#[test]
+fn recordings_written_by_python_peers_are_analysed() {
+    let dir = tempfile::tempdir().unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/discrepancy_peers.py");
+    for rate in ["500", "1000"] {
+        let folder = dir.path().join(rate);
+        let out = Command::new("python3").arg(&script).arg("write").arg(&folder).arg(rate).output().unwrap();
+        assert!(out.status.success(), "discrepancy_peers.py: {}", text(&out));
+        for recording in [folder.join("by_mcap_ros2.mcap"), folder.join("by_rosbags")] {
+            let json = folder.join("report.json");
+            let run = discrepancy(&[
+                recording.as_os_str(),
+                "--json".as_ref(),
+                json.as_os_str(),
+                "--out".as_ref(),
+                folder.join("out").as_os_str(),
+            ]);
+            let shown = text(&run);
+            assert!(run.status.success(), "{shown}");
+            let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+            assert_eq!(ids(&report), ["viscoelastic_relaxation"], "{rate} Hz {recording:?}\n{shown}");
+            let p = &report["effects"][0]["parameters"];
+            let (k_m, tau) = (p["stiffness_n_per_m"].as_f64().unwrap(), p["time_constant_s"].as_f64().unwrap());
+            assert!((k_m / 300.0 - 1.0).abs() < 0.05 && (tau / 0.5 - 1.0).abs() < 0.05, "{k_m} N/m, {tau} s\n{shown}");
+            let (before, after) = (report["refit"]["rms"].as_f64().unwrap(), report["final_rms"].as_f64().unwrap());
+            let ideal = 1.0 - report["noise_floor"].as_f64().unwrap() / before;
+            assert!(1.0 - after / before >= 0.8 * ideal, "RMS {before} → {after}, ideal {ideal}\n{shown}");
+        }
+    }
+}
