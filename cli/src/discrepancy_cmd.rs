@@ -113,6 +113,23 @@ fn print_report(report: &Report, name: &str) {
     for (phase, rms) in &report.phases {
         println!("{:<12}{:>10.3} N{:>10.3} N", format!("{phase:?}").to_lowercase(), rms.rms_before, rms.rms_after);
     }
+    let l = &report.locate;
+    println!("\nwhere (in contact; before: the refitted baseline)");
+    for (what, unit, scale, bins) in [("speed", "mm/s", 1e3, &l.by_speed), ("force", "N", 1.0, &l.by_force)] {
+        for b in bins.iter() {
+            println!(
+                "  {what} {:>9.2}–{:<9.2} {unit:<5}{:>10.3} N{:>10.3} N",
+                b.from * scale,
+                b.to * scale,
+                b.rms_before,
+                b.rms_after
+            );
+        }
+    }
+    println!(
+        "  whiteness (lag-1 autocorrelation) {:.2} → {:.2}; force against the model: best at a lag of {:+.3} s (correlation {:.4})",
+        l.whiteness_before, l.whiteness_after, l.lag_s, l.lag_correlation
+    );
     let remaining = match report.remaining {
         softcontact_discrepancy::Remaining::None => "none: the residual is at the noise floor",
         softcontact_discrepancy::Remaining::Unexplained => {

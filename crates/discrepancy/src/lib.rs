@@ -437,6 +437,116 @@ pub struct PhaseRms {
     pub rms_after: f64,
 }
 
+/// In-contact samples in one range of a quantity, and the residual RMS there.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bin {
+    pub from: f64,
+    pub to: f64,
+    pub samples: usize,
+    pub rms_before: f64,
+    pub rms_after: f64,
+}
+
+/// Where the gap is (before: the refitted baseline; after: the augmented model).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Locate {
+    /// Quartiles of the in-contact samples by |ż| [m/s] and by measured force [N].
+    pub by_speed: Vec<Bin>,
+    pub by_force: Vec<Bin>,
+    /// Lag-1 autocorrelation of the in-contact residual (≈ 0 when white).
+    pub whiteness_before: f64,
+    pub whiteness_after: f64,
+    /// The lag [s] within ±0.2 s at which the measured force's rate correlates best with the given
+    /// baseline's predicted rate, and that correlation: a force that lags the motion by d peaks at +d (to a
+    /// sample; smooth motions make the peak broad).
+    pub lag_s: f64,
+    pub lag_correlation: f64,
+}
+
+/// Quartile bins of `key` over the in-contact samples.
+fn bins(key: &[f64], contact: &[usize], before: &[f64], after: &[f64]) -> Vec<Bin> {
+    let mut sorted: Vec<f64> = contact.iter().map(|&i| key[i]).collect();
+    if sorted.is_empty() {
+        return vec![];
+    }
+    sorted.sort_by(f64::total_cmp);
+    let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p).round() as usize];
+    let edges = [q(0.0), q(0.25), q(0.5), q(0.75), q(1.0)];
+    (0..4)
+        .map(|b| {
+            let inside: Vec<usize> = contact
+                .iter()
+                .copied()
+                .filter(|&i| key[i] >= edges[b] && (key[i] < edges[b + 1] || (b == 3 && key[i] <= edges[4])))
+                .collect();
+            let rms =
+                |r: &[f64]| (inside.iter().map(|&i| r[i] * r[i]).sum::<f64>() / inside.len().max(1) as f64).sqrt();
+            Bin {
+                from: edges[b],
+                to: edges[b + 1],
+                samples: inside.len(),
+                rms_before: rms(before),
+                rms_after: rms(after),
+            }
+        })
+        .collect()
+}
+
+fn locate(series: &Series, phases: &[Phase], given: &[f64], before: &[f64], after: &[f64]) -> Locate {
+    let contact: Vec<usize> = (0..series.len()).filter(|&i| phases[i].in_contact()).collect();
+    let speed: Vec<f64> = series.zdot.iter().map(|v| v.abs()).collect();
+    let contact = &contact[..];
+    let lag1 = |r: &[f64]| {
+        let (mut lag, mut ss) = (0.0, 0.0);
+        for &i in contact {
+            ss += r[i] * r[i];
+            if i > 0 && phases[i - 1].in_contact() {
+                lag += r[i] * r[i - 1];
+            }
+        }
+        if ss > 0.0 { lag / ss } else { 0.0 }
+    };
+    // Cross-correlation of the measured force's rate with the given baseline's (not the refitted one: its
+    // damping absorbs part of a lag), in contact, over ±0.2 s: a sensor or a stamp that lags the motion by
+    // d peaks at +d.
+    let mut dts: Vec<f64> = series.t.windows(2).map(|w| w[1] - w[0]).collect();
+    dts.sort_by(f64::total_cmp);
+    let dt = dts.get(dts.len() / 2).copied().unwrap_or(1.0).max(1e-6);
+    // On a grid of at least 5 ms (the lag's resolution; a 1 kHz recording's cost stays small), first
+    // differences (a hold's level would otherwise swamp the timing), in contact only.
+    let step = ((0.005 / dt).round() as usize).max(1);
+    let dt = dt * step as f64;
+    let reach = ((0.2 / dt).round() as usize).clamp(1, 200);
+    let grid: Vec<usize> = (step..series.len()).step_by(step).collect();
+    let rate = |v: &[f64]| -> Vec<f64> {
+        grid.iter()
+            .map(|&i| if phases[i].in_contact() && phases[i - step].in_contact() { v[i] - v[i - step] } else { 0.0 })
+            .collect()
+    };
+    let (fc, pc) = (rate(&series.f), rate(given));
+    let norm = (fc.iter().map(|x| x * x).sum::<f64>() * pc.iter().map(|x| x * x).sum::<f64>()).sqrt().max(1e-300);
+    let corr: Vec<f64> = (0..=2 * reach)
+        .map(|k| {
+            let k = k as isize - reach as isize;
+            (0..fc.len() as isize)
+                .filter(|&i| i - k >= 0 && ((i - k) as usize) < fc.len())
+                .map(|i| fc[i as usize] * pc[(i - k) as usize])
+                .sum::<f64>()
+                / norm
+        })
+        .collect();
+    let best = (0..corr.len()).max_by(|&a, &b| corr[a].total_cmp(&corr[b])).unwrap_or(reach);
+    let (lag_s, lag_correlation) = ((best as f64 - reach as f64) * dt, corr[best]);
+    Locate {
+        by_speed: bins(&speed, contact, before, after),
+        by_force: bins(&series.f, contact, before, after),
+        whiteness_before: lag1(before),
+        whiteness_after: lag1(after),
+        lag_s,
+        lag_correlation,
+    }
+}
+
 /// The result of [`analyse`]; serialises to the design's discrepancy JSON (without `model_file`, which the
 /// CLI adds), with `refit` and `noise_source` besides.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -451,6 +561,8 @@ pub struct Report {
     /// contact (`free`, `approach`) the RMS is over that phase's own samples.
     pub phases: BTreeMap<Phase, PhaseRms>,
     pub final_rms: f64,
+    /// Where the gap is: by speed and force level, whiteness, lag against the motion.
+    pub locate: Locate,
     /// The surface position of the augmented model, along the normal from the given one [m]; re-simulate
     /// the recording with `series.shifted(contact_shift)`.
     pub contact_shift: f64,
@@ -894,6 +1006,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     };
 
     let mut cur_gap = gap(series, &ph, &simulate(&model, &series.shifted(st.shift))?);
+    let (refit_model, refit_shift) = (model.clone(), st.shift);
     let refit = Refit {
         stiffness: model.stiffness,
         damping: model.damping,
@@ -1113,6 +1226,13 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         ambiguous,
         phases: phases_out,
         final_rms: cur_gap.rms,
+        locate: {
+            let residual = |m: &ContactModel, shift: f64| -> Result<Vec<f64>, DiscrepancyError> {
+                Ok(simulate(m, &series.shifted(shift))?.iter().zip(&series.f).map(|(p, f)| f - p).collect())
+            };
+            let given = simulate(baseline, series)?;
+            locate(series, &ph, &given, &residual(&refit_model, refit_shift)?, &residual(&model, st.shift)?)
+        },
         contact_shift: st.shift,
         contact_shift_ci: 1.96 * shift_se,
         remaining,

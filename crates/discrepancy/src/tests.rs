@@ -511,3 +511,21 @@ fn a_sensor_drift_restarting_at_each_tare_is_named() {
     within("rate", param(&r, "sensor_drift", "rate_n_per_s"), 0.05, 0.1);
     assert_eq!(r.remaining, Remaining::None);
 }
+
+#[test]
+fn a_lagging_force_is_located_at_its_lag() {
+    // The sensor's stream 50 ms late: the force correlates best with the model 50 ms earlier.
+    let truth = kv();
+    let s = record(&truth, Exc::new(100.0), 0.05, 9, &|_, _, _| 0.0);
+    let lag = 5;
+    let mut f = vec![s.f[0]; lag];
+    f.extend_from_slice(&s.f[..s.len() - lag]);
+    let late = Series::new(s.t.clone(), s.z.clone(), s.zdot.clone(), f).unwrap();
+    let r = analyse(&late, &truth, &Options::default()).unwrap();
+    assert!((r.locate.lag_s - 0.05).abs() <= 0.0101, "lag {} s", r.locate.lag_s);
+    let on_time = analyse(&s, &truth, &Options::default()).unwrap();
+    assert!(on_time.locate.lag_s.abs() <= 0.0101, "lag {} s", on_time.locate.lag_s);
+    // Quartile bins cover every in-contact sample.
+    let counted: usize = on_time.locate.by_speed.iter().map(|b| b.samples).sum();
+    assert_eq!(counted, s.z.iter().filter(|&&z| z - on_time.contact_shift > 0.0).count());
+}
