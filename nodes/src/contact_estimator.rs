@@ -130,6 +130,11 @@ impl ContactEstimatorNode {
         self.window.len()
     }
 
+    /// The window's samples, oldest first (deformation from the onset position).
+    pub fn window_samples(&self) -> impl Iterator<Item = &Sample> {
+        self.window.samples()
+    }
+
     /// The fraction of the window filled.
     pub fn window_fill(&self) -> f64 {
         self.window.len() as f64 / self.window.capacity() as f64

@@ -26,11 +26,8 @@ pub struct Identifier {
     pub unpaired: u64,
     pub contact_time: Option<f64>,
     first_time: Option<f64>,
-    /// The estimator's window samples, mirrored (its window is private): every kind is refitted to
-    /// them at the estimated surface.
-    samples: Vec<Sample>,
-    next_sample: f64,
-    config: EstimatorConfig,
+    /// How every kind is refitted at the estimated surface (the estimator's own fit settings).
+    fit: FitConfig,
 }
 
 /// The result: every candidate's fit (cross-validated), the chosen model and the surface position.
@@ -53,9 +50,9 @@ impl Identifier {
     /// `config.window` bounds the samples kept: give it at least the recording's duration over
     /// `config.sample_period` to fit every contact sample.
     pub fn new(config: EstimatorConfig, stale_after: f64) -> anyhow::Result<Self> {
-        let normal = config.normal;
+        let (normal, fit) = (config.normal, config.fit);
         Ok(Self {
-            estimator: ContactEstimatorNode::new(config.clone())?,
+            estimator: ContactEstimatorNode::new(config)?,
             pairing: ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, stale_after),
             frames: FramesFrom::Urdf,
             tool_frame: softcontact_dynamics::lwr4::TOOL_FRAME.into(),
@@ -63,9 +60,7 @@ impl Identifier {
             unpaired: 0,
             contact_time: None,
             first_time: None,
-            samples: Vec::new(),
-            next_sample: 0.0,
-            config,
+            fit,
         })
     }
 
@@ -99,17 +94,6 @@ impl Identifier {
         if out.in_contact && self.contact_time.is_none() {
             self.contact_time = Some(t);
         }
-        // ContactEstimatorNode::update's sampling rule, from its onset on (the test below checks that the
-        // samples agree); memory bounded as the window is, dropping the oldest in amortised O(1).
-        if self.contact_time.is_some() && t >= self.next_sample {
-            self.next_sample = t + self.config.sample_period;
-            if out.in_contact && out.normal_force > self.config.onset.threshold {
-                self.samples.push(Sample::new(out.deformation, out.deformation_rate, out.normal_force)?);
-                if self.samples.len() >= 2 * self.config.window {
-                    self.samples.drain(..self.config.window);
-                }
-            }
-        }
         Ok(())
     }
 
@@ -120,10 +104,10 @@ impl Identifier {
             .ok_or(ContactError::NotEnoughData { kind: "a contact (force above the onset threshold)" })?;
         let samples = self.estimator.samples();
         let model = self.estimator.refit()?;
-        // The window keeps the last `window` samples; the deformation moves to the estimated surface.
-        let kept = &self.samples[self.samples.len().saturating_sub(self.config.window)..];
-        let moved: Vec<Sample> = kept.iter().map(|s| Sample { z: s.z - model.offset, ..*s }).collect();
-        let at_surface = surface_fits(&model.estimate.fits, &moved, &self.config.fit)?;
+        // The estimator's window, its deformation moved to the estimated surface.
+        let moved: Vec<Sample> =
+            self.estimator.window_samples().map(|s| Sample { z: s.z - model.offset, ..*s }).collect();
+        let at_surface = surface_fits(&model.estimate.fits, &moved, &self.fit)?;
         Ok(Identification {
             at_surface,
             model,
@@ -272,8 +256,8 @@ mod tests {
     use super::*;
     use softcontact_contact::ContactModel;
 
-    /// The mirrored samples are the estimator's: the selected kind refitted at the surface is exactly
-    /// the estimator's model, whether the window holds every sample or only the last ones.
+    /// The selected kind refitted at the surface is exactly the estimator's model, whether the window
+    /// holds every sample or only the last ones.
     #[test]
     fn the_selected_kind_at_the_surface_is_the_estimators_model() {
         let truth = ContactModel::new(Kind::HuntCrossley, 30_000.0, 40_000.0).unwrap();
