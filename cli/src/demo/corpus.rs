@@ -180,6 +180,21 @@ pub fn cases() -> Vec<Case> {
 /// The plan of every case: three identification runs and one cycle of six force commands.
 const PLAN: Plan = Plan { identification_runs: 3, push_periods: 5, commands: 6, move_duration: 2.0 };
 
+/// `softcontact discrepancy FILE --out DIR --sample-period P` with the cell's normal (down).
+fn args(file: &Path, out: &Path, sample_period: f64) -> DiscrepancyArgs {
+    DiscrepancyArgs {
+        recording: IdentifyArgs {
+            file: file.to_path_buf(),
+            json: None,
+            normal: vec![0.0, 0.0, -1.0],
+            onset: 1.0,
+            sample_period,
+        },
+        model: None,
+        out: out.to_path_buf(),
+    }
+}
+
 /// Records one case into `dir` and runs the workflow on the file.
 pub fn run_case(case: &Case, dir: &Path) -> anyhow::Result<Outcome> {
     let spec = SurfaceSpec {
@@ -195,18 +210,7 @@ pub fn run_case(case: &Case, dir: &Path) -> anyhow::Result<Outcome> {
     let mut recorder = Recorder::create(&path, 1_700_000_000_000_000_000)?;
     run_surface(&spec, PLAN, case.seed, &mut recorder)?;
     recorder.finish()?;
-    let args = DiscrepancyArgs {
-        recording: IdentifyArgs {
-            file: path.clone(),
-            json: None,
-            normal: vec![0.0, 0.0, -1.0],
-            onset: 1.0,
-            sample_period: 0.01,
-        },
-        model: None,
-        out: dir.to_path_buf(),
-    };
-    let a = discrepancy_cmd::analyse_file(&args, false)?;
+    let a = discrepancy_cmd::analyse_file(&args(&path, dir, 0.01), false)?;
     std::fs::remove_file(&path)?;
     let r = &a.report;
     let mut named: Vec<String> = r.effects.iter().map(|e| e.id.clone()).collect();
@@ -328,29 +332,11 @@ pub fn table(s: &Summary) -> String {
 pub fn time_workflow() -> anyhow::Result<(f64, usize, f64)> {
     let dir = tempfile_dir()?;
     let path = dir.join("timing.mcap");
-    let spec = SurfaceSpec {
-        name: "timing",
-        truth: softcontact_sim::lab_sponge(),
-        push: (0.01, 0.05),
-        push_forces: (0.0, 0.0),
-        max_force: 300.0,
-        max_deformation: 0.08,
-        sensor: FtSensorConfig::gamma_drifting(),
-    };
+    let [spec, _] = super::surfaces();
     let mut recorder = Recorder::create(&path, 1_700_000_000_000_000_000)?;
     let run = run_surface(&spec, PLAN, 7, &mut recorder)?;
     recorder.finish()?;
-    let args = DiscrepancyArgs {
-        recording: IdentifyArgs {
-            file: path,
-            json: None,
-            normal: vec![0.0, 0.0, -1.0],
-            onset: 1.0,
-            sample_period: 0.001,
-        },
-        model: None,
-        out: dir.clone(),
-    };
+    let args = args(&path, &dir, 0.001);
     let mut best = f64::INFINITY;
     let mut samples = 0;
     for _ in 0..3 {
