@@ -53,7 +53,9 @@ pub use fit::{
     Fit, FitConfig, Moments, Prior, Sample, fit, fit_folds, fitness, fold_moments, fold_of, least_squares_qr,
     regressors, robust_least_squares,
 };
-pub use model::{ContactModel, Effect, EffectState, Exponents, Kind, Tangential};
+pub use model::{
+    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, Tangential, gravity_change,
+};
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
 pub use window::{Estimate, WindowEstimator, estimate};

@@ -96,6 +96,40 @@ pub enum Effect {
     /// Offset of the measured normal force growing at a constant rate [N/s] since the sensor's last tare
     /// ([`EffectState::tare`]).
     SensorDrift { rate: f64 },
+    /// The reading reaches the recording `delay` [s] after the force acts (a slow sensor chain or a skewed
+    /// stamp): measured(t) = reading(t − delay), 0 ≤ delay ≤ [`MAX_DELAY`].
+    TimeDelay { delay: f64 },
+    /// Force channels mix (seed 000: a sensor axis misaligned with the pushing axis): the normal reading
+    /// gains coupling · F_t, F_t the tangential force the surface exerts on the hand, both in the frame of
+    /// the normal. A misalignment by a small rotation ω of the sensing frame gives coupling ≈ n × ω.
+    SensorCrosstalk { coupling: [f64; 3] },
+    /// A tool mass the gravity compensation does not know [kg] (negative: it assumes too much): the normal
+    /// reading gains mass · Δg_n, with Δg_n how gravity along the normal, as the sensor sees it, has changed
+    /// since its last tare ([`SensorInputs::gravity_change`]); nothing while the hand keeps its orientation.
+    ToolGravity { mass: f64 },
+}
+
+/// The longest [`Effect::TimeDelay`] a model may carry [s].
+pub const MAX_DELAY: f64 = 1.0;
+
+/// What the sensor effects read besides the normal force (see [`ContactModel::sense`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SensorInputs {
+    /// Tangential force the surface exerts on the hand, in the frame of the normal [N].
+    pub tangential_force: [f64; 3],
+    /// ((R R_tareᵀ − I) g)·n [m/s²]: the change since the last tare of gravity along the normal as the
+    /// sensor sees it (R the sensor's orientation now, R_tare at the tare, g gravity, n the normal; see
+    /// [`gravity_change`]).
+    pub gravity_change: f64,
+}
+
+/// [`SensorInputs::gravity_change`] from the sensor's rotation now and at its last tare (row-major 3×3,
+/// sensor → frame of the normal), gravity g [m/s²] and the normal n in that frame.
+pub fn gravity_change(now: &[[f64; 3]; 3], at_tare: &[[f64; 3]; 3], g: [f64; 3], n: [f64; 3]) -> f64 {
+    // R_tareᵀ g: gravity in the sensor frame at the tare; R (·): back in the frame of the normal.
+    let in_sensor: [f64; 3] = std::array::from_fn(|j| (0..3).map(|i| at_tare[i][j] * g[i]).sum());
+    let seen: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| now[i][j] * in_sensor[j]).sum());
+    (0..3).map(|i| (seen[i] - g[i]) * n[i]).sum()
 }
 
 impl Effect {
@@ -106,15 +140,21 @@ impl Effect {
             Effect::ContactOffsetDrift { .. } => "contact_offset_drift",
             Effect::SensorBias { .. } => "sensor_bias",
             Effect::SensorDrift { .. } => "sensor_drift",
+            Effect::TimeDelay { .. } => "time_delay",
+            Effect::SensorCrosstalk { .. } => "sensor_crosstalk",
+            Effect::ToolGravity { .. } => "tool_gravity",
         }
     }
 
-    fn parameters(&self) -> [f64; 2] {
+    fn parameters(&self) -> [f64; 3] {
         match *self {
-            Effect::ViscoelasticRelaxation { stiffness, time_constant } => [stiffness, time_constant],
-            Effect::Hysteresis { fraction, velocity_scale } => [fraction, velocity_scale],
-            Effect::ContactOffsetDrift { rate } | Effect::SensorDrift { rate } => [rate, 0.0],
-            Effect::SensorBias { offset } => [offset, 0.0],
+            Effect::ViscoelasticRelaxation { stiffness, time_constant } => [stiffness, time_constant, 0.0],
+            Effect::Hysteresis { fraction, velocity_scale } => [fraction, velocity_scale, 0.0],
+            Effect::ContactOffsetDrift { rate } | Effect::SensorDrift { rate } => [rate, 0.0, 0.0],
+            Effect::SensorBias { offset } => [offset, 0.0, 0.0],
+            Effect::TimeDelay { delay } => [delay, 0.0, 0.0],
+            Effect::SensorCrosstalk { coupling } => coupling,
+            Effect::ToolGravity { mass } => [mass, 0.0, 0.0],
         }
     }
 
@@ -132,6 +172,14 @@ impl Effect {
             {
                 bad("fraction must be in [0, 1) and velocity_scale > 0")
             }
+            Effect::TimeDelay { delay } if !(0.0..=MAX_DELAY).contains(&delay) => {
+                bad(&format!("delay must be in [0, {MAX_DELAY}] s"))
+            }
+            // A coupling of one would read the whole tangential load as normal force: not a small mixing.
+            Effect::SensorCrosstalk { coupling } if coupling.iter().map(|c| c * c).sum::<f64>() >= 0.25 => {
+                bad("|coupling| must be below 0.5")
+            }
+            Effect::ToolGravity { mass } if mass.abs() > 100.0 => bad("|mass| must be at most 100 kg"),
             _ => Ok(()),
         }
     }
@@ -237,7 +285,12 @@ pub struct EffectState {
     pub since_tare: f64,
     /// Force of each viscoelastic branch, in the order of `effects`.
     pub branch_force: Vec<f64>,
+    /// (time, reading) of the last [`Effect::TimeDelay`] span, oldest first: at most [`DELAY_LINE`].
+    pub delay_line: std::collections::VecDeque<(f64, f64)>,
 }
+
+/// The most readings a delay line keeps (one second at 10 kHz); with finer steps the delay is cut short.
+pub const DELAY_LINE: usize = 10_000;
 
 impl EffectState {
     /// The sensor was tared: the offset it has drifted since the last tare is zeroed.
@@ -363,12 +416,20 @@ impl ContactModel {
 
     /// A fresh state for [`ContactModel::step`].
     pub fn effect_state(&self) -> EffectState {
-        EffectState { time: 0.0, since_tare: 0.0, branch_force: vec![0.0; self.effects.len()] }
+        EffectState { branch_force: vec![0.0; self.effects.len()], ..EffectState::default() }
     }
 
     /// Advances the effects with memory by dt and returns (surface force, measured force): the force
-    /// the surface exerts with its surface effects, and what a sensor with the sensor effects reads.
+    /// the surface exerts with its surface effects, and what a sensor with the sensor effects reads
+    /// without tangential load or a change of orientation ([`ContactModel::sense`] with default inputs).
     pub fn step(&self, state: &mut EffectState, z: f64, zdot: f64, dt: f64) -> Result<(f64, f64), ContactError> {
+        let surface = self.step_surface(state, z, zdot, dt)?;
+        Ok((surface, self.sense(state, surface, &SensorInputs::default())?))
+    }
+
+    /// Advances time and the surface effects by dt and returns the force the surface exerts (≥ 0). Call
+    /// [`ContactModel::sense`] after it, once per step, for what the sensor reads.
+    pub fn step_surface(&self, state: &mut EffectState, z: f64, zdot: f64, dt: f64) -> Result<f64, ContactError> {
         let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
         state.time += dt;
         state.since_tare += dt;
@@ -388,26 +449,57 @@ impl ContactModel {
             let (elastic, rate) = self.parts(z_eff, zdot);
             surface = elastic * scale + rate;
         }
-        let mut offset = 0.0;
         for (i, e) in self.effects.iter().enumerate() {
-            match *e {
-                Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
-                    // Exact update of ṡ = k_m ż − s/τ over dt with ż held; the branch only acts in contact.
-                    let s = &mut state.branch_force[i];
-                    let decay = (-dt / time_constant).exp();
-                    let drive = if z_eff > 0.0 { stiffness * zdot * time_constant } else { 0.0 };
-                    *s = *s * decay + drive * (1.0 - decay);
-                    if z_eff <= 0.0 {
-                        *s = 0.0;
-                    }
-                    surface += *s;
+            if let Effect::ViscoelasticRelaxation { stiffness, time_constant } = *e {
+                // Exact update of ṡ = k_m ż − s/τ over dt with ż held; the branch only acts in contact.
+                let s = &mut state.branch_force[i];
+                let decay = (-dt / time_constant).exp();
+                let drive = if z_eff > 0.0 { stiffness * zdot * time_constant } else { 0.0 };
+                *s = *s * decay + drive * (1.0 - decay);
+                if z_eff <= 0.0 {
+                    *s = 0.0;
                 }
-                Effect::SensorBias { offset: b } => offset += b,
-                Effect::SensorDrift { rate } => offset += rate * state.since_tare,
+                surface += *s;
+            }
+        }
+        Ok(surface.max(0.0))
+    }
+
+    /// What the sensor reads along the normal of the surface force of this step (after
+    /// [`ContactModel::step_surface`]): plus bias, drift, crosstalk and unknown tool weight, the whole
+    /// reading delayed by a time delay (linear interpolation between steps; before the first step the
+    /// first reading).
+    pub fn sense(&self, state: &mut EffectState, surface: f64, inputs: &SensorInputs) -> Result<f64, ContactError> {
+        let surface = finite("surface force", surface)?;
+        let gravity = finite("gravity change", inputs.gravity_change)?;
+        for (i, &f) in inputs.tangential_force.iter().enumerate() {
+            finite(["F_t x", "F_t y", "F_t z"][i], f)?;
+        }
+        let mut reading = surface;
+        let mut delay = None;
+        for e in &self.effects {
+            match *e {
+                Effect::SensorBias { offset } => reading += offset,
+                Effect::SensorDrift { rate } => reading += rate * state.since_tare,
+                Effect::SensorCrosstalk { coupling } => {
+                    reading += (0..3).map(|i| coupling[i] * inputs.tangential_force[i]).sum::<f64>()
+                }
+                Effect::ToolGravity { mass } => reading += mass * gravity,
+                Effect::TimeDelay { delay: d } => delay = Some(d),
                 _ => {}
             }
         }
-        let surface = surface.max(0.0);
-        Ok((surface, surface + offset))
+        let Some(delay) = delay else { return Ok(reading) };
+        let line = &mut state.delay_line;
+        line.push_back((state.time, reading));
+        let target = state.time - delay;
+        while line.len() > DELAY_LINE || (line.len() > 1 && line[1].0 <= target) {
+            line.pop_front();
+        }
+        let (t0, r0) = line[0];
+        Ok(match line.get(1) {
+            Some(&(t1, r1)) if target > t0 => r0 + (r1 - r0) * (target - t0) / (t1 - t0),
+            _ => r0,
+        })
     }
 }

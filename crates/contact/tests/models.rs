@@ -4,7 +4,9 @@
 mod common;
 
 use proptest::prelude::*;
-use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, Tangential};
+use softcontact_contact::{
+    ContactError, ContactModel, DELAY_LINE, Effect, Exponents, Kind, SensorInputs, Tangential, gravity_change,
+};
 
 #[test]
 fn forces_match_the_laws_of_the_paper() {
@@ -194,4 +196,66 @@ fn hysteresis_and_sensor_effects_change_what_they_should() {
     assert!(loading > unloading, "loading path above unloading");
     assert!((loading - unloading - 2.0 * 0.1 * 54.0 * (50.0f64).tanh()).abs() < 1e-9);
     assert!((measured - unloading - (0.7 + 0.01 * 2.0)).abs() < 1e-12, "bias + drift after 2 s");
+}
+
+#[test]
+fn a_time_delay_shifts_the_whole_reading_by_its_delay() {
+    // A ramp of force read 25 ms late: at 1 kHz the reading at t is the force at t − 0.025 (exactly, the
+    // ramp being linear), and the first reading stands before the line is full.
+    let base = ContactModel::new(Kind::KelvinVoigt, 1000.0, 0.0).unwrap();
+    let model = ContactModel { effects: vec![Effect::TimeDelay { delay: 0.025 }], ..base };
+    let mut state = model.effect_state();
+    let dt = 1e-3;
+    for i in 1..=200 {
+        let t = i as f64 * dt;
+        let (surface, measured) = model.step(&mut state, 0.01 * t, 0.01, dt).unwrap();
+        assert!((surface - 10.0 * t).abs() < 1e-9);
+        let expected = 10.0 * (t - 0.025).max(dt);
+        assert!((measured - expected).abs() < 1e-9, "t {t}: read {measured}, expected {expected}");
+    }
+    assert!(state.delay_line.len() <= 27, "the line keeps only the delay's span: {}", state.delay_line.len());
+    // Steps far finer than the delay: the line stays bounded.
+    let mut state = model.effect_state();
+    for _ in 0..3 * DELAY_LINE {
+        model.step(&mut state, 0.01, 0.0, 1e-7).unwrap();
+    }
+    assert!(state.delay_line.len() <= DELAY_LINE);
+    for bad in [-1e-3, 1.5, f64::NAN] {
+        let m = ContactModel { effects: vec![Effect::TimeDelay { delay: bad }], ..model.clone() };
+        assert!(m.validate().is_err(), "delay {bad} accepted");
+    }
+}
+
+#[test]
+fn crosstalk_and_tool_weight_add_to_the_normal_reading() {
+    let base = ContactModel::new(Kind::KelvinVoigt, 1000.0, 0.0).unwrap();
+    let model = ContactModel {
+        effects: vec![Effect::SensorCrosstalk { coupling: [0.02, -0.01, 0.0] }, Effect::ToolGravity { mass: 0.3 }],
+        ..base
+    };
+    let mut state = model.effect_state();
+    let surface = model.step_surface(&mut state, 0.02, 0.0, 1e-3).unwrap();
+    let inputs = SensorInputs { tangential_force: [10.0, 5.0, 0.0], gravity_change: -0.5 };
+    let read = model.sense(&mut state, surface, &inputs).unwrap();
+    assert!((read - (20.0 + 0.2 - 0.05 + 0.3 * -0.5)).abs() < 1e-12, "{read}");
+    let nan = SensorInputs { tangential_force: [f64::NAN, 0.0, 0.0], ..inputs };
+    assert!(model.sense(&mut state, surface, &nan).is_err());
+    let bad = ContactModel { effects: vec![Effect::SensorCrosstalk { coupling: [0.6, 0.0, 0.0] }], ..model.clone() };
+    assert!(bad.validate().is_err());
+}
+
+#[test]
+fn gravity_change_is_zero_at_the_tare_orientation_and_follows_a_tilt() {
+    let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let (g, n) = ([0.0, 0.0, -9.81], [0.0, 0.0, -1.0]);
+    assert_eq!(gravity_change(&identity, &identity, g, n), 0.0);
+    // Tilted by θ about x after a tare facing down: gravity along the sensor's old normal axis is g cos θ,
+    // so the change along n is 9.81 (cos θ − 1) — a hand that weighs m more than compensated reads m·that.
+    let th: f64 = 0.2;
+    let (c, s) = (th.cos(), th.sin());
+    let tilted = [[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]];
+    let change = gravity_change(&tilted, &identity, g, n);
+    assert!((change - 9.81 * (c - 1.0)).abs() < 1e-12, "{change}");
+    // Tared tilted, back level: the opposite sign.
+    assert!((gravity_change(&identity, &tilted, g, n) - 9.81 * (c - 1.0)).abs() < 1e-12);
 }

@@ -27,6 +27,17 @@ pub(crate) enum Term {
     OffsetLin,
     /// zᵃ·ln z (linearised change of the stiffness exponent); coefficient k·δa.
     ExpDeriv,
+    /// The tangential force along the recording's lateral axis [N]; coefficient the crosstalk coupling.
+    Crosstalk,
+    /// The change of gravity along the normal since the last tare [m/s²]; coefficient the unknown mass [kg].
+    Gravity,
+}
+
+impl Term {
+    /// A term of the sensor alone: it acts out of contact too.
+    fn of_sensor(self) -> bool {
+        matches!(self, Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::Gravity)
+    }
 }
 
 /// Base law exponents a (fitted), b, c (of the baseline kind), the surface position's shift [m] and its drift
@@ -38,6 +49,8 @@ pub(crate) struct Structure {
     pub c: f64,
     pub shift: f64,
     pub offset_rate: f64,
+    /// The reading's delay [s]: every column is read at t − delay.
+    pub delay: f64,
     pub terms: Vec<Term>,
 }
 
@@ -53,6 +66,39 @@ pub(crate) struct Data<'a> {
     /// In contact but the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0, fast unloading of a shallow
     /// contact): [`ContactModel::step`] clamps the force to 0 there, so the contact columns are zeroed.
     pub clamped: Vec<bool>,
+    /// The unit axis of the tangential force (its principal direction) and the force along it, when the
+    /// series carries tangential force.
+    pub lateral_axis: Option<[f64; 3]>,
+    pub lateral: Vec<f64>,
+}
+
+/// The principal direction u of the tangential forces (largest Σ(F_t·u)²), by power iteration on Σ F_t F_tᵀ.
+fn principal_axis(forces: &[[f64; 3]]) -> Option<[f64; 3]> {
+    let mut m = [[0.0; 3]; 3];
+    for f in forces {
+        for i in 0..3 {
+            for j in 0..3 {
+                m[i][j] += f[i] * f[j];
+            }
+        }
+    }
+    let trace = m[0][0] + m[1][1] + m[2][2];
+    if trace.is_nan() || trace <= 0.0 {
+        return None;
+    }
+    // Start off every eigenvector's orthogonal complement.
+    let mut u = [0.577, 0.578, 0.5764];
+    for _ in 0..200 {
+        let v: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| m[i][j] * u[j]).sum());
+        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if norm.is_nan() || norm <= 0.0 {
+            return None;
+        }
+        u = v.map(|x| x / norm);
+    }
+    // A sign by convention: the largest component positive.
+    let k = (0..3).max_by(|&a, &b| u[a].abs().total_cmp(&u[b].abs())).unwrap_or(0);
+    Some(if u[k] < 0.0 { u.map(|x| -x) } else { u })
 }
 
 impl<'a> Data<'a> {
@@ -77,7 +123,12 @@ impl<'a> Data<'a> {
         let folds = (0..folds).map(|i| i * n / folds..(i + 1) * n / folds).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
-        Data { s, time, since_tare, dt, folds, clamped }
+        let lateral_axis = principal_axis(&s.tangential);
+        let lateral = match lateral_axis {
+            Some(u) => s.tangential.iter().map(|f| f[0] * u[0] + f[1] * u[1] + f[2] * u[2]).collect(),
+            None => Vec::new(),
+        };
+        Data { s, time, since_tare, dt, folds, clamped, lateral_axis, lateral }
     }
 }
 
@@ -141,11 +192,14 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
             Term::ExpDeriv => {
                 (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * zeff[i].max(zmin).ln() } else { 0.0 }).collect()
             }
+            Term::Crosstalk if d.lateral.len() == n => d.lateral.clone(),
+            Term::Gravity if s.gravity_change.len() == n => s.gravity_change.clone(),
+            Term::Crosstalk | Term::Gravity => vec![0.0; n],
         };
         cols.push(col);
     }
     for (j, col) in cols.iter_mut().enumerate() {
-        if j < 2 || !matches!(st.terms[j - 2], Term::Bias | Term::SensorDrift) {
+        if j < 2 || !st.terms[j - 2].of_sensor() {
             for (v, &c) in col.iter_mut().zip(&d.clamped) {
                 if c {
                     *v = 0.0;
@@ -153,7 +207,44 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
             }
         }
     }
+    // The sensor reads everything late: clamped where the surface lets go, then delayed.
+    if st.delay > 0.0 {
+        for col in cols.iter_mut() {
+            *col = delayed(&d.time, col, st.delay);
+        }
+    }
     cols
+}
+
+/// `x` read `delay` late: x(t − delay) by linear interpolation between samples (the first value before the
+/// first sample), as [`ContactModel::sense`] delays a reading.
+pub(crate) fn delayed(time: &[f64], x: &[f64], delay: f64) -> Vec<f64> {
+    let mut j = 0;
+    (0..x.len())
+        .map(|i| {
+            let target = time[i] - delay;
+            while j + 1 < i && time[j + 1] <= target {
+                j += 1;
+            }
+            if target <= time[j] || j + 1 > i {
+                x[j]
+            } else {
+                x[j] + (x[j + 1] - x[j]) * (target - time[j]) / (time[j + 1] - time[j])
+            }
+        })
+        .collect()
+}
+
+/// −dx/dt by central differences (one-sided at the ends): the linearised change of x read δ later is
+/// δ·(−ẋ).
+pub(crate) fn negative_rate(time: &[f64], x: &[f64]) -> Vec<f64> {
+    let n = x.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            if b > a { -(x[b] - x[a]) / (time[b] - time[a]) } else { 0.0 }
+        })
+        .collect()
 }
 
 /// A least-squares fit with its held-out and in-sample scores.

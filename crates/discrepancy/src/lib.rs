@@ -51,13 +51,16 @@ mod tests;
 use std::collections::BTreeMap;
 
 use serde::Serialize;
-use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind};
+use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, MAX_DELAY, SensorInputs};
 
 use fit::{Data, Fit, Structure, Term};
 
 /// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
 /// free space), its rate ż [m/s] and the measured normal force f [N]; and the times [s] the sensor was
 /// tared (a tare zeroes the sensor's drifted offset: [`softcontact_contact::EffectState::tare`]).
+/// Optionally the rest of the wrench and pose, per sample, as the sensor effects read them
+/// ([`SensorInputs`]): the tangential force [N] and the change of gravity along the normal since the last
+/// tare [m/s²] (empty when not recorded: no crosstalk or tool weight can then be named).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
     pub t: Vec<f64>,
@@ -65,6 +68,8 @@ pub struct Series {
     pub zdot: Vec<f64>,
     pub f: Vec<f64>,
     pub tares: Vec<f64>,
+    pub tangential: Vec<[f64; 3]>,
+    pub gravity_change: Vec<f64>,
 }
 
 /// Relaxation branches (time constants) the workflow names at most.
@@ -77,9 +82,30 @@ pub const MIN_CONTACT_SAMPLES: usize = 20;
 impl Series {
     /// Checks equal lengths, finite values and strictly increasing time.
     pub fn new(t: Vec<f64>, z: Vec<f64>, zdot: Vec<f64>, f: Vec<f64>) -> Result<Self, DiscrepancyError> {
-        let s = Series { t, z, zdot, f, tares: Vec::new() };
+        let s = Series { t, z, zdot, f, tares: Vec::new(), tangential: Vec::new(), gravity_change: Vec::new() };
         s.validate()?;
         Ok(s)
+    }
+
+    /// The same samples with the tangential force [N] and the change of gravity along the normal since the
+    /// last tare [m/s²] of every sample (see [`SensorInputs`]).
+    pub fn with_sensor_inputs(
+        mut self,
+        tangential: Vec<[f64; 3]>,
+        gravity_change: Vec<f64>,
+    ) -> Result<Self, DiscrepancyError> {
+        self.tangential = tangential;
+        self.gravity_change = gravity_change;
+        self.validate()?;
+        Ok(self)
+    }
+
+    /// What the sensor effects read at sample i besides the normal force.
+    pub fn inputs(&self, i: usize) -> SensorInputs {
+        SensorInputs {
+            tangential_force: self.tangential.get(i).copied().unwrap_or_default(),
+            gravity_change: self.gravity_change.get(i).copied().unwrap_or_default(),
+        }
     }
 
     /// The same samples with the sensor tared at these times [s] (any order; non-finite ones are refused).
@@ -125,10 +151,24 @@ impl Series {
         if self.z.len() != n || self.zdot.len() != n || self.f.len() != n {
             return Err(DiscrepancyError::Lengths { t: n, z: self.z.len(), zdot: self.zdot.len(), f: self.f.len() });
         }
-        for (name, v) in [("t", &self.t), ("z", &self.z), ("zdot", &self.zdot), ("f", &self.f)] {
+        for (name, len) in [("tangential", self.tangential.len()), ("gravity_change", self.gravity_change.len())] {
+            if len != 0 && len != n {
+                return Err(DiscrepancyError::InputLength { name, len, n });
+            }
+        }
+        for (name, v) in [
+            ("t", &self.t),
+            ("z", &self.z),
+            ("zdot", &self.zdot),
+            ("f", &self.f),
+            ("gravity_change", &self.gravity_change),
+        ] {
             if let Some(index) = v.iter().position(|x| !x.is_finite()) {
                 return Err(DiscrepancyError::NonFinite { name, index });
             }
+        }
+        if let Some(index) = self.tangential.iter().position(|x| !x.iter().all(|v| v.is_finite())) {
+            return Err(DiscrepancyError::NonFinite { name: "tangential", index });
         }
         if let Some(i) = self.t.windows(2).position(|w| w[1] <= w[0]) {
             return Err(DiscrepancyError::Time(i + 1));
@@ -142,6 +182,8 @@ impl Series {
 pub enum DiscrepancyError {
     #[error("the series' columns differ in length (t {t}, z {z}, zdot {zdot}, f {f})")]
     Lengths { t: usize, z: usize, zdot: usize, f: usize },
+    #[error("`{name}` has {len} samples, the series {n}")]
+    InputLength { name: &'static str, len: usize, n: usize },
     #[error("`{name}` is not finite at sample {index}")]
     NonFinite { name: &'static str, index: usize },
     #[error("time stamps must increase strictly (sample {0})")]
@@ -326,7 +368,8 @@ fn steps(model: &ContactModel, series: &Series) -> Result<Vec<(f64, f64)>, Discr
             if tared[i] {
                 state.tare();
             }
-            Ok(model.step(&mut state, series.z[i], series.zdot[i], dt[i])?)
+            let surface = model.step_surface(&mut state, series.z[i], series.zdot[i], dt[i])?;
+            Ok((surface, model.sense(&mut state, surface, &series.inputs(i))?))
         })
         .collect()
 }
@@ -587,16 +630,22 @@ enum Family {
     Hysteresis,
     StiffnessExponent,
     OffsetDrift,
+    TimeDelay,
+    Crosstalk,
+    ToolGravity,
 }
 
 impl Family {
-    const ALL: [Family; 6] = [
+    const ALL: [Family; 9] = [
         Family::SensorBias,
         Family::SensorDrift,
         Family::Relaxation,
         Family::Hysteresis,
         Family::StiffnessExponent,
         Family::OffsetDrift,
+        Family::TimeDelay,
+        Family::Crosstalk,
+        Family::ToolGravity,
     ];
 
     fn id(self) -> &'static str {
@@ -607,12 +656,30 @@ impl Family {
             Family::Hysteresis => "hysteresis",
             Family::StiffnessExponent => "stiffness_exponent",
             Family::OffsetDrift => "contact_offset_drift",
+            Family::TimeDelay => "time_delay",
+            Family::Crosstalk => "sensor_crosstalk",
+            Family::ToolGravity => "tool_gravity",
         }
     }
 
-    /// The term this family adds (None for the exponent, which changes a).
+    /// Whether the series can show this family at all: crosstalk needs tangential force, the tool's
+    /// weight a change of orientation.
+    fn observable(self, d: &Data) -> bool {
+        let varies = |x: &[f64]| x.iter().any(|v| *v != x[0]);
+        match self {
+            Family::Crosstalk => !d.lateral.is_empty() && varies(&d.lateral),
+            Family::ToolGravity => !d.s.gravity_change.is_empty() && varies(&d.s.gravity_change),
+            _ => true,
+        }
+    }
+
+    /// The term this family adds (None for the exponent, which changes a, and the delay, which reads every
+    /// column late).
     fn term(self, shape: f64) -> Option<Term> {
         match self {
+            Family::Crosstalk => Some(Term::Crosstalk),
+            Family::ToolGravity => Some(Term::Gravity),
+            Family::TimeDelay => None,
             Family::SensorBias => Some(Term::Bias),
             Family::SensorDrift => Some(Term::SensorDrift),
             Family::Relaxation => Some(Term::Relax(shape)),
@@ -624,6 +691,9 @@ impl Family {
 
     /// The structure without this family's term (None for the exponent, which has no term to remove).
     fn remove(self, st: &Structure, shape: f64) -> Option<Structure> {
+        if self == Family::TimeDelay {
+            return Some(Structure { delay: 0.0, ..st.clone() });
+        }
         let term = self.term(shape)?;
         let mut st = st.clone();
         st.terms.retain(|t| *t != term);
@@ -637,6 +707,7 @@ impl Family {
         let mut st = st.clone();
         match self.term(shape) {
             Some(t) => st.terms.push(t),
+            None if self == Family::TimeDelay => st.delay = shape,
             None => st.a = shape,
         }
         st
@@ -660,12 +731,13 @@ impl Family {
             Family::StiffnessExponent => {
                 (0..=17).map(|i| 0.8 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
             }
+            Family::TimeDelay => log(0.002, 0.25, 12),
             _ => vec![0.0],
         }
     }
 
     fn has_shape(self) -> bool {
-        matches!(self, Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent)
+        matches!(self, Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent | Family::TimeDelay)
     }
 }
 
@@ -687,6 +759,13 @@ fn would_separate(a: Family, b: Family) -> String {
         }
         (StiffnessExponent, OffsetDrift) => "repeated pushes to the same depth minutes apart: a moving zero shifts them, an exponent does not",
         (SensorBias, _) | (SensorDrift, _) => "free space before and after contact: a sensor offset shows without contact",
+        (TimeDelay, _) | (_, TimeDelay) => {
+            "a fast stop after a push, or pushes at two frequencies: a delay shifts the force after the motion has stopped, and its phase grows with frequency"
+        }
+        (Crosstalk, _) | (_, Crosstalk) => {
+            "lateral motion at a held deformation: only crosstalk follows the tangential load"
+        }
+        (ToolGravity, _) | (_, ToolGravity) => "tilting the hand in free space: only the tool's weight follows the tilt",
         _ => "a hold of several seconds, pushes at two speeds and to two depths, and free space before and after",
     }
     .to_string()
@@ -724,8 +803,28 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
             match f {
                 Family::Relaxation => physical &= b > 0.0,
                 Family::Hysteresis => physical &= b > 0.0 && b / k < 1.0,
+                // A small mixing of channels, a plausible tool: larger ones are something else.
+                Family::Crosstalk => physical &= b.abs() < 0.3,
+                Family::ToolGravity => physical &= b.abs() <= 100.0,
                 _ => {}
             }
+        } else if f == Family::TimeDelay {
+            // The delay: t from the linearised column −ṗ at the fitted delay (its coefficient is δ, the
+            // delay's change); fold stability from the same test at no delay with the other members.
+            let linear = |s: &Structure| {
+                let base = fit::fit(d, s);
+                let mut cols = fit::columns(d, s);
+                cols.push(fit::negative_rate(&d.time, &base.pred));
+                fit::fit_columns(d, &cols)
+            };
+            let fd = linear(&st);
+            t.push(sh / fd.se[fd.se.len() - 1]);
+            let mut lin = fams.iter().filter(|x| x.0 != f).fold(cur.clone(), |s, &(g, gs)| g.apply(&s, gs));
+            lin.delay = cur.delay;
+            let fl = linear(&lin);
+            let j = fl.beta.len() - 1;
+            stable.push(fl.fold_beta.iter().all(|fb| fb[j] > 0.0));
+            physical &= sh > 0.0 && sh <= MAX_DELAY;
         } else {
             // The exponent: t from the linearised column zᵃ′·ln z at the fitted a′ (its coefficient is k·δa);
             // fold stability from the linear test at the current a with the other members.
@@ -783,7 +882,13 @@ fn corr(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// The augmented model of a structure and its fit; `order` lists the accepted families in order.
-fn to_model(base: &ContactModel, st: &Structure, fit: &Fit, order: &[(Family, f64)]) -> ContactModel {
+fn to_model(
+    base: &ContactModel,
+    d_axis: Option<[f64; 3]>,
+    st: &Structure,
+    fit: &Fit,
+    order: &[(Family, f64)],
+) -> ContactModel {
     let k = if fit.beta[0] > 0.0 { fit.beta[0] } else { base.stiffness };
     let mut m = base.clone();
     m.stiffness = k;
@@ -806,6 +911,12 @@ fn to_model(base: &ContactModel, st: &Structure, fit: &Fit, order: &[(Family, f6
                     Some(Effect::Hysteresis { fraction: (b(f) / k).clamp(0.0, 0.999), velocity_scale: sh })
                 }
                 Family::OffsetDrift => Some(Effect::ContactOffsetDrift { rate: st.offset_rate }),
+                Family::TimeDelay => Some(Effect::TimeDelay { delay: st.delay }),
+                Family::Crosstalk => {
+                    let u = d_axis.unwrap_or_default();
+                    Some(Effect::SensorCrosstalk { coupling: u.map(|x| x * b(f)) })
+                }
+                Family::ToolGravity => Some(Effect::ToolGravity { mass: b(f) }),
                 Family::StiffnessExponent => None,
             }
         })
@@ -926,6 +1037,21 @@ fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, rate_s
         Family::OffsetDrift => {
             u.insert("rate_m_per_s".into(), z * rate_se);
         }
+        Family::TimeDelay => {
+            let mut cols = fit::columns(d, st);
+            cols.push(fit::negative_rate(&d.time, &fit.pred));
+            let f = fit::fit_columns(d, &cols);
+            u.insert("delay_s".into(), z * f.se[f.se.len() - 1]);
+        }
+        Family::Crosstalk => {
+            let se = fit.se[term_index(st, fam, sh).unwrap_or(2)];
+            for (i, axis) in ["coupling_x", "coupling_y", "coupling_z"].into_iter().enumerate() {
+                u.insert(axis.into(), z * se * d.lateral_axis.map_or(0.0, |a| a[i].abs()));
+            }
+        }
+        Family::ToolGravity => {
+            u.insert("mass_kg".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+        }
     }
     u
 }
@@ -957,6 +1083,17 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
             (Effect::ContactOffsetDrift { rate }, Family::OffsetDrift) => {
                 p.insert("rate_m_per_s".into(), rate);
             }
+            (Effect::TimeDelay { delay }, Family::TimeDelay) => {
+                p.insert("delay_s".into(), delay);
+            }
+            (Effect::SensorCrosstalk { coupling }, Family::Crosstalk) => {
+                for (axis, c) in ["coupling_x", "coupling_y", "coupling_z"].into_iter().zip(coupling) {
+                    p.insert(axis.into(), c);
+                }
+            }
+            (Effect::ToolGravity { mass }, Family::ToolGravity) => {
+                p.insert("mass_kg".into(), mass);
+            }
             _ => {}
         }
     }
@@ -980,14 +1117,16 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     // fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more.
     let mut d = Data::new(series, o.folds, baseline);
     let ex = baseline.exponents;
-    let start = Structure { a: ex.a, b: ex.b, c: ex.c, shift: 0.0, offset_rate: 0.0, terms: vec![Term::Shift] };
+    let start =
+        Structure { a: ex.a, b: ex.b, c: ex.c, shift: 0.0, offset_rate: 0.0, delay: 0.0, terms: vec![Term::Shift] };
     let mut order: Vec<(Family, f64)> = vec![];
     let (mut st, _, _) = refine_surface(&d, &start);
-    d.clamped = clamp_mask(&to_model(baseline, &st, &fit::fit(&d, &st), &order), &series.shifted(st.shift))?;
+    d.clamped =
+        clamp_mask(&to_model(baseline, d.lateral_axis, &st, &fit::fit(&d, &st), &order), &series.shifted(st.shift))?;
     let (refined, mut shift_se, _) = refine_surface(&d, &st);
     st = refined;
     let mut cur = fit::fit(&d, &st);
-    let mut model = to_model(baseline, &st, &cur, &order);
+    let mut model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
 
     // Phases and the noise floor at the refitted surface (recomputed when it moves): samples the given
     // surface put in free space but that carry contact force would otherwise inflate σ.
@@ -1031,6 +1170,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         let left: Vec<Family> = Family::ALL
             .into_iter()
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
+            .filter(|&f| f.observable(&d))
             .collect();
         let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95)).collect();
         // A candidate must not fit free space worse than the current model: there the force is the sensor's
@@ -1107,12 +1247,34 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 if n + 1 == fams.len() { next.clone() } else { refine_surface(&d, &fam.0.apply(&st, fam.1)).0 };
             let pf = fit::fit(&d, &partial);
             order.push(fam);
-            let m = to_model(baseline, &partial, &pf, &order);
+            let m = to_model(baseline, d.lateral_axis, &partial, &pf, &order);
             let g = gap(series, &ph, &simulate(&m, &series.shifted(partial.shift))?);
             stages.push((cur_gap.rms, g.rms));
             cur_gap = g;
         }
         st = next;
+        cur = fit::fit(&d, &st);
+        if order.iter().any(|x| x.0 == Family::TimeDelay) {
+            let m = to_model(baseline, d.lateral_axis, &st, &cur, &order);
+            d.clamped = clamp_mask(&m, &series.shifted(st.shift))?;
+        }
+        // A delay's shape was screened with the clamping of the undelayed law (where the refit damping may
+        // be negative and never clamps): screen it again under the new mask, until the mask settles.
+        if let Some(slot) = order.iter().position(|x| x.0 == Family::TimeDelay) {
+            for _ in 0..3 {
+                let undelayed = Structure { delay: 0.0, ..st.clone() };
+                let again = screen(&d, &undelayed, Family::TimeDelay, p95);
+                let (next, _, _) = refine_surface(&d, &again.st);
+                let settled = (next.delay - st.delay).abs() <= 1e-3 * st.delay;
+                st = next;
+                order[slot].1 = st.delay;
+                let m = to_model(baseline, d.lateral_axis, &st, &fit::fit(&d, &st), &order);
+                d.clamped = clamp_mask(&m, &series.shifted(st.shift))?;
+                if settled {
+                    break;
+                }
+            }
+        }
         cur = fit::fit(&d, &st);
         // Backward check: an effect accepted in an earlier round may have stood in for what this round
         // named (a moving surface zero for a slow relaxation branch); drop it when the model without it
@@ -1130,12 +1292,12 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 cur = fr;
             }
         }
-        model = to_model(baseline, &st, &cur, &order);
+        model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
         // re-mask with the augmented model and refit.
         d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         cur = fit::fit(&d, &st);
-        model = to_model(baseline, &st, &cur, &order);
+        model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         model.validate()?;
         (ph, noise, free) = at_surface(st.shift);
         sigma = sigma_of(&noise);
@@ -1182,10 +1344,10 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 }
             }
         }
-        model = to_model(baseline, &st, &cur, &order);
+        model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         cur = fit::fit(&d, &st);
-        model = to_model(baseline, &st, &cur, &order);
+        model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         model.validate()?;
         cur_gap = gap(series, &ph, &simulate(&model, &series.shifted(st.shift))?);
         if let Some(last) = stages.last_mut() {

@@ -5,7 +5,7 @@
 use rand::SeedableRng;
 use rand::rngs::SmallRng;
 use rand_distr::{Distribution, Normal};
-use softcontact_contact::{ContactModel, Effect, Exponents, Kind};
+use softcontact_contact::{ContactModel, Effect, Exponents, Kind, SensorInputs};
 
 use crate::{Options, Remaining, Report, Series, analyse};
 
@@ -528,4 +528,71 @@ fn a_lagging_force_is_located_at_its_lag() {
     // Quartile bins cover every in-contact sample.
     let counted: usize = on_time.locate.by_speed.iter().map(|b| b.samples).sum();
     assert_eq!(counted, s.z.iter().filter(|&&z| z - on_time.contact_shift > 0.0).count());
+}
+
+/// The excitation with lateral motion (a tangential force following a 0.3 Hz sway, in contact) and a tilt
+/// of the hand (±0.4 rad at 0.1 Hz), stepped with the sensor effects reading both; noise on every channel.
+fn record_with_wrench(truth: &ContactModel, sigma: f64, seed: u64) -> Series {
+    let exc = Exc::new(500.0);
+    let (t, z, zd) = exc.trajectory();
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sigma).unwrap();
+    let mut state = truth.effect_state();
+    let dt = 1.0 / exc.fs;
+    let (mut f, mut tangential, mut gravity) = (vec![], vec![], vec![]);
+    for i in 0..t.len() {
+        let surface = truth.step_surface(&mut state, z[i], zd[i], dt).unwrap();
+        let sway = 0.003 * (2.0 * std::f64::consts::PI * 0.3 * t[i]).sin();
+        let ft = if z[i] > 0.0 { 4.0e4 * z[i].sqrt() * sway } else { 0.0 };
+        let inputs = SensorInputs {
+            tangential_force: [0.8 * ft, -0.6 * ft, 0.0],
+            gravity_change: 9.81 * ((0.4 * (2.0 * std::f64::consts::PI * 0.1 * t[i]).sin()).cos() - 1.0),
+        };
+        f.push(truth.sense(&mut state, surface, &inputs).unwrap() + noise.sample(&mut rng));
+        let n = [noise.sample(&mut rng), noise.sample(&mut rng), 0.0];
+        tangential.push(std::array::from_fn(|k| inputs.tangential_force[k] + n[k]));
+        gravity.push(inputs.gravity_change);
+    }
+    Series::new(t, z, zd, f).unwrap().with_sensor_inputs(tangential, gravity).unwrap()
+}
+
+#[test]
+fn crosstalk_and_tool_weight_are_named_from_the_whole_wrench() {
+    let o = Options::default();
+    // A sensor axis misaligned by 1° towards the sway (seed 000's error): coupling 0.0175 along it.
+    let coupling = [0.0175 * 0.8, -0.0175 * 0.6, 0.0];
+    let truth = with(&kv(), &[Effect::SensorCrosstalk { coupling }]);
+    let r = analyse(&record_with_wrench(&truth, 0.05, 41), &kv(), &o).unwrap();
+    show("crosstalk 1°", &r);
+    assert_eq!(ids(&r), ["sensor_crosstalk"]);
+    within("coupling x", param(&r, "sensor_crosstalk", "coupling_x"), coupling[0], 0.1);
+    within("coupling y", param(&r, "sensor_crosstalk", "coupling_y"), coupling[1], 0.1);
+    // A hand 0.5 kg heavier than the gravity compensation knows (0.38 N at the largest tilt).
+    let truth = with(&kv(), &[Effect::ToolGravity { mass: 0.5 }]);
+    let r = analyse(&record_with_wrench(&truth, 0.05, 42), &kv(), &o).unwrap();
+    show("tool gravity 0.5 kg", &r);
+    assert_eq!(ids(&r), ["tool_gravity"]);
+    within("mass", param(&r, "tool_gravity", "mass_kg"), 0.5, 0.1);
+    assert_eq!(r.remaining, Remaining::None);
+    // Neither: the same motion, nothing named.
+    for seed in [43, 44, 45] {
+        let r = analyse(&record_with_wrench(&kv(), 0.05, seed), &kv(), &o).unwrap();
+        show("null with sway and tilt", &r);
+        assert!(r.effects.is_empty(), "named {:?}", ids(&r));
+    }
+}
+
+#[test]
+fn a_time_delay_is_named_with_its_delay() {
+    // 30 ms on a linear and a Hertzian law: the fast lift-offs, where the surface lets go and the late
+    // reading does not, and the stops before holds tell it from damping.
+    let o = Options::default();
+    for (name, base) in [("kv", kv()), ("af", af())] {
+        let truth = with(&base, &[Effect::TimeDelay { delay: 0.03 }]);
+        let r = analyse(&record(&truth, Exc::new(500.0), 0.05, 51, &|_, _, _| 0.0), &base, &o).unwrap();
+        show(&format!("delay 30 ms {name}"), &r);
+        assert_eq!(ids(&r), ["time_delay"]);
+        within("delay", param(&r, "time_delay", "delay_s"), 0.03, 0.05);
+        assert_eq!(r.remaining, Remaining::None);
+    }
 }

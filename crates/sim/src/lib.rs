@@ -79,6 +79,25 @@ impl SimConfig {
     }
 }
 
+/// The hand beyond the sensing frame as the sensor feels it: the URDF's, plus the tool mass a surface
+/// model's [`softcontact_contact::Effect::ToolGravity`] says the compensation does not know, at the same
+/// centre of mass. (The arm's dynamics keep the URDF's hand: a payload error is a separate effect.)
+fn sensed_load(surface: Option<&SurfaceConfig>) -> softcontact_dynamics::BodyInertia {
+    let mut load = lwr4::tool_load();
+    let extra: f64 = surface
+        .into_iter()
+        .flat_map(|s| &s.model.effects)
+        .map(|e| if let softcontact_contact::Effect::ToolGravity { mass } = *e { mass } else { 0.0 })
+        .sum();
+    if extra != 0.0 && load.mass > 0.0 {
+        let scale = (load.mass + extra) / load.mass;
+        load.mass *= scale;
+        load.first_moment *= scale;
+        load.inertia_origin *= scale;
+    }
+    load
+}
+
 /// Seed 001's sponge: Azad-Featherstone-like, ≈ 280 N at 5 cm.
 pub fn sponge() -> ContactModel {
     ContactModel::new(softcontact_contact::Kind::AzadFeatherstone, 280.0 / 0.05f64.powf(1.5), 1100.0)
@@ -160,7 +179,7 @@ impl Simulator {
         let sensor_frame = model.frame_id(lwr4::FT_SENSOR_FRAME)?;
         let surface = config.surface.clone().map(Surface::new).transpose()?;
         let krc = Krc::new(config.krc.clone(), config.initial_q);
-        let sensor = FtSensor::new(config.sensor.clone(), lwr4::tool_load());
+        let sensor = FtSensor::new(config.sensor.clone(), sensed_load(config.surface.as_ref()));
         let data = model.data();
         Ok(Self {
             data,

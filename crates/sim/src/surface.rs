@@ -2,7 +2,7 @@
 //! with a friction cone and slip across it.
 
 use nalgebra::Vector3;
-use softcontact_contact::{ContactModel, EffectState};
+use softcontact_contact::{ContactModel, EffectState, SensorInputs};
 
 use crate::SimError;
 
@@ -25,7 +25,8 @@ pub struct Contact {
     pub rate: f64,
     /// The normal force the surface exerts, f ≥ 0 [N].
     pub normal_force: f64,
-    /// What a sensor reads of the normal force with the model's sensor effects (bias, drift) [N].
+    /// What a sensor reads of the normal force with the model's sensor effects (bias, drift, crosstalk,
+    /// delay) [N].
     pub measured_normal_force: f64,
     /// Total force on the hand, world [N].
     pub force: Vector3<f64>,
@@ -63,7 +64,7 @@ impl Surface {
         let n = self.normal;
         let z = (position - self.config.point).dot(&n);
         let zd = velocity.dot(&n);
-        let (f, measured) = self.config.model.step(&mut self.effects, z, zd, dt)?;
+        let f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
         let mut force = -f * n;
         let mut sliding = false;
         if z > 0.0 {
@@ -88,6 +89,11 @@ impl Surface {
         } else {
             self.anchor = None;
         }
+        // The sensor effects on the normal reading; the tangential load of this step feeds crosstalk. (A
+        // model's unknown tool weight is carried by the sensor's load instead: see `Sim::new`.)
+        let tangential = force + f * n;
+        let inputs = SensorInputs { tangential_force: tangential.into(), gravity_change: 0.0 };
+        let measured = self.config.model.sense(&mut self.effects, f, &inputs)?;
         let sensed_force = force - (measured - f) * n;
         Ok(Contact {
             deformation: z,

@@ -289,3 +289,23 @@ fn joint_friction_dissipates_energy() {
     assert!(free > 0.1, "the wrist coasts without friction: {free} rad/s");
     assert!(damped >= 0.0 && damped < 0.5 * free, "friction slows it: {damped} vs {free} rad/s");
 }
+
+#[test]
+fn a_surface_models_crosstalk_reads_tangential_load_as_normal_force() {
+    use softcontact_contact::{Effect, Tangential};
+    use softcontact_sim::{Surface, SurfaceConfig};
+    let model = ContactModel {
+        tangential: Some(Tangential { stiffness: 4.0e4, friction: 0.5 }),
+        effects: vec![Effect::SensorCrosstalk { coupling: [0.02, 0.0, 0.0] }],
+        ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
+    };
+    let mut surface =
+        Surface::new(SurfaceConfig { point: Vector3::zeros(), normal: Vector3::new(0.0, 0.0, -1.0), model }).unwrap();
+    let v = Vector3::zeros();
+    surface.contact(&Vector3::new(0.0, 0.0, -0.01), &v, 1e-3).unwrap();
+    let c = surface.contact(&Vector3::new(0.0005, 0.0, -0.01), &v, 1e-3).unwrap();
+    // F_t = (−2, 0, 0) N on the hand: the normal reading is 0.02 × (−2) N off, the true force is not.
+    assert!((c.force.x + 2.0).abs() < 1e-9);
+    assert!((c.measured_normal_force - (c.normal_force - 0.04)).abs() < 1e-12, "{c:?}");
+    assert!((c.sensed_force.z - (c.force.z - 0.04)).abs() < 1e-12 && c.sensed_force.x == c.force.x);
+}
