@@ -4,18 +4,20 @@
 //! detector fixes the contact position d. In contact a force command becomes a deformation command
 //! through the inverse of the current contact model, a quintic joins the present deformation to it, the
 //! deformation law turns the reference into z̈_des along n, the hand's position across the surface and its
-//! orientation are held by PD laws, and eq. 15 turns the task acceleration into joint torques with a
+//! orientation are held by PD laws (at the start pose, or where [`DeformationController::command_across`]
+//! moved their reference), and eq. 15 turns the task acceleration into joint torques with a
 //! null-space joint impedance holding the initial posture. Every output passes the torque limiter.
 //!
 //! What it refuses (the safety contract, README "Safety"): a command whose force, deformation, lift or
-//! move duration lies outside the configured limits; a contact model that is not plausible (exponents
+//! move duration lies outside the configured limits; a move across the surface or a tilt beyond
+//! [`MAX_LATERAL`], [`MAX_TILT`] or their speed limits; a contact model that is not plausible (exponents
 //! outside [`EXPONENT_RANGE`], a surface placed further than `max_surface_offset` from the measured
 //! onset); a tick whose measurements are not finite numbers. A tick that cannot produce finite torques
 //! returns an error and re-plans a hold where the hand is: the node then sends the driver a hold
 //! request, never an older torque. After the joint states were interrupted (a new KRC session) the
 //! controller forgets the contact and approaches again.
 
-use nalgebra::{DVector, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{DVector, Matrix3, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
     Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque, TorqueLimiter,
@@ -104,6 +106,9 @@ pub enum ControlError {
     NonFinite(&'static str),
     #[error("implausible contact model refused: {0}")]
     ImplausibleModel(String),
+    /// A move across the surface or a tilt beyond its limit (see [`MAX_LATERAL`], [`MAX_TILT`]).
+    #[error("{what} of {value} is beyond the limit of {limit}")]
+    Across { what: &'static str, value: f64, limit: f64 },
 }
 
 /// What the controller reports each tick (/deformation_controller/state).
@@ -132,6 +137,94 @@ const BACK_OFF_MIN_STEP: f64 = 0.5e-3;
 /// Most periods of one series of identification pushes.
 const MAX_PUSH_PERIODS: u32 = 10_000;
 
+/// Farthest [`DeformationController::command_across`] moves the hand across the surface from its start
+/// [m]. A lateral offset is a test excitation (a tangential load on the surface: it sticks, then slips;
+/// the sensor's crosstalk), not a motion planner: a few centimetres are enough for that, keep the hand
+/// on the sample and the arm near its start posture, where the null-space impedance holds the elbow.
+pub const MAX_LATERAL: f64 = 0.03;
+/// Largest tilt of the hand from its start orientation [rad] (≈ 11°): enough to change the sensor's
+/// orientation to gravity measurably (the tool's weight moves ≈ 20 % across the sensor's axes), small
+/// enough that the hand's edge does not dig into the surface and the wrist stays far from its limits.
+pub const MAX_TILT: f64 = 0.2;
+/// Fastest tilt [rad/s] (the quintic's peak, 15/8 · angle / duration): the orientation PD and the
+/// torque-rate limit follow it without a jolt, and the sensor's gravity reading changes slowly against
+/// the contact dynamics. (The lateral speed is bounded by the limits' `max_deformation_rate`.)
+pub const MAX_TILT_RATE: f64 = 0.5;
+/// A lateral offset's component along n [m] beyond which it is refused: it must be across the surface
+/// (the normal is commanded by deformation and force commands only); below it is rounding and is removed.
+const ACROSS_NORMAL_TOLERANCE: f64 = 1e-6;
+/// Peak speed of a rest-to-rest quintic per unit distance and second: ṡ(T/2) = 15/(8T).
+const QUINTIC_PEAK: f64 = 15.0 / 8.0;
+
+/// A move of the hold across the surface and in orientation: the lateral offset and the tilt (a rotation
+/// vector in the world) go on straight lines from `from` to `to` with `progress`, a rest-to-rest quintic
+/// 0 → 1 that began at controller time `since`. With `from == to` it is a hold.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct AcrossMove {
+    from: (Vector3<f64>, Vector3<f64>),
+    to: (Vector3<f64>, Vector3<f64>),
+    progress: Quintic,
+    since: f64,
+}
+
+/// The reference across the surface and in orientation at one instant: lateral offset from the start
+/// position [m], its velocity and acceleration; tilt (rotation vector, R_ref = exp(tilt) · R_start), the
+/// world angular velocity and acceleration of R_ref.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct AcrossReference {
+    lateral: Vector3<f64>,
+    velocity: Vector3<f64>,
+    acceleration: Vector3<f64>,
+    tilt: Vector3<f64>,
+    angular_velocity: Vector3<f64>,
+    angular_acceleration: Vector3<f64>,
+}
+
+impl AcrossReference {
+    const HOLD_START: Self = Self {
+        lateral: Vector3::new(0.0, 0.0, 0.0),
+        velocity: Vector3::new(0.0, 0.0, 0.0),
+        acceleration: Vector3::new(0.0, 0.0, 0.0),
+        tilt: Vector3::new(0.0, 0.0, 0.0),
+        angular_velocity: Vector3::new(0.0, 0.0, 0.0),
+        angular_acceleration: Vector3::new(0.0, 0.0, 0.0),
+    };
+}
+
+impl AcrossMove {
+    fn at(&self, t: f64) -> AcrossReference {
+        let s = self.progress.at(t - self.since);
+        let (lateral, tilt) = (self.to.0 - self.from.0, self.to.1 - self.from.1);
+        let theta = self.from.1 + s.position * tilt;
+        // The world angular velocity of exp(θ(t)) is J_l(θ)·θ̇. Its acceleration J_l·θ̈ + J̇_l·θ̇ drops
+        // the second term: with θ on a straight line it is, to leading order, (1/6)·ṡ²·Δ×(θ×Δ): zero
+        // when θ ∥ Δ (every move from the start), below 1 % of the first's peak within the tilt limits.
+        let jacobian = left_jacobian(&theta);
+        AcrossReference {
+            lateral: self.from.0 + s.position * lateral,
+            velocity: s.velocity * lateral,
+            acceleration: s.acceleration * lateral,
+            tilt: theta,
+            angular_velocity: s.velocity * (jacobian * tilt),
+            angular_acceleration: s.acceleration * (jacobian * tilt),
+        }
+    }
+}
+
+/// The left Jacobian of SO(3) at θ: the world angular velocity of exp(θ(t)) is J_l(θ)·θ̇. Its singular
+/// values are 1 (along θ) and |sin(φ/2)/(φ/2)| ≤ 1, so |ω| ≤ |θ̇|.
+fn left_jacobian(theta: &Vector3<f64>) -> Matrix3<f64> {
+    let phi2 = theta.norm_squared();
+    let phi = phi2.sqrt();
+    let (a, b) = if phi < 1e-4 {
+        (0.5 - phi2 / 24.0, 1.0 / 6.0 - phi2 / 120.0)
+    } else {
+        ((1.0 - phi.cos()) / phi2, (phi - phi.sin()) / (phi2 * phi))
+    };
+    let k = theta.cross_matrix();
+    Matrix3::identity() + a * k + b * k * k
+}
+
 pub struct DeformationController {
     config: ControllerConfig,
     model: Model,
@@ -143,6 +236,8 @@ pub struct DeformationController {
     contact_level: Option<f64>,
     offset: f64,
     start: Option<(Vector3<f64>, UnitQuaternion<f64>, [f64; 7])>,
+    /// The hold across the surface and in orientation, relative to `start`; `None` holds the start.
+    across: Option<AcrossMove>,
     time: f64,
     plan: Option<(Trajectory, f64)>,
     f_cmd: f64,
@@ -176,6 +271,7 @@ impl DeformationController {
             contact_level: None,
             offset: 0.0,
             start: None,
+            across: None,
             time: 0.0,
             plan: None,
             f_cmd: 0.0,
@@ -274,9 +370,10 @@ impl DeformationController {
         self.contact_level.is_none() && self.config.approach_speed * self.time >= self.config.max_approach
     }
 
-    /// Forgets the contact, the plan and the start pose: the next tick approaches again from where the
-    /// hand is. For a new KRC session, or joint states that stopped for a while — the arm may have
-    /// been moved, the surface too.
+    /// Forgets the contact, the plan, the start pose and the move across the surface: the next tick
+    /// approaches again from where the hand is, and holds it there across the surface and in orientation.
+    /// For a new KRC session, or joint states that stopped for a while — the arm may have been moved, the
+    /// surface too.
     pub fn restart(&mut self) {
         if let Ok(onset) = OnsetDetector::new(self.config.onset) {
             self.onset = onset;
@@ -284,6 +381,7 @@ impl DeformationController {
         self.contact_level = None;
         self.offset = 0.0;
         self.start = None;
+        self.across = None;
         self.time = 0.0;
         self.plan = None;
         self.f_cmd = 0.0;
@@ -371,6 +469,81 @@ impl DeformationController {
         self.contact_lost = false;
         self.force_limited = false;
         Ok(())
+    }
+
+    /// The reference across the surface and in orientation now.
+    fn across_reference(&self) -> AcrossReference {
+        self.across.map_or(AcrossReference::HOLD_START, |m| m.at(self.time))
+    }
+
+    /// Moves the hand's hold across the surface and its orientation: a quintic of `duration` seconds from
+    /// the present lateral/tilt reference to `lateral` [m] (a world vector ⊥ n, from the start position;
+    /// its n component is refused if not ~0) and `tilt` [rad] (a rotation vector in the world, applied to
+    /// the start orientation: R_ref = exp(tilt) · R_start). The normal part (deformation/force command) is
+    /// left as it is. Allowed in free space and in contact; a command during a move starts from where the
+    /// reference is then (at rest). Refused, and the present move kept, for inputs that are not finite,
+    /// offsets beyond [`MAX_LATERAL`] or [`MAX_TILT`], a duration outside the limits, or a peak speed
+    /// beyond the limits' `max_deformation_rate` or [`MAX_TILT_RATE`].
+    pub fn command_across(
+        &mut self,
+        lateral: Vector3<f64>,
+        tilt: Vector3<f64>,
+        duration: f64,
+    ) -> Result<(), ControlError> {
+        if !lateral.iter().all(|v| v.is_finite()) {
+            return Err(ControlError::NonFinite("the lateral offset"));
+        }
+        if !tilt.iter().all(|v| v.is_finite()) {
+            return Err(ControlError::NonFinite("the tilt"));
+        }
+        if !duration.is_finite() {
+            return Err(ControlError::NonFinite("the move duration"));
+        }
+        let n = self.config.normal;
+        let along = lateral.dot(&n);
+        if along.abs() > ACROSS_NORMAL_TOLERANCE {
+            return Err(ControlError::Across {
+                what: "the lateral offset's component along the normal [m]",
+                value: along,
+                limit: ACROSS_NORMAL_TOLERANCE,
+            });
+        }
+        let lateral = lateral - along * n;
+        if lateral.norm() > MAX_LATERAL {
+            return Err(ControlError::Across {
+                what: "the lateral offset [m]",
+                value: lateral.norm(),
+                limit: MAX_LATERAL,
+            });
+        }
+        if tilt.norm() > MAX_TILT {
+            return Err(ControlError::Across { what: "the tilt [rad]", value: tilt.norm(), limit: MAX_TILT });
+        }
+        let limits = &self.config.limits;
+        let duration = limits.check_duration(duration)?;
+        let now = self.across_reference();
+        limits.check_rate(QUINTIC_PEAK * (lateral - now.lateral).norm() / duration)?;
+        let tilt_rate = QUINTIC_PEAK * (tilt - now.tilt).norm() / duration;
+        if !(tilt_rate <= MAX_TILT_RATE) {
+            return Err(ControlError::Across {
+                what: "the tilt speed [rad/s]",
+                value: tilt_rate,
+                limit: MAX_TILT_RATE,
+            });
+        }
+        let progress = Quintic::rest_to_rest(0.0, 1.0, duration).ok_or(ControlError::Duration)?;
+        self.across =
+            Some(AcrossMove { from: (now.lateral, now.tilt), to: (lateral, tilt), progress, since: self.time });
+        Ok(())
+    }
+
+    /// Stops the move across the surface where its reference is now.
+    fn hold_across(&mut self) {
+        if let Some(m) = self.across.as_mut() {
+            let now = m.at(self.time);
+            m.from = (now.lateral, now.tilt);
+            m.to = m.from;
+        }
     }
 
     /// One control tick: total joint torques (gravity included) for the measured joint state, the
@@ -474,14 +647,18 @@ impl DeformationController {
         state.contact_lost = self.contact_lost;
         state.force_limited = self.force_limited;
 
-        // Across the surface and in orientation: hold the start.
+        // Across the surface and in orientation: hold the start, moved by `command_across` (its reference
+        // is ⊥ n; velocity and acceleration feed forward, so a move does not lag).
+        let across = self.across_reference();
         let (kp, kd) = self.config.lateral;
-        let lateral_error = (start.0 - r) - (start.0 - r).dot(&n) * n;
+        let target = start.0 + across.lateral;
+        let lateral_error = (target - r) - (target - r).dot(&n) * n;
         let lateral_velocity = v - v.dot(&n) * n;
-        let linear = z_accel * n + kp * lateral_error - kd * lateral_velocity;
+        let linear = z_accel * n + across.acceleration + kp * lateral_error + kd * (across.velocity - lateral_velocity);
         let (ko, kw) = self.config.orientation;
-        let rotation_error = (start.1 * pose.rotation.inverse()).scaled_axis();
-        let angular = ko * rotation_error - kw * w;
+        let held = UnitQuaternion::from_scaled_axis(across.tilt) * start.1;
+        let rotation_error = (held * pose.rotation.inverse()).scaled_axis();
+        let angular = across.angular_acceleration + ko * rotation_error + kw * (across.angular_velocity - w);
         let acceleration = Vector6::new(linear.x, linear.y, linear.z, angular.x, angular.y, angular.z);
 
         for i in 0..7 {
@@ -493,7 +670,9 @@ impl DeformationController {
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
         let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
         if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, self.config.period) {
-            // Nothing to send this tick; the next one holds the hand where it is.
+            // Nothing to send this tick; the next one holds the hand where it is (across the surface:
+            // where its reference is now).
+            self.hold_across();
             if self.contact_level.is_some() && state.z.is_finite() {
                 self.f_cmd = 0.0;
                 self.hold(state.z)?;
@@ -689,5 +868,274 @@ impl crate::params::NodeParams for Params {
         }
         self.initial_model.validate().map_err(|e| format!("initial_model: {e}"))?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cell::Cell;
+    use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+    use softcontact_sim::SimConfig;
+
+    fn controller() -> DeformationController {
+        DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge()).unwrap()
+    }
+
+    /// `ticks` ticks of an arm standing at the start posture, no force.
+    fn tick(c: &mut DeformationController, ticks: usize) {
+        for _ in 0..ticks {
+            c.tick(&softcontact_sim::DEFAULT_Q, &[0.0; 7], 0.0, &Vector3::zeros()).unwrap();
+        }
+    }
+
+    /// The lockstep cell with the arm in free space, commanding and tared.
+    fn free_cell() -> Cell {
+        let config = SimConfig { surface: None, ..SimConfig::above_surface(softcontact_sim::sponge(), 41) };
+        let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+        let mut cell = Cell::new(config, controller(), estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        cell.start(5000).unwrap();
+        cell
+    }
+
+    /// The hand's lateral offset from the start (⊥ n) and its rotation's distance from exp(tilt)·R_start.
+    fn hand_error(cell: &mut Cell, lateral: &Vector3<f64>, tilt: &Vector3<f64>) -> (f64, f64) {
+        let (r0, rot0, _) = cell.controller.start.unwrap();
+        let n = cell.controller.config.normal;
+        let pose = cell.sim.tool_pose();
+        let d = pose.translation.vector - r0;
+        let across = d - d.dot(&n) * n;
+        let expected = UnitQuaternion::from_scaled_axis(*tilt) * rot0;
+        ((across - lateral).norm(), (expected.inverse() * pose.rotation).angle())
+    }
+
+    #[test]
+    fn refused_across_commands_leave_the_plan_unchanged() {
+        let mut c = controller();
+        tick(&mut c, 10);
+        c.command_across(Vector3::new(0.005, 0.005, 0.0), Vector3::new(0.0, 0.02, 0.0), 1.0).unwrap();
+        tick(&mut c, 300);
+        let before = (c.across, c.plan.clone(), c.across_reference());
+        let unchanged = |c: &DeformationController, what: &str| {
+            assert_eq!((c.across, c.plan.clone(), c.across_reference()), before, "{what} changed the plan");
+        };
+        let ok_lateral = Vector3::new(0.01, 0.0, 0.0);
+        let ok_tilt = Vector3::new(0.05, 0.0, 0.0);
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, f64::MAX] {
+            for axis in 0..3 {
+                let mut v = Vector3::zeros();
+                v[axis] = x;
+                let e = c.command_across(v, ok_tilt, 1.0).unwrap_err();
+                assert!(x.is_finite() || matches!(e, ControlError::NonFinite(_)), "lateral {v:?}: {e}");
+                unchanged(&c, &format!("a lateral offset of {x}"));
+                let e = c.command_across(ok_lateral, v, 1.0).unwrap_err();
+                assert!(x.is_finite() || matches!(e, ControlError::NonFinite(_)), "tilt {v:?}: {e}");
+                unchanged(&c, &format!("a tilt of {x}"));
+            }
+        }
+        for lateral in [Vector3::new(0.031, 0.0, 0.0), Vector3::new(0.0, -0.0301, 0.0), Vector3::new(0.022, 0.022, 0.0)]
+        {
+            let e = c.command_across(lateral, ok_tilt, 2.0).unwrap_err();
+            assert!(matches!(e, ControlError::Across { limit: MAX_LATERAL, .. }), "lateral {lateral:?}: {e}");
+            unchanged(&c, "an offset beyond MAX_LATERAL");
+        }
+        for tilt in [Vector3::new(0.21, 0.0, 0.0), Vector3::new(0.0, 0.0, -0.201), Vector3::new(0.15, 0.15, 0.0)] {
+            let e = c.command_across(ok_lateral, tilt, 2.0).unwrap_err();
+            assert!(matches!(e, ControlError::Across { limit: MAX_TILT, .. }), "tilt {tilt:?}: {e}");
+            unchanged(&c, "a tilt beyond MAX_TILT");
+        }
+        for duration in [0.01, 0.099, 0.0, -1.0, 1e-300, 601.0, 1e300, f64::NAN, f64::INFINITY] {
+            assert!(c.command_across(ok_lateral, ok_tilt, duration).is_err(), "duration {duration}");
+            unchanged(&c, "a duration out of range");
+        }
+        assert!(matches!(
+            c.command_across(ok_lateral, ok_tilt, 0.05),
+            Err(ControlError::Limit(LimitError::Duration(..)))
+        ));
+        // Too fast: 2.9 cm in 0.2 s peaks at 0.27 m/s (limit 0.25 m/s); 0.2 rad in 0.5 s at 0.75 rad/s.
+        let e = c.command_across(Vector3::new(-0.028, 0.0, 0.0), ok_tilt, 0.2).unwrap_err();
+        assert!(matches!(e, ControlError::Limit(LimitError::Rate(..))), "{e}");
+        unchanged(&c, "a lateral move too fast");
+        let e = c.command_across(ok_lateral, Vector3::new(0.0, 0.0, 0.2), 0.5).unwrap_err();
+        assert!(matches!(e, ControlError::Across { limit: MAX_TILT_RATE, .. }), "{e}");
+        unchanged(&c, "a tilt too fast");
+        // The limits themselves are commands.
+        c.command_across(Vector3::new(0.0, -MAX_LATERAL, 0.0), Vector3::new(0.0, 0.0, MAX_TILT), 2.0).unwrap();
+    }
+
+    #[test]
+    fn a_lateral_offset_along_the_normal_is_refused() {
+        let mut c = controller();
+        tick(&mut c, 10);
+        for lateral in [Vector3::new(0.0, 0.0, 0.01), Vector3::new(0.0, 0.0, -0.01), Vector3::new(0.01, 0.0, 2e-6)] {
+            let e = c.command_across(lateral, Vector3::zeros(), 1.0).unwrap_err();
+            assert!(matches!(e, ControlError::Across { limit: ACROSS_NORMAL_TOLERANCE, .. }), "{lateral:?}: {e}");
+            assert_eq!(c.across, None);
+        }
+        // Rounding along n is removed, not refused.
+        c.command_across(Vector3::new(0.01, 0.0, 1e-9), Vector3::zeros(), 1.0).unwrap();
+        tick(&mut c, 1100);
+        assert_eq!(c.across_reference().lateral, Vector3::new(0.01, 0.0, 0.0));
+    }
+
+    #[test]
+    fn in_free_space_the_hand_follows_a_move_across_and_a_tilt() {
+        let mut cell = free_cell();
+        for _ in 0..50 {
+            cell.cycle().unwrap();
+        }
+        let (lateral, tilt) = (Vector3::new(0.01, 0.0, 0.0), Vector3::new(0.05, 0.0, 0.0));
+        cell.controller.command_across(lateral, tilt, 1.0).unwrap();
+        // While it moves the hand keeps up with the reference (velocity and acceleration fed forward).
+        let mut lag: (f64, f64) = (0.0, 0.0);
+        for _ in 0..1000 {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(tick.refused.is_none(), "{:?}", tick.refused);
+            let now = cell.controller.across_reference();
+            let (p, o) = hand_error(&mut cell, &now.lateral, &now.tilt);
+            lag = (lag.0.max(p), lag.1.max(o));
+        }
+        for _ in 0..500 {
+            cell.cycle().unwrap();
+        }
+        let (p, o) = hand_error(&mut cell, &lateral, &tilt);
+        eprintln!(
+            "lag during the move {:.3} mm, {:.4} rad; after it {:.3} mm, {:.4} rad",
+            lag.0 * 1e3,
+            lag.1,
+            p * 1e3,
+            o
+        );
+        assert!(p < 1e-3, "the hand is {:.2} mm from start + 1 cm across", p * 1e3);
+        assert!(o < 0.005, "the hand is {o:.4} rad from the tilted start orientation");
+        // (Without the feed-forward it lags 1.8 mm and 0.009 rad.)
+        assert!(lag.0 < 2e-4 && lag.1 < 2e-3, "the hand lagged {lag:?} behind the moving reference");
+        // Back to the start, from where the reference is.
+        cell.controller.command_across(Vector3::zeros(), Vector3::zeros(), 1.0).unwrap();
+        for _ in 0..1500 {
+            cell.cycle().unwrap();
+        }
+        let (p, o) = hand_error(&mut cell, &Vector3::zeros(), &Vector3::zeros());
+        assert!(p < 1e-3 && o < 0.005, "back at the start: {:.2} mm, {o:.4} rad", p * 1e3);
+    }
+
+    #[test]
+    fn pressing_the_sponge_the_hand_moves_across_and_tilts_below_the_force_limit() {
+        let config = SimConfig::above_surface(softcontact_sim::sponge(), 42);
+        let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+        let mut cell = Cell::new(config, controller(), estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        let mut cycles = 0;
+        while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
+            cycles += 1;
+            assert!(cycles < 10_000, "no contact");
+        }
+        cell.controller.command_force(40.0, 1.0).unwrap();
+        for _ in 0..1500 {
+            cell.cycle().unwrap();
+        }
+        let before = cell.sim.contact().normal_force;
+        let (lateral, tilt) = (Vector3::new(0.0, 0.008, 0.0), Vector3::new(0.0, -0.04, 0.0));
+        cell.controller.command_across(lateral, tilt, 1.5).unwrap();
+        let mut peak: f64 = 0.0;
+        for _ in 0..2500 {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(tick.refused.is_none() && !tick.controller.force_limited, "{tick:?}");
+            peak = peak.max(cell.sim.contact().normal_force);
+        }
+        let (p, o) = hand_error(&mut cell, &lateral, &tilt);
+        let f = cell.sim.contact().normal_force;
+        eprintln!(
+            "in contact: {:.2} mm, {o:.4} rad from the reference; {before:.1} N before, {f:.1} N after \
+             (peak {peak:.1} N)",
+            p * 1e3
+        );
+        assert!(p < 1e-3 && o < 0.005, "{:.2} mm, {o:.4} rad", p * 1e3);
+        // The normal part is left as it was: the force holds.
+        assert!((f - before).abs() < 3.0 && peak < before + 3.0, "{before} N before, {f} N after, peak {peak} N");
+    }
+
+    #[test]
+    fn a_new_command_mid_move_starts_from_the_present_reference() {
+        let mut c = controller();
+        tick(&mut c, 10);
+        c.command_across(Vector3::new(0.01, 0.0, 0.0), Vector3::new(0.0, 0.05, 0.0), 1.0).unwrap();
+        tick(&mut c, 400);
+        let now = c.across_reference();
+        c.command_across(Vector3::new(0.0, 0.01, 0.0), Vector3::new(0.05, 0.0, 0.0), 1.0).unwrap();
+        let from = c.across_reference();
+        assert!((from.lateral - now.lateral).norm() < 1e-15 && (from.tilt - now.tilt).norm() < 1e-15);
+        assert!(now.lateral.x > 0.001 && now.lateral.x < 0.009, "mid-move: {now:?}");
+        tick(&mut c, 1000);
+        let end = c.across_reference();
+        assert!(end.velocity.norm() < 1e-12 && end.angular_velocity.norm() < 1e-12, "{end:?}");
+        assert!((end.lateral - Vector3::new(0.0, 0.01, 0.0)).norm() < 1e-12);
+        assert!((end.tilt - Vector3::new(0.05, 0.0, 0.0)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn a_failed_tick_stops_the_move_across_where_its_reference_is() {
+        let mut c = controller();
+        tick(&mut c, 10);
+        c.command_across(Vector3::new(0.01, 0.0, 0.0), Vector3::new(0.0, 0.05, 0.0), 1.0).unwrap();
+        tick(&mut c, 400);
+        let now = c.across_reference();
+        c.hold_across();
+        tick(&mut c, 1000);
+        let held = c.across_reference();
+        assert!((held.lateral - now.lateral).norm() < 1e-15 && (held.tilt - now.tilt).norm() < 1e-15);
+        assert_eq!((held.velocity, held.angular_velocity), (Vector3::zeros(), Vector3::zeros()));
+    }
+
+    #[test]
+    fn restarts_and_new_sessions_hold_the_start_again() {
+        let mut c = controller();
+        let moving = |c: &mut DeformationController| {
+            c.follow_session(Some(2), true, 0.0);
+            tick(c, 10);
+            c.command_across(Vector3::new(0.01, 0.0, 0.0), Vector3::new(0.0, 0.05, 0.0), 1.0).unwrap();
+            tick(c, 500);
+            assert!(c.across.is_some() && c.across_reference().lateral.x > 0.004);
+        };
+        moving(&mut c);
+        c.restart();
+        assert_eq!((c.across, c.across_reference()), (None, AcrossReference::HOLD_START));
+        // A new KRC session, joint states after a silence, a KRC that stopped commanding.
+        for (session, commanding, silence) in
+            [(Some(3), true, 0.0), (None, true, 0.0), (Some(2), true, 1.0), (Some(2), false, 0.0)]
+        {
+            moving(&mut c);
+            c.follow_session(session, commanding, silence);
+            assert_eq!(c.across, None, "session {session:?}, commanding {commanding}, silence {silence} s");
+            assert_eq!(c.across_reference(), AcrossReference::HOLD_START);
+        }
+        // The same session, commanding, on time: the move goes on.
+        moving(&mut c);
+        c.follow_session(Some(2), true, 0.001);
+        assert!(c.across.is_some());
+    }
+
+    #[test]
+    fn the_reference_angular_velocity_is_that_of_the_reference_rotation() {
+        let progress = Quintic::rest_to_rest(0.0, 1.0, 1.0).unwrap();
+        let m = AcrossMove {
+            from: (Vector3::zeros(), Vector3::new(0.15, -0.05, 0.0)),
+            to: (Vector3::zeros(), Vector3::new(-0.05, 0.1, 0.12)),
+            progress,
+            since: 0.0,
+        };
+        let h = 1e-6;
+        // The quintic's peak acceleration: 10/√3 per unit distance and s².
+        let peak_alpha = 10.0 / 3f64.sqrt() * (m.to.1 - m.from.1).norm();
+        for t in [0.1, 0.3, 0.5, 0.8] {
+            let rotation = |t: f64| UnitQuaternion::from_scaled_axis(m.at(t).tilt);
+            // World angular velocity: Ṙ Rᵀ.
+            let numeric = (rotation(t + h) * rotation(t - h).inverse()).scaled_axis() / (2.0 * h);
+            let w = m.at(t).angular_velocity;
+            assert!((numeric - w).norm() < 1e-6 * w.norm().max(1.0), "t {t}: {numeric:?} vs {w:?}");
+            let alpha = (m.at(t + h).angular_velocity - m.at(t - h).angular_velocity) / (2.0 * h);
+            let fed = m.at(t).angular_acceleration;
+            // Without J̇_l·θ̇: within 1 % of the peak.
+            assert!((alpha - fed).norm() < 0.01 * peak_alpha, "t {t}: {alpha:?} vs {fed:?}");
+        }
     }
 }
