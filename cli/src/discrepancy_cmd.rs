@@ -34,12 +34,25 @@ pub struct DiscrepancyArgs {
 /// The F/T node's tares (their stamps zero the sensor's drifted offset).
 const TARE: &str = "/ft_sensor/tare";
 
-/// The recording along the normal from the contact position: one sample per `sample_period`.
+/// Gravity in the frame of the poses (the arm's base, z up) [m/s²].
+const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
+
+/// The recording along the normal from the contact position: one sample per `sample_period`, with the
+/// tangential force and the change of gravity along the normal since the last tare as the sensor saw
+/// them (before the first tare: since the first sample).
 fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) -> anyhow::Result<Series> {
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let n = Vector3::new(x, y, z).normalize();
     let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, n, 0.05);
     let (mut t, mut zs, mut zdot, mut f, mut tares) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut tangential, mut gravity) = (Vec::new(), Vec::new());
+    // The sensor's orientation at the last tare, and the newest one seen.
+    type Rows = [[f64; 3]; 3];
+    let (mut at_tare, mut newest): (Option<Rows>, Option<Rows>) = (None, None);
+    let rows = |q: &nalgebra::UnitQuaternion<f64>| -> Rows {
+        let m = q.to_rotation_matrix();
+        std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))
+    };
     for m in recording.messages() {
         let m = m?;
         match m.topic() {
@@ -56,7 +69,10 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 let (position, rotation) = geometry::pose_of(&p.pose);
                 pairing.pose(p.header.stamp.as_secs_f64(), position, rotation);
             }
-            TARE => tares.push(m.decode::<WrenchStamped>()?.header.stamp.as_secs_f64()),
+            TARE => {
+                tares.push(m.decode::<WrenchStamped>()?.header.stamp.as_secs_f64());
+                at_tare = newest.or(at_tare);
+            }
             TWIST => pairing.twist(geometry::vector_of(&m.decode::<TwistStamped>()?.twist.linear)),
             WRENCH => {
                 let w = m.decode::<WrenchStamped>()?;
@@ -69,13 +85,19 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                     zs.push((p.position - surface).dot(&n));
                     zdot.push(p.velocity.dot(&n));
                     f.push(p.normal_reading);
+                    let along = p.force.dot(&n);
+                    tangential.push((p.force - along * n).into());
+                    let now = rows(&p.sensor_rotation);
+                    newest = Some(now);
+                    let tare = *at_tare.get_or_insert(now);
+                    gravity.push(softcontact_contact::gravity_change(&now, &tare, GRAVITY, n.into()));
                 }
             }
             _ => {}
         }
     }
     anyhow::ensure!(t.len() >= 100, "only {} force readings paired with a pose: too short to analyse", t.len());
-    Ok(Series::new(t, zs, zdot, f)?.with_tares(tares)?)
+    Ok(Series::new(t, zs, zdot, f)?.with_tares(tares)?.with_sensor_inputs(tangential, gravity)?)
 }
 
 fn print_report(report: &Report, name: &str) {

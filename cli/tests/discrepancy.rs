@@ -132,6 +132,28 @@ fn the_hidden_effect_corpus_meets_its_goals() {
     assert!(count("effect_cases") >= 12 && count("null_cases") >= 20, "{shown}");
     assert!(count("named_exactly") * 10 >= 9 * count("effect_cases"), "{shown}");
     assert_eq!(count("false_names_on_nulls"), 0, "{shown}");
+    assert!(count("out_of_library_cases") >= 1, "{shown}");
+    assert_eq!(count("out_of_library_unexplained"), count("out_of_library_cases"), "{shown}");
+    // Every effect id of the cell's surface and sensor is hidden at least once.
+    let hidden: std::collections::BTreeSet<&str> = c["outcomes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|o| o["expected"].as_array().unwrap())
+        .filter_map(|v| v.as_str())
+        .collect();
+    for id in [
+        "viscoelastic_relaxation",
+        "hysteresis",
+        "stiffness_exponent",
+        "contact_offset_drift",
+        "sensor_drift",
+        "time_delay",
+        "sensor_crosstalk",
+        "tool_gravity",
+    ] {
+        assert!(hidden.contains(id), "{id} is never hidden: {shown}");
+    }
     assert!(c["median_shrink_of_ideal"].as_f64().unwrap() >= 0.8, "{shown}");
 }
 

@@ -322,6 +322,9 @@ pub struct Paired {
     pub normal_force: f64,
     /// The sensor's reading along the normal, unclamped [N]: in free space its noise and bias.
     pub normal_reading: f64,
+    /// The whole force on the hand in the world [N] and the sensor's orientation (sensor → world).
+    pub force: Vector3<f64>,
+    pub sensor_rotation: UnitQuaternion<f64>,
 }
 
 impl ForcePairing {
@@ -368,8 +371,16 @@ impl ForcePairing {
         if t - seen > self.stale_after || !force_in_sensor.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let force = rotation * self.tool_to_sensor * force_in_sensor;
+        let sensor_rotation = rotation * self.tool_to_sensor;
+        let force = sensor_rotation * force_in_sensor;
         let normal_reading = -force.dot(&self.normal);
-        Some(Paired { position, velocity: self.velocity, normal_force: normal_reading.max(0.0), normal_reading })
+        Some(Paired {
+            position,
+            velocity: self.velocity,
+            normal_force: normal_reading.max(0.0),
+            normal_reading,
+            force,
+            sensor_rotation,
+        })
     }
 }

@@ -42,10 +42,16 @@ pub struct Plan {
     /// Control commands (30: five cycles of six).
     pub commands: usize,
     pub move_duration: f64,
+    /// Lateral sway during every push run and force command (a tangential load) and tilts of the hand in
+    /// free space after every push run (the sensor's orientation against gravity): the excitation
+    /// crosstalk and an unknown tool weight need, spread through the recording so that every fold of the
+    /// workflow's cross-validation sees some.
+    pub across: bool,
 }
 
 impl Plan {
-    pub const SEED_001: Plan = Plan { identification_runs: 10, push_periods: 5, commands: 30, move_duration: 2.0 };
+    pub const SEED_001: Plan =
+        Plan { identification_runs: 10, push_periods: 5, commands: 30, move_duration: 2.0, across: false };
 }
 
 /// One control command and what was reached.
@@ -137,6 +143,9 @@ impl Observer for NoObserver {
 
 const CYCLE: f64 = 1e-3;
 const RETREAT: f64 = -0.01;
+/// [`Plan::across`]: the lateral sway [m] (each way) and the tilt of the hand [rad] about y.
+const SWAY: f64 = 0.008;
+const TILT: f64 = 0.35;
 
 /// The cell driven tick by tick, the estimator refitted on the node's schedule.
 struct Runner<'a, O: Observer> {
@@ -214,9 +223,22 @@ pub fn run_surface(
             k += 1;
         };
         r.cell.controller.command_pushes(low, high, 1.0, plan.push_periods)?;
+        let sway = Vector3::new(SWAY * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0, 0.0);
+        if plan.across {
+            // Across the surface while pushing: the tangential load, in every run.
+            r.cell.controller.command_across(sway, Vector3::zeros(), 2.0)?;
+        }
         r.run(1.0 + f64::from(plan.push_periods), &mut watch)?;
         r.cell.controller.command_deformation(RETREAT, 1.0)?;
         r.run(1.5, &mut watch)?;
+        if plan.across {
+            // Tilt the hand in free space and back: the sensor's orientation against gravity.
+            let tilt = Vector3::new(0.0, TILT * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0);
+            for to in [tilt, Vector3::zeros()] {
+                r.cell.controller.command_across(sway, to, 3.0)?;
+                r.run(3.5, &mut watch)?;
+            }
+        }
     }
     let identification_samples = r.cell.estimator.samples();
     let identified = r.cell.estimator.refit().context("identification fit")?;
@@ -246,6 +268,10 @@ pub fn run_surface(
         }
         let stiffness = r.cell.controller.contact_model().stiffness;
         r.cell.controller.command_force(command, plan.move_duration)?;
+        if plan.across {
+            let sway = SWAY * if i % 2 == 0 { 1.0 } else { -1.0 };
+            r.cell.controller.command_across(Vector3::new(sway, 0.0, 0.0), Vector3::zeros(), plan.move_duration)?;
+        }
         r.observer.force_command(r.last.time, command, plan.move_duration)?;
         command_times.push(r.last.time);
         let cycles = (plan.move_duration / CYCLE).round() as usize;

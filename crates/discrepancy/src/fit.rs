@@ -143,6 +143,10 @@ fn pow(z: f64, e: f64) -> f64 {
         1.0
     } else if e == 1.0 {
         z
+    } else if e == 0.5 {
+        z.sqrt()
+    } else if e == 1.5 {
+        z * z.sqrt()
     } else {
         z.powf(e)
     }
@@ -168,10 +172,15 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
             Term::Relax(tau) => {
                 // The same exact update as ContactModel::step, with unit branch stiffness.
                 let mut x = 0.0;
+                // exp(−dt/τ) again only where the step changes (a steady rate: once).
+                let mut last = (f64::NAN, 0.0);
                 (0..n)
                     .map(|i| {
                         if zeff[i] > 0.0 {
-                            let decay = (-d.dt[i] / tau).exp();
+                            if d.dt[i] != last.0 {
+                                last = (d.dt[i], (-d.dt[i] / tau).exp());
+                            }
+                            let decay = last.1;
                             x = x * decay + s.zdot[i] * tau * (1.0 - decay);
                         } else {
                             x = 0.0;

@@ -75,6 +75,10 @@ pub struct Series {
 /// Relaxation branches (time constants) the workflow names at most.
 pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
+/// The shortest delay named [s]: shorter lags belong to the nominal chain (the sensor's filter, the stamp
+/// skew between wrench and pose, the pairing with the newest pose), not to an effect.
+pub const MIN_DELAY: f64 = 0.005;
+
 /// The fewest samples [`analyse`] accepts, in all and in contact.
 pub const MIN_SAMPLES: usize = 50;
 pub const MIN_CONTACT_SAMPLES: usize = 20;
@@ -280,8 +284,8 @@ pub struct NoiseFloor {
 /// The fewest samples a noise estimate uses.
 pub const MIN_NOISE_SAMPLES: usize = 20;
 
-/// σ of the force noise: from the farther half of the out-of-contact samples (mean and linear trend in the
-/// time since the last tare removed) when there are at least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else
+/// σ of the force noise: from the farther half of the out-of-contact samples (mean, linear trend in the
+/// time since the last tare and, when the hand tilts, the gravity change removed) when there are at least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else
 /// from all first differences.
 pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
     // The trend is in the time since the last tare: a drifting sensor's offset restarts at each tare.
@@ -303,17 +307,37 @@ pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
         free.retain(|&i| series.z[i] <= median);
     }
     if free.len() >= MIN_NOISE_SAMPLES {
-        let n = free.len() as f64;
-        let tm = free.iter().map(|&i| clock[i]).sum::<f64>() / n;
-        let fm = free.iter().map(|&i| series.f[i]).sum::<f64>() / n;
-        let (mut stt, mut stf) = (0.0, 0.0);
+        // Least squares on [1, time since tare, gravity change since tare]: what a tilting hand of unknown
+        // weight adds in free space is structure, not noise.
+        let tilts = series.gravity_change.len() == series.len()
+            && free.iter().any(|&i| series.gravity_change[i] != series.gravity_change[free[0]]);
+        let p = if tilts { 3 } else { 2 };
+        let row = |i: usize| [1.0, clock[i], if tilts { series.gravity_change[i] } else { 0.0 }];
+        let mut g = nalgebra::DMatrix::<f64>::zeros(p, p);
+        let mut h = nalgebra::DVector::<f64>::zeros(p);
         for &i in &free {
-            stt += (clock[i] - tm).powi(2);
-            stf += (clock[i] - tm) * (series.f[i] - fm);
+            let r = row(i);
+            for j in 0..p {
+                h[j] += r[j] * series.f[i];
+                for k in 0..p {
+                    g[(j, k)] += r[j] * r[k];
+                }
+            }
         }
-        let slope = if stt > 0.0 { stf / stt } else { 0.0 };
-        let sse: f64 = free.iter().map(|&i| (series.f[i] - fm - slope * (clock[i] - tm)).powi(2)).sum();
-        return NoiseFloor { sigma: (sse / (n - 2.0)).sqrt(), source: NoiseSource::FreeSpace, samples: free.len() };
+        let beta = g.clone().pseudo_inverse(1e-12).map(|inv| inv * h).unwrap_or_else(|_| nalgebra::DVector::zeros(p));
+        let sse: f64 = free
+            .iter()
+            .map(|&i| {
+                let r = row(i);
+                (series.f[i] - (0..p).map(|j| beta[j] * r[j]).sum::<f64>()).powi(2)
+            })
+            .sum();
+        let n = free.len() as f64;
+        return NoiseFloor {
+            sigma: (sse / (n - p as f64)).sqrt(),
+            source: NoiseSource::FreeSpace,
+            samples: free.len(),
+        };
     }
     let diffs = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
         (1..series.len()).filter(|&i| keep(i)).map(|i| series.f[i] - series.f[i - 1]).collect()
@@ -666,8 +690,19 @@ impl Family {
     /// weight a change of orientation.
     fn observable(self, d: &Data) -> bool {
         let varies = |x: &[f64]| x.iter().any(|v| *v != x[0]);
+        let spread = |keep: &dyn Fn(usize) -> bool| {
+            let v: Vec<f64> = (0..d.lateral.len()).filter(|&i| keep(i)).map(|i| d.lateral[i]).collect();
+            let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+        };
         match self {
-            Family::Crosstalk => !d.lateral.is_empty() && varies(&d.lateral),
+            // A tangential load: the tangential force in contact varies well beyond the sensor's own
+            // tangential noise and drift in free space (ten times).
+            Family::Crosstalk => {
+                !d.lateral.is_empty()
+                    && varies(&d.lateral)
+                    && spread(&|i| d.s.z[i] > 0.0) > 10.0 * spread(&|i| d.s.z[i] <= 0.0)
+            }
             Family::ToolGravity => !d.s.gravity_change.is_empty() && varies(&d.s.gravity_change),
             _ => true,
         }
@@ -731,7 +766,7 @@ impl Family {
             Family::StiffnessExponent => {
                 (0..=17).map(|i| 0.8 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
             }
-            Family::TimeDelay => log(0.002, 0.25, 12),
+            Family::TimeDelay => log(MIN_DELAY, 0.25, 8),
             _ => vec![0.0],
         }
     }
@@ -824,7 +859,8 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
             let fl = linear(&lin);
             let j = fl.beta.len() - 1;
             stable.push(fl.fold_beta.iter().all(|fb| fb[j] > 0.0));
-            physical &= sh > 0.0 && sh <= MAX_DELAY;
+            // An optimum at the grid's lower end is a lag at most that long: the nominal chain's.
+            physical &= sh > 1.1 * MIN_DELAY && sh <= MAX_DELAY;
         } else {
             // The exponent: t from the linearised column zᵃ′·ln z at the fitted a′ (its coefficient is k·δa);
             // fold stability from the linear test at the current a with the other members.
@@ -846,11 +882,19 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
 
 /// The best shape of a family by held-out MSE on the grid, refined by golden section on the in-sample SSE
 /// between the grid neighbours.
-fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64) -> Cand {
+/// A family whose best grid point does not beat `cv_now` (the current model's held-out MSE) is neither
+/// refined nor tested: it cannot pass.
+fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, cv_now: f64) -> Cand {
     let grid = fam.grid(p95, cur);
     let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
     let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
     let mut shape = grid[best];
+    if scores[best] >= cv_now {
+        // Hopeless: no t or fold stability needed (nor can it be a rival: it gains nothing).
+        let st = fam.apply(cur, shape);
+        let fit = fit::fit(d, &st);
+        return Cand { fams: vec![(fam, shape)], st, fit, t: vec![0.0], stable: vec![false], physical: false };
+    }
     if fam.has_shape() && grid.len() > 2 {
         let lo = grid[best.saturating_sub(1)];
         let hi = grid[(best + 1).min(grid.len() - 1)];
@@ -1172,7 +1216,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&d))
             .collect();
-        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95)).collect();
+        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95, cur.cv_mse)).collect();
         // A candidate must not fit free space worse than the current model: there the force is the sensor's
         // alone, and an offset that helps in contact but not there stands in for the surface position.
         let free_ok = |c: &Cand| {
@@ -1193,6 +1237,11 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c)).cloned().collect();
         for i in 0..singles.len() * usize::from(options.is_empty()) {
             for j in i + 1..singles.len() {
+                // Pairs are for effects of the surface that mask each other; a delay reads everything late
+                // and, paired, becomes a small correction of whatever the other member leaves.
+                if [i, j].iter().any(|&k| singles[k].fams[0].0 == Family::TimeDelay) {
+                    continue;
+                }
                 let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]]);
                 let best_single = singles[i].fit.cv_mse.min(singles[j].fit.cv_mse);
                 if passes(&pair) && pair.fit.cv_mse <= best_single * (1.0 - o.min_gain) {
@@ -1263,7 +1312,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         if let Some(slot) = order.iter().position(|x| x.0 == Family::TimeDelay) {
             for _ in 0..3 {
                 let undelayed = Structure { delay: 0.0, ..st.clone() };
-                let again = screen(&d, &undelayed, Family::TimeDelay, p95);
+                let again = screen(&d, &undelayed, Family::TimeDelay, p95, f64::INFINITY);
                 let (next, _, _) = refine_surface(&d, &again.st);
                 let settled = (next.delay - st.delay).abs() <= 1e-3 * st.delay;
                 st = next;
