@@ -75,6 +75,10 @@ pub struct Series {
 /// Relaxation branches (time constants) the workflow names at most.
 pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
+/// The least range of the gravity change along the normal [m/s²] under which `tool_gravity` is not
+/// tried: about a 6° tilt from the tare's orientation.
+pub const MIN_GRAVITY_CHANGE: f64 = 0.05;
+
 /// The shortest delay named [s]: shorter lags belong to the nominal chain (the sensor's filter, the stamp
 /// skew between wrench and pose, the pairing with the newest pose), not to an effect.
 pub const MIN_DELAY: f64 = 0.005;
@@ -703,7 +707,13 @@ impl Family {
                     && varies(&d.lateral)
                     && spread(&|i| d.s.z[i] > 0.0) > 10.0 * spread(&|i| d.s.z[i] <= 0.0)
             }
-            Family::ToolGravity => !d.s.gravity_change.is_empty() && varies(&d.s.gravity_change),
+            // A tilt: gravity along the normal changes by at least 0.05 m/s² (a tilt of about 6° from the
+            // tare's orientation); the hand's wobble under an impedance shows nothing of its weight.
+            Family::ToolGravity => {
+                let g = &d.s.gravity_change;
+                let (lo, hi) = g.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
+                !g.is_empty() && hi - lo >= MIN_GRAVITY_CHANGE
+            }
             _ => true,
         }
     }
