@@ -47,11 +47,21 @@ pub struct Plan {
     /// crosstalk and an unknown tool weight need, spread through the recording so that every fold of the
     /// workflow's cross-validation sees some.
     pub across: bool,
+    /// The hand starts this deep [m] in the surface instead of 4 cm above it, so that the start-up tare
+    /// takes the contact force for the sensor's zero, and control starts without a second tare: the
+    /// whole recording then reads a constant offset (a sensor bias, as after a tare taken touching).
+    pub start_pressed: Option<f64>,
 }
 
 impl Plan {
-    pub const SEED_001: Plan =
-        Plan { identification_runs: 10, push_periods: 5, commands: 30, move_duration: 2.0, across: false };
+    pub const SEED_001: Plan = Plan {
+        identification_runs: 10,
+        push_periods: 5,
+        commands: 30,
+        move_duration: 2.0,
+        across: false,
+        start_pressed: None,
+    };
 }
 
 /// One control command and what was reached.
@@ -189,6 +199,9 @@ pub fn run_surface(
 ) -> anyhow::Result<SurfaceRun> {
     let normal = Vector3::new(0.0, 0.0, -1.0);
     let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
+    if let (Some(depth), Some(surface)) = (plan.start_pressed, sim.surface.as_mut()) {
+        surface.point -= (0.04 + depth) * surface.normal;
+    }
     sim.sensor = spec.sensor.clone();
     let params = contact_estimator::Params::default();
     // Identification keeps every sample of every run (seed 001 fits all of them at once).
@@ -246,7 +259,9 @@ pub fn run_surface(
 
     // Control: a fresh estimator (its window: the last 1200 samples of the control run), the sensor
     // tared out of contact, and the identified model for cycle 1.
-    r.cell.tare()?;
+    if plan.start_pressed.is_none() {
+        r.cell.tare()?;
+    }
     r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?;
     r.next_refit = r.last.time;
     r.newest = None;

@@ -155,6 +155,11 @@ fn pow(z: f64, e: f64) -> f64 {
 /// The raw (unscaled) columns of a structure: [zᵃ, zᵇ·sgn(ż)|ż|ᶜ, terms…], each zero out of contact
 /// except the sensor terms.
 pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
+    columns_masked(d, st, &d.clamped)
+}
+
+/// [`columns`] with the given samples masked where the law clamps (instead of `d.clamped`).
+fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
     let s = d.s;
     let n = s.len();
     let zeff: Vec<f64> = (0..n).map(|i| s.z[i] - st.shift - st.offset_rate * d.time[i]).collect();
@@ -209,7 +214,7 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
     }
     for (j, col) in cols.iter_mut().enumerate() {
         if j < 2 || !st.terms[j - 2].of_sensor() {
-            for (v, &c) in col.iter_mut().zip(&d.clamped) {
+            for (v, &c) in col.iter_mut().zip(clamped) {
                 if c {
                     *v = 0.0;
                 }
@@ -362,7 +367,28 @@ pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
 }
 
 pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
-    fit_columns(d, &columns(d, st))
+    let fitted = fit_columns(d, &columns(d, st));
+    if st.delay <= 0.0 {
+        return fitted;
+    }
+    // Read late, the law clamps where its own undelayed surface force is ≤ 0 — which the mask of the
+    // undelayed fit (where the refit damping may be negative and never clamps) gets wrong at every
+    // lift-off: mask with this fit's own surface force, twice.
+    let n = d.s.len();
+    let undelayed = Structure { delay: 0.0, ..st.clone() };
+    let raw = columns_masked(d, &undelayed, &vec![false; n]);
+    let surface = |j: usize| j < 2 || !st.terms[j - 2].of_sensor();
+    let mut fitted = fitted;
+    for _ in 0..2 {
+        let mask: Vec<bool> = (0..n)
+            .map(|i| {
+                raw[0][i] > 0.0
+                    && (0..raw.len()).filter(|&j| surface(j)).map(|j| fitted.beta[j] * raw[j][i]).sum::<f64>() <= 0.0
+            })
+            .collect();
+        fitted = fit_columns(d, &columns_masked(d, st, &mask));
+    }
+    fitted
 }
 
 /// Golden-section minimum of `f` on [lo, hi].

@@ -837,7 +837,9 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
     let st = fams.iter().fold(cur.clone(), |s, &(f, sh)| f.apply(&s, sh));
     let fit = fit::fit(d, &st);
     let k = fit.beta[0];
-    let mut physical = k > 0.0;
+    // k > 0, and no negative damping beyond its noise: a refit λ < 0 is the signature of a lag the
+    // candidate (a fast relaxation branch, say) would only be covering for, and the model clamps λ at 0.
+    let mut physical = k > 0.0 && fit.beta[1] >= -2.0 * fit.se[1];
     let mut t = Vec::new();
     let mut stable = Vec::new();
     for &(f, sh) in fams {
