@@ -237,6 +237,9 @@ pub struct DeformationController {
     contact_level: Option<f64>,
     offset: f64,
     start: Option<(Vector3<f64>, UnitQuaternion<f64>, [f64; 7])>,
+    /// The hand's pose at this controller's very first tick, kept through restarts: moves across the
+    /// surface are bounded from it too, so that restarts cannot walk the hand away step by step.
+    origin: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
     /// The hold across the surface and in orientation, relative to `start`; `None` holds the start.
     across: Option<AcrossMove>,
     time: f64,
@@ -272,6 +275,7 @@ impl DeformationController {
             contact_level: None,
             offset: 0.0,
             start: None,
+            origin: None,
             across: None,
             time: 0.0,
             plan: None,
@@ -520,6 +524,27 @@ impl DeformationController {
         if tilt.norm() > MAX_TILT {
             return Err(ControlError::Across { what: "the tilt [rad]", value: tilt.norm(), limit: MAX_TILT });
         }
+        // The same bounds from the first start (a restart takes a new start where the hand is).
+        if let (Some((r0, q0, _)), Some((origin, q_origin))) = (self.start, self.origin) {
+            let away = r0 + lateral - origin;
+            let away = (away - away.dot(&n) * n).norm();
+            // (1e-9: the rounding of composing the start with the move, not an allowance.)
+            if away > MAX_LATERAL + 1e-9 {
+                return Err(ControlError::Across {
+                    what: "the lateral offset from the first start [m]",
+                    value: away,
+                    limit: MAX_LATERAL,
+                });
+            }
+            let turned = (UnitQuaternion::from_scaled_axis(tilt) * q0).angle_to(&q_origin);
+            if turned > MAX_TILT + 1e-9 {
+                return Err(ControlError::Across {
+                    what: "the tilt from the first start [rad]",
+                    value: turned,
+                    limit: MAX_TILT,
+                });
+            }
+        }
         let limits = &self.config.limits;
         let duration = limits.check_duration(duration)?;
         let now = self.across_reference();
@@ -569,6 +594,7 @@ impl DeformationController {
         let pose = self.model.frame_pose(&self.data, self.tool);
         let r = pose.translation.vector;
         let start = *self.start.get_or_insert((r, pose.rotation, *q));
+        self.origin.get_or_insert((start.0, start.1));
         let twist = self.model.frame_velocity(&mut self.data, q, dq, self.tool);
         let (v, w) = (twist.fixed_rows::<3>(0).into_owned(), twist.fixed_rows::<3>(3).into_owned());
         let along = r.dot(&n);
@@ -908,6 +934,53 @@ mod tests {
         let across = d - d.dot(&n) * n;
         let expected = UnitQuaternion::from_scaled_axis(*tilt) * rot0;
         ((across - lateral).norm(), (expected.inverse() * pose.rotation).angle())
+    }
+
+    #[test]
+    fn restarts_cannot_walk_the_hand_beyond_the_limits_from_the_first_start() {
+        // An adversary's sequence: tilt about the normal to the limit, restart (a new start where the hand
+        // is), again and again. Without a bound from the first start joint 7 left its range after 10 rounds.
+        let mut cell = free_cell();
+        for _ in 0..50 {
+            cell.cycle().unwrap();
+        }
+        let (_, first, _) = cell.controller.start.unwrap();
+        let mut refused = 0;
+        for _ in 0..4 {
+            match cell.controller.command_across(Vector3::zeros(), Vector3::new(0.0, 0.0, 0.3), 1.4) {
+                Ok(()) => {}
+                Err(ControlError::Across { limit, .. }) => {
+                    assert_eq!(limit, MAX_TILT);
+                    refused += 1;
+                }
+                Err(e) => panic!("{e}"),
+            }
+            for _ in 0..2000 {
+                cell.cycle().unwrap();
+            }
+            cell.controller.restart();
+            for _ in 0..100 {
+                cell.cycle().unwrap();
+            }
+            let turned = cell.sim.tool_pose().rotation.angle_to(&first);
+            assert!(turned < MAX_TILT + 0.01, "turned {turned} rad from the first start");
+        }
+        assert_eq!(refused, 3, "only the first tilt fits within MAX_TILT of the first start");
+        // Across the surface likewise: 2 cm, restart, 2 cm again is refused.
+        let mut cell = free_cell();
+        for _ in 0..50 {
+            cell.cycle().unwrap();
+        }
+        cell.controller.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap();
+        for _ in 0..1500 {
+            cell.cycle().unwrap();
+        }
+        cell.controller.restart();
+        for _ in 0..100 {
+            cell.cycle().unwrap();
+        }
+        let e = cell.controller.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap_err();
+        assert!(matches!(e, ControlError::Across { limit: MAX_LATERAL, .. }), "{e}");
     }
 
     #[test]
