@@ -72,33 +72,20 @@ pub(crate) struct Data<'a> {
     pub lateral: Vec<f64>,
 }
 
-/// The principal direction u of the tangential forces (largest Σ(F_t·u)²), by power iteration on Σ F_t F_tᵀ.
+/// The principal direction u of the tangential forces (largest Σ(F_t·u)²): the leading eigenvector of
+/// Σ F_t F_tᵀ, its largest component made positive; `None` without tangential force.
 fn principal_axis(forces: &[[f64; 3]]) -> Option<[f64; 3]> {
-    let mut m = [[0.0; 3]; 3];
-    for f in forces {
-        for i in 0..3 {
-            for j in 0..3 {
-                m[i][j] += f[i] * f[j];
-            }
-        }
-    }
-    let trace = m[0][0] + m[1][1] + m[2][2];
-    if trace.is_nan() || trace <= 0.0 {
+    let m = forces.iter().fold(nalgebra::Matrix3::<f64>::zeros(), |m, f| {
+        let v = nalgebra::Vector3::from(*f);
+        m + v * v.transpose()
+    });
+    if m.trace().is_nan() || m.trace() <= 0.0 {
         return None;
     }
-    // Start off every eigenvector's orthogonal complement.
-    let mut u = [0.577, 0.578, 0.5764];
-    for _ in 0..200 {
-        let v: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| m[i][j] * u[j]).sum());
-        let norm = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        if norm.is_nan() || norm <= 0.0 {
-            return None;
-        }
-        u = v.map(|x| x / norm);
-    }
-    // A sign by convention: the largest component positive.
-    let k = (0..3).max_by(|&a, &b| u[a].abs().total_cmp(&u[b].abs())).unwrap_or(0);
-    Some(if u[k] < 0.0 { u.map(|x| -x) } else { u })
+    let eigen = nalgebra::SymmetricEigen::new(m);
+    let u = eigen.eigenvectors.column(eigen.eigenvalues.imax()).into_owned();
+    let u = if u[u.iamax()] < 0.0 { -u } else { u };
+    Some([u.x, u.y, u.z])
 }
 
 impl<'a> Data<'a> {

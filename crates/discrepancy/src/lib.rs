@@ -1315,28 +1315,6 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
         st = next;
         cur = fit::fit(&d, &st);
-        if order.iter().any(|x| x.0 == Family::TimeDelay) {
-            let m = to_model(baseline, d.lateral_axis, &st, &cur, &order);
-            d.clamped = clamp_mask(&m, &series.shifted(st.shift))?;
-        }
-        // A delay's shape was screened with the clamping of the undelayed law (where the refit damping may
-        // be negative and never clamps): screen it again under the new mask, until the mask settles.
-        if let Some(slot) = order.iter().position(|x| x.0 == Family::TimeDelay) {
-            for _ in 0..3 {
-                let undelayed = Structure { delay: 0.0, ..st.clone() };
-                let again = screen(&d, &undelayed, Family::TimeDelay, p95, f64::INFINITY);
-                let (next, _, _) = refine_surface(&d, &again.st);
-                let settled = (next.delay - st.delay).abs() <= 1e-3 * st.delay;
-                st = next;
-                order[slot].1 = st.delay;
-                let m = to_model(baseline, d.lateral_axis, &st, &fit::fit(&d, &st), &order);
-                d.clamped = clamp_mask(&m, &series.shifted(st.shift))?;
-                if settled {
-                    break;
-                }
-            }
-        }
-        cur = fit::fit(&d, &st);
         // Backward check: an effect accepted in an earlier round may have stood in for what this round
         // named (a moving surface zero for a slow relaxation branch); drop it when the model without it
         // is held-out nearly as good.
