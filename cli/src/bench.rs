@@ -98,6 +98,12 @@ pub enum BenchCommand {
         /// Only the timing, not the corpus.
         #[arg(long)]
         timing_only: bool,
+        /// Only the corpus cases whose name contains this text (and no timing).
+        #[arg(long)]
+        case: Option<String>,
+        /// Keep each case's recording in this folder (`case<seed>.mcap`) to run `softcontact discrepancy` on.
+        #[arg(long)]
+        keep: Option<PathBuf>,
     },
 }
 
@@ -210,8 +216,8 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
         BenchCommand::Demo { reps } => crate::demo::bench(reps),
-        BenchCommand::Discrepancy { threads, json, timing_only } => {
-            crate::demo::corpus::bench(threads, json, timing_only)
+        BenchCommand::Discrepancy { threads, json, timing_only, case, keep } => {
+            crate::demo::corpus::bench(threads, json, timing_only, case.as_deref(), keep.as_deref())
         }
     }
 }

@@ -83,6 +83,10 @@ pub const MIN_GRAVITY_CHANGE: f64 = 0.05;
 /// skew between wrench and pose, the pairing with the newest pose), not to an effect.
 pub const MIN_DELAY: f64 = 0.005;
 
+/// Hysteresis is named only when a quarter of the moving in-contact samples are faster than its velocity
+/// scale v₀ (so that the recording's loops saturate): v₀ at most this percentile of their speed.
+pub const HYSTERESIS_SATURATION_PERCENTILE: f64 = 0.75;
+
 /// The fewest samples [`analyse`] accepts, in all and in contact.
 pub const MIN_SAMPLES: usize = 50;
 pub const MIN_CONTACT_SAMPLES: usize = 20;
@@ -233,6 +237,23 @@ impl Phase {
 /// it is well above the jitter of a held position and well below the speed of any deliberate push.
 pub fn velocity_threshold(series: &Series) -> f64 {
     (0.05 * p95_speed(series)).max(1e-4)
+}
+
+/// The speed that a quarter of the moving in-contact samples exceed [m/s]
+/// ([`HYSTERESIS_SATURATION_PERCENTILE`]).
+fn saturating_speed(series: &Series, v_th: f64) -> f64 {
+    let mut v: Vec<f64> = series
+        .zdot
+        .iter()
+        .zip(&series.z)
+        .filter(|(zd, z)| **z > 0.0 && zd.abs() > v_th)
+        .map(|(zd, _)| zd.abs())
+        .collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * HYSTERESIS_SATURATION_PERCENTILE).round() as usize]
 }
 
 /// The 95th percentile of |ż| [m/s].
@@ -833,7 +854,7 @@ fn term_index(st: &Structure, fam: Family, shape: f64) -> Option<usize> {
 }
 
 /// Fits the option and computes each new member's t and fold stability.
-fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
+fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], v_sat: f64) -> Cand {
     let st = fams.iter().fold(cur.clone(), |s, &(f, sh)| f.apply(&s, sh));
     let fit = fit::fit(d, &st);
     let k = fit.beta[0];
@@ -849,7 +870,9 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
             stable.push(fit.fold_beta.iter().all(|fb| fb[j].signum() == b.signum()));
             match f {
                 Family::Relaxation => physical &= b > 0.0,
-                Family::Hysteresis => physical &= b > 0.0 && b / k < 1.0,
+                // A loop whose velocity scale is above the speeds reached never saturates: there it is a
+                // damping ∝ the elastic force, the proxy of a rate law the baseline lacks, not hysteresis.
+                Family::Hysteresis => physical &= b > 0.0 && b / k < 1.0 && sh <= v_sat,
                 // A small mixing of channels, a plausible tool: larger ones are something else.
                 Family::Crosstalk => physical &= b.abs() < 0.3,
                 Family::ToolGravity => physical &= b.abs() <= 100.0,
@@ -896,7 +919,7 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)]) -> Cand {
 /// between the grid neighbours.
 /// A family whose best grid point does not beat `cv_now` (the current model's held-out MSE) is neither
 /// refined nor tested: it cannot pass.
-fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, cv_now: f64) -> Cand {
+fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, v_sat: f64, cv_now: f64) -> Cand {
     let grid = fam.grid(p95, cur);
     let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
     let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
@@ -919,7 +942,7 @@ fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, cv_now: f64) -> Cand
             shape = grid[best];
         }
     }
-    assess(d, cur, &[(fam, shape)])
+    assess(d, cur, &[(fam, shape)], v_sat)
 }
 
 use fit::golden;
@@ -1157,6 +1180,51 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
 }
 
 /// The whole workflow: phases, noise floor, baseline gap, naming, adding; see the crate documentation.
+/// Polish: each shape (τ, v₀) was chosen with the effects of its own round; refine each one in the
+/// current structure, the others held (two passes of ten golden-section steps within ×2, a second
+/// relaxation branch kept 3× away), and keep it when the in-sample fit improves. True if any moved.
+fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64)], v_sat: f64) -> bool {
+    let shaped = |f: Family| matches!(f, Family::Relaxation | Family::Hysteresis);
+    let mut moved = false;
+    for _ in 0..2 {
+        for slot in order.iter_mut() {
+            let (f, sh) = *slot;
+            let Some(term) = f.term(sh).filter(|_| shaped(f)) else { continue };
+            let Some(j) = st.terms.iter().position(|t| *t == term) else { continue };
+            let (mut lo, mut hi) = (sh / 2.0, sh * 2.0);
+            if f == Family::Hysteresis {
+                hi = hi.min(v_sat);
+            }
+            for t in &st.terms {
+                if let Term::Relax(other) = *t
+                    && f == Family::Relaxation
+                    && other != sh
+                {
+                    if other < sh { lo = lo.max(3.0 * other) } else { hi = hi.min(other / 3.0) }
+                }
+            }
+            if lo >= hi {
+                continue;
+            }
+            let with_shape = |x: f64| {
+                let mut s = st.clone();
+                s.terms[j] = f.term(x).unwrap_or(term);
+                s
+            };
+            let x = golden(|x| fit::fit(d, &with_shape(x.exp())).sse, lo.ln(), hi.ln(), 10).exp();
+            let (polished, _, _) = refine_surface(d, &with_shape(x));
+            let fp = fit::fit(d, &polished);
+            if fp.sse < cur.sse {
+                *st = polished;
+                *cur = fp;
+                slot.1 = x;
+                moved = true;
+            }
+        }
+    }
+    moved
+}
+
 pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> Result<Report, DiscrepancyError> {
     series.validate()?;
     baseline.validate()?;
@@ -1168,6 +1236,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     let v_th = velocity_threshold(series);
     let fscale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
     let p95 = p95_speed(series).max(1e-4);
+    let v_sat = saturating_speed(series, v_th);
 
     // The baseline's k, λ and the surface position refitted (the position's column stays in every later
     // fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more.
@@ -1216,7 +1285,9 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     // contact, and only free space shows it.
     let at_floor = |g: &Gap, sigma: f64| g.rms.max(g.free_rms) <= o.floor_margin * sigma && g.lag1 <= o.max_white_rho;
 
-    for _ in 0..o.max_rounds {
+    let mut polished = false;
+    let mut rounds = 0;
+    'rounds: while rounds < o.max_rounds {
         if at_floor(&cur_gap, sigma) {
             break;
         }
@@ -1228,7 +1299,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&d))
             .collect();
-        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95, cur.cv_mse)).collect();
+        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95, v_sat, cur.cv_mse)).collect();
         // A candidate must not fit free space worse than the current model: there the force is the sensor's
         // alone, and an offset that helps in contact but not there stands in for the surface position.
         let free_ok = |c: &Cand| {
@@ -1254,82 +1325,96 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 if [i, j].iter().any(|&k| singles[k].fams[0].0 == Family::TimeDelay) {
                     continue;
                 }
-                let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]]);
+                let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]], v_sat);
                 let best_single = singles[i].fit.cv_mse.min(singles[j].fit.cv_mse);
                 if passes(&pair) && pair.fit.cv_mse <= best_single * (1.0 - o.min_gain) {
                     options.push(pair);
                 }
             }
         }
-        let Some(best) = options.into_iter().min_by(|a, b| a.fit.cv_mse.total_cmp(&b.fit.cv_mse)) else {
-            break;
-        };
-        // Collinear rivals: judged on the single-family fits.
-        let gain = |c: &Cand| cur.cv_mse - c.fit.cv_mse;
-        let contribution = |c: &Cand| -> Vec<f64> { c.fit.pred.iter().zip(&cur.pred).map(|(a, b)| a - b).collect() };
-        for &(f, _) in &best.fams {
-            let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
-            let cm = contribution(mine);
-            for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
-                if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
-                    && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
-                    && gain(rival) * o.rival_ratio >= gain(mine)
-                {
-                    let r = rival.fams[0].0;
-                    if !ambiguous.iter().any(|a: &Ambiguity| a.between.contains(&r.id().to_string())) {
-                        ambiguous.push(Ambiguity {
-                            between: [f.id().to_string(), r.id().to_string()],
-                            would_separate: would_separate(f, r),
-                        });
+        let accepted = 'round: {
+            let Some(best) = options.into_iter().min_by(|a, b| a.fit.cv_mse.total_cmp(&b.fit.cv_mse)) else {
+                break 'round false;
+            };
+            // Collinear rivals: judged on the single-family fits.
+            let gain = |c: &Cand| cur.cv_mse - c.fit.cv_mse;
+            let contribution =
+                |c: &Cand| -> Vec<f64> { c.fit.pred.iter().zip(&cur.pred).map(|(a, b)| a - b).collect() };
+            for &(f, _) in &best.fams {
+                let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
+                let cm = contribution(mine);
+                for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
+                    if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
+                        && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
+                        && gain(rival) * o.rival_ratio >= gain(mine)
+                    {
+                        let r = rival.fams[0].0;
+                        if !ambiguous.iter().any(|a: &Ambiguity| a.between.contains(&r.id().to_string())) {
+                            ambiguous.push(Ambiguity {
+                                between: [f.id().to_string(), r.id().to_string()],
+                                would_separate: would_separate(f, r),
+                            });
+                        }
                     }
                 }
             }
-        }
-        if !ambiguous.is_empty() {
+            if !ambiguous.is_empty() {
+                break 'rounds;
+            }
+            // Accept, larger gain first within a pair.
+            let mut fams = best.fams.clone();
+            if fams.len() == 2 {
+                let g: Vec<f64> =
+                    fams.iter().map(|x| singles.iter().find(|c| c.fams[0].0 == x.0).map_or(0.0, gain)).collect();
+                if g[1] > g[0] {
+                    fams.swap(0, 1);
+                }
+            }
+            let (next, se_shift, se_rate) = refine_surface(&d, &best.st);
+            shift_se = se_shift;
+            if fams.iter().any(|x| x.0 == Family::OffsetDrift) {
+                rate_se = se_rate;
+            }
+            for (n, &fam) in fams.iter().enumerate() {
+                // Each member's own gap: the intermediate model with the members so far.
+                let partial =
+                    if n + 1 == fams.len() { next.clone() } else { refine_surface(&d, &fam.0.apply(&st, fam.1)).0 };
+                let pf = fit::fit(&d, &partial);
+                order.push(fam);
+                let m = to_model(baseline, d.lateral_axis, &partial, &pf, &order);
+                let g = gap(series, &ph, &simulate(&m, &series.shifted(partial.shift))?);
+                stages.push((cur_gap.rms, g.rms));
+                cur_gap = g;
+            }
+            st = next;
+            cur = fit::fit(&d, &st);
+            // Backward check: an effect accepted in an earlier round may have stood in for what this round
+            // named (a moving surface zero for a slow relaxation branch); drop it when the model without it
+            // is held-out nearly as good.
+            let earlier = order.len() - fams.len();
+            for i in (0..earlier).rev() {
+                let (f, sh) = order[i];
+                let Some(reduced) = f.remove(&st, sh) else { continue };
+                let (reduced, _, _) = refine_surface(&d, &reduced);
+                let fr = fit::fit(&d, &reduced);
+                if fr.cv_mse <= cur.cv_mse * (1.0 + o.min_gain) && fr.aicc <= cur.aicc + o.min_delta_aicc {
+                    order.remove(i);
+                    stages.remove(i);
+                    st = reduced;
+                    cur = fr;
+                }
+            }
+            true
+        };
+        // Before giving up, polish the shapes in the current structure and look once more: a shape chosen
+        // in its own round leaves a misfit that can hide a small effect (the demo's sensor drift).
+        if accepted {
+            rounds += 1;
+            polished = false;
+        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, v_sat) {
             break;
-        }
-        // Accept, larger gain first within a pair.
-        let mut fams = best.fams.clone();
-        if fams.len() == 2 {
-            let g: Vec<f64> =
-                fams.iter().map(|x| singles.iter().find(|c| c.fams[0].0 == x.0).map_or(0.0, gain)).collect();
-            if g[1] > g[0] {
-                fams.swap(0, 1);
-            }
-        }
-        let (next, se_shift, se_rate) = refine_surface(&d, &best.st);
-        shift_se = se_shift;
-        if fams.iter().any(|x| x.0 == Family::OffsetDrift) {
-            rate_se = se_rate;
-        }
-        for (n, &fam) in fams.iter().enumerate() {
-            // Each member's own gap: the intermediate model with the members so far.
-            let partial =
-                if n + 1 == fams.len() { next.clone() } else { refine_surface(&d, &fam.0.apply(&st, fam.1)).0 };
-            let pf = fit::fit(&d, &partial);
-            order.push(fam);
-            let m = to_model(baseline, d.lateral_axis, &partial, &pf, &order);
-            let g = gap(series, &ph, &simulate(&m, &series.shifted(partial.shift))?);
-            stages.push((cur_gap.rms, g.rms));
-            cur_gap = g;
-        }
-        st = next;
-        cur = fit::fit(&d, &st);
-        // Backward check: an effect accepted in an earlier round may have stood in for what this round
-        // named (a moving surface zero for a slow relaxation branch); drop it when the model without it
-        // is held-out nearly as good.
-        let earlier = order.len() - fams.len();
-        for i in (0..earlier).rev() {
-            let (f, sh) = order[i];
-            let Some(reduced) = f.remove(&st, sh) else { continue };
-            let (reduced, _, _) = refine_surface(&d, &reduced);
-            let fr = fit::fit(&d, &reduced);
-            if fr.cv_mse <= cur.cv_mse * (1.0 + o.min_gain) && fr.aicc <= cur.aicc + o.min_delta_aicc {
-                order.remove(i);
-                stages.remove(i);
-                st = reduced;
-                cur = fr;
-            }
+        } else {
+            polished = true;
         }
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
@@ -1346,43 +1431,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
     }
 
-    // Polish: each shape (τ, v₀) was chosen with the effects of its own round; refine each one in the
-    // final structure, the others held (two passes of ten golden-section steps within ×2, a second relaxation
-    // branch kept 3× away), and keep it when the in-sample fit improves.
-    let shaped = |f: Family| matches!(f, Family::Relaxation | Family::Hysteresis);
-    if ambiguous.is_empty() && order.iter().any(|x| shaped(x.0)) {
-        for _ in 0..2 {
-            for slot in order.iter_mut() {
-                let (f, sh) = *slot;
-                let Some(term) = f.term(sh).filter(|_| shaped(f)) else { continue };
-                let Some(j) = st.terms.iter().position(|t| *t == term) else { continue };
-                let (mut lo, mut hi) = (sh / 2.0, sh * 2.0);
-                for t in &st.terms {
-                    if let Term::Relax(other) = *t
-                        && f == Family::Relaxation
-                        && other != sh
-                    {
-                        if other < sh { lo = lo.max(3.0 * other) } else { hi = hi.min(other / 3.0) }
-                    }
-                }
-                if lo >= hi {
-                    continue;
-                }
-                let with_shape = |x: f64| {
-                    let mut s = st.clone();
-                    s.terms[j] = f.term(x).unwrap_or(term);
-                    s
-                };
-                let x = golden(|x| fit::fit(&d, &with_shape(x.exp())).sse, lo.ln(), hi.ln(), 10).exp();
-                let (polished, _, _) = refine_surface(&d, &with_shape(x));
-                let fp = fit::fit(&d, &polished);
-                if fp.sse < cur.sse {
-                    st = polished;
-                    cur = fp;
-                    slot.1 = x;
-                }
-            }
-        }
+    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, v_sat) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         cur = fit::fit(&d, &st);
