@@ -9,7 +9,7 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use softcontact_bag::Recording;
 use softcontact_contact::ContactModel;
-use softcontact_discrepancy::{Options, Report, Series, analyse, phases, simulate};
+use softcontact_discrepancy::{Options, Report, Series, Wrench, analyse, phases, simulate};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::ForcePairing;
@@ -43,9 +43,11 @@ const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) -> anyhow::Result<Series> {
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let n = Vector3::new(x, y, z).normalize();
-    let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, n, 0.05);
+    let mut tool_to_sensor = ForcePairing::urdf_tool_to_sensor_pose()?;
+    let mut pairing = ForcePairing::new(tool_to_sensor.rotation, n, 0.05);
     let (mut t, mut zs, mut zdot, mut f, mut tares) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut tangential, mut gravity) = (Vec::new(), Vec::new());
+    let (mut positions, mut rotations, mut wrenches) = (Vec::new(), Vec::new(), Vec::new());
     // The sensor's orientation at the last tare, and the newest one seen.
     type Rows = [[f64; 3]; 3];
     let (mut at_tare, mut newest): (Option<Rows>, Option<Rows>) = (None, None);
@@ -60,8 +62,9 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 let tf = m.decode::<TFMessage>()?;
                 let (tool, sensor) =
                     (softcontact_dynamics::lwr4::TOOL_FRAME, softcontact_dynamics::lwr4::FT_SENSOR_FRAME);
-                if let Some(r) = geometry::static_rotation(&[&tf], tool, sensor) {
-                    pairing.tool_to_sensor = r;
+                if let Some(pose) = geometry::static_transform(&[&tf], tool, sensor) {
+                    tool_to_sensor = pose;
+                    pairing.tool_to_sensor = pose.rotation;
                 }
             }
             POSE => {
@@ -89,6 +92,10 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                     tangential.push((p.force - along * n).into());
                     let now = rows(&p.sensor_rotation);
                     newest = Some(now);
+                    positions.push(p.position.into());
+                    rotations.push(now);
+                    let (force, torque) = (&w.wrench.force, &w.wrench.torque);
+                    wrenches.push([force.x, force.y, force.z, torque.x, torque.y, torque.z]);
                     let tare = *at_tare.get_or_insert(now);
                     gravity.push(softcontact_contact::gravity_change(&now, &tare, GRAVITY, n.into()));
                 }
@@ -97,7 +104,11 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
         }
     }
     anyhow::ensure!(t.len() >= 100, "only {} force readings paired with a pose: too short to analyse", t.len());
-    Ok(Series::new(t, zs, zdot, f)?.with_tares(tares)?.with_sensor_inputs(tangential, gravity)?)
+    // The tool point, where the contact force acts, in the sensor frame.
+    let lever = tool_to_sensor.inverse().translation.vector.into();
+    let wrench =
+        Wrench { normal: n.into(), position: positions, sensor_rotation: rotations, lever, measured: wrenches };
+    Ok(Series::new(t, zs, zdot, f)?.with_tares(tares)?.with_sensor_inputs(tangential, gravity)?.with_wrench(wrench)?)
 }
 
 fn print_report(report: &Report, name: &str) {
@@ -152,6 +163,17 @@ fn print_report(report: &Report, name: &str) {
         "  whiteness (lag-1 autocorrelation) {:.2} → {:.2}; force against the model: best at a lag of {:+.3} s (correlation {:.4})",
         l.whiteness_before, l.whiteness_after, l.lag_s, l.lag_correlation
     );
+    if !l.channels.is_empty() {
+        println!("\nevery wrench channel (sensor frame; in contact; the model's tangential law, if any, predicts F_t)");
+        println!("  {:<10}{:>14}{:>14}{:>14}{:>14}", "channel", "free-space σ", "RMS before", "RMS after", "max after");
+        for c in &l.channels {
+            let sigma = c.noise_floor.map_or("—".to_string(), |s| format!("{s:.4}"));
+            println!(
+                "  {:<10}{sigma:>14}{:>14.4}{:>14.4}{:>14.4} {}",
+                c.channel, c.rms_before, c.rms_after, c.max_after, c.unit
+            );
+        }
+    }
     let remaining = match report.remaining {
         softcontact_discrepancy::Remaining::None => "none: the residual is at the noise floor",
         softcontact_discrepancy::Remaining::Unexplained => {

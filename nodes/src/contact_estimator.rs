@@ -341,12 +341,17 @@ impl ForcePairing {
 
     /// The sensor's rotation in the tool frame as the URDF gives it.
     pub fn urdf_tool_to_sensor() -> Result<UnitQuaternion<f64>, softcontact_dynamics::Error> {
+        Ok(Self::urdf_tool_to_sensor_pose()?.rotation)
+    }
+
+    /// The sensor frame's pose in the tool frame, from the URDF (/tf_static carries the same).
+    pub fn urdf_tool_to_sensor_pose() -> Result<nalgebra::Isometry3<f64>, softcontact_dynamics::Error> {
         use softcontact_dynamics::lwr4;
         let model = lwr4::model();
         let mut data = model.data();
         model.forward_kinematics(&mut data, &[0.0; 7]);
-        Ok(model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).rotation.inverse()
-            * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?).rotation)
+        Ok(model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).inverse()
+            * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?))
     }
 
     pub fn pose(&mut self, t: f64, position: Vector3<f64>, rotation: UnitQuaternion<f64>) {

@@ -1,6 +1,6 @@
 //! geometry_msgs ↔ nalgebra, and the fixed frames below the tool from /tf_static.
 
-use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use softcontact_msgs::geometry_msgs::{Pose, Vector3 as Vector3Msg};
 use softcontact_msgs::tf2_msgs::TFMessage;
 
@@ -17,26 +17,32 @@ pub fn pose_of(p: &Pose) -> (Vector3<f64>, UnitQuaternion<f64>) {
     )
 }
 
-/// The rotation of frame `child` in frame `ancestor` through the chain of static transforms, if the
+/// The pose of frame `child` in frame `ancestor` through the chain of static transforms, if the
 /// transforms connect them.
-pub fn static_rotation(transforms: &[&TFMessage], ancestor: &str, child: &str) -> Option<UnitQuaternion<f64>> {
+pub fn static_transform(transforms: &[&TFMessage], ancestor: &str, child: &str) -> Option<Isometry3<f64>> {
     let parent_of = |frame: &str| {
         transforms.iter().flat_map(|m| &m.transforms).find(|t| t.child_frame_id == frame).map(|t| {
-            let r = t.transform.rotation;
-            (t.header.frame_id.as_str(), UnitQuaternion::from_quaternion(Quaternion::new(r.w, r.x, r.y, r.z)))
+            let (r, p) = (t.transform.rotation, t.transform.translation);
+            let rotation = UnitQuaternion::from_quaternion(Quaternion::new(r.w, r.x, r.y, r.z));
+            (t.header.frame_id.as_str(), Isometry3::from_parts(Translation3::new(p.x, p.y, p.z), rotation))
         })
     };
-    let mut rotation = UnitQuaternion::identity();
+    let mut pose = Isometry3::identity();
     let mut frame = child;
     for _ in 0..32 {
         if frame == ancestor {
-            return Some(rotation);
+            return Some(pose);
         }
-        let (parent, r) = parent_of(frame)?;
-        rotation = r * rotation;
+        let (parent, t) = parent_of(frame)?;
+        pose = t * pose;
         frame = parent;
     }
     None
+}
+
+/// The rotation of frame `child` in frame `ancestor` ([`static_transform`]'s).
+pub fn static_rotation(transforms: &[&TFMessage], ancestor: &str, child: &str) -> Option<UnitQuaternion<f64>> {
+    static_transform(transforms, ancestor, child).map(|t| t.rotation)
 }
 
 #[cfg(test)]
@@ -65,5 +71,21 @@ mod tests {
         assert!((r * v - a * (b * v)).norm() < 1e-12);
         assert_eq!(static_rotation(&[&m1], "tool", "sensor"), None);
         assert_eq!(static_rotation(&[&m1, &m2], "sensor", "sensor"), Some(UnitQuaternion::identity()));
+    }
+
+    #[test]
+    fn transforms_compose_translations_in_the_parent_frame() {
+        use softcontact_msgs::geometry_msgs::Vector3 as V;
+        let quarter = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        let mut hand = tf("tool", "hand", quarter);
+        hand.transform.translation = V { x: 0.1, y: 0.0, z: 0.0 };
+        let mut sensor = tf("hand", "sensor", UnitQuaternion::identity());
+        sensor.transform.translation = V { x: 0.0, y: 0.0, z: 0.2 };
+        let m = TFMessage { transforms: vec![hand, sensor] };
+        let t = static_transform(&[&m], "tool", "sensor").unwrap();
+        // The sensor's origin: 0.1 along the tool's x, then 0.2 along the hand's z (the tool's z too).
+        assert!((t.translation.vector - Vector3::new(0.1, 0.0, 0.2)).norm() < 1e-12);
+        // A point 1 m along the sensor's x lies along the tool's y (the quarter turn about z).
+        assert!((t * nalgebra::Point3::new(1.0, 0.0, 0.0) - nalgebra::Point3::new(0.1, 1.0, 0.2)).norm() < 1e-12);
     }
 }

@@ -13,7 +13,7 @@ use serde::Serialize;
 use softcontact_contact::{ContactModel, Effect, Exponents, Tangential};
 use softcontact_sim::FtSensorConfig;
 
-use super::experiment::{Plan, SurfaceSpec, run_surface};
+use super::experiment::{Plan, SurfaceSpec, run_hold, run_surface};
 use super::record::Recorder;
 use crate::discrepancy_cmd::{self, DiscrepancyArgs};
 use crate::identify_cmd::IdentifyArgs;
@@ -36,6 +36,11 @@ pub struct Case {
     pub out_of_library: bool,
     /// [`Plan::start_pressed`].
     pub start_pressed: Option<f64>,
+    /// Instead of the plan, one long hold of this many seconds on a surface identified earlier (the law
+    /// without its effects, given with `--model`): see [`super::experiment::run_hold`].
+    pub hold: Option<f64>,
+    /// The answer is no name and "ambiguous between these two" (the recording cannot separate them).
+    pub ambiguous: Option<[&'static str; 2]>,
     pub seed: u64,
 }
 
@@ -44,7 +49,11 @@ pub struct Case {
 pub struct Outcome {
     pub case: String,
     pub expected: Vec<String>,
+    /// The expected answer when it is an ambiguity, "a or b".
+    pub expected_ambiguous: Option<String>,
     pub named: Vec<String>,
+    /// The ambiguities reported, "a or b" each.
+    pub ambiguous: Vec<String>,
     pub remaining: String,
     pub visible_in: String,
     /// The gap the effect leaves in multiples of the noise σ: the refitted baseline's RMS over σ.
@@ -114,6 +123,8 @@ pub fn cases() -> Vec<Case> {
             across,
             out_of_library,
             start_pressed,
+            hold: None,
+            ambiguous: None,
             seed,
         });
     };
@@ -251,6 +262,23 @@ pub fn cases() -> Vec<Case> {
         vec![],
         "pushes at speed (out of library)",
     );
+    // One long hold with no lift-off after it: a drifting sensor and a creeping surface both read as force
+    // growing linearly in time there, so the answer is "ambiguous", not a guess (the free approach before
+    // the hold is too short to tell them apart).
+    let mut drifting = FtSensorConfig::gamma_drifting();
+    drifting.drift.iter_mut().for_each(|d| *d *= 2.5);
+    for (name, law, sensor, geometry) in [
+        ("dice: sensor drifting 0.01 N/s through one 40 s hold", dice_law(), drifting, dice),
+        (
+            "sponge: surface zero creeping 5 µm/s through one 40 s hold",
+            with(sponge_law(), &[Effect::ContactOffsetDrift { rate: 5e-6 }]),
+            FtSensorConfig::gamma(),
+            sponge,
+        ),
+    ] {
+        let hidden = if law.effects.is_empty() { "sensor_drift" } else { "contact_offset_drift" };
+        case(name.into(), law, sensor, geometry, vec![hidden], ONE_HOLD);
+    }
     for (law, base, geometry) in [("sponge", sponge_law(), sponge), ("dice", dice_law(), dice)] {
         for seed in 0..2 {
             let name = format!("null: {law} with sway and tilt ({})", seed + 1);
@@ -262,8 +290,14 @@ pub fn cases() -> Vec<Case> {
             }
         }
     }
+    for c in out.iter_mut().filter(|c| c.visible_in == ONE_HOLD) {
+        c.hold = Some(40.0);
+        c.ambiguous = Some(["contact_offset_drift", "sensor_drift"]);
+    }
     out
 }
+
+const ONE_HOLD: &str = "one long hold (no lift-off after it)";
 
 /// The plan of every case: three identification runs and one cycle of six force commands.
 const PLAN: Plan = Plan {
@@ -303,12 +337,26 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
     };
     let path = dir.join(format!("case{}.mcap", case.seed));
     let mut recorder = Recorder::create(&path, 1_700_000_000_000_000_000)?;
-    let plan = Plan { across: case.across, start_pressed: case.start_pressed, ..PLAN };
-    run_surface(&spec, plan, case.seed, &mut recorder)?;
+    let mut args = args(&path, dir, 0.01);
+    if let Some(hold) = case.hold {
+        // The surface as identified before: its law without the hidden effects.
+        let mut known = case.truth.clone();
+        known.effects.clear();
+        run_hold(&spec, &known, 0.5 * case.max_force, hold, case.seed, &mut recorder)?;
+        let model = dir.join(format!("case{}.model.yaml", case.seed));
+        std::fs::write(&model, known.to_yaml())?;
+        args.model = Some(model);
+    } else {
+        let plan = Plan { across: case.across, start_pressed: case.start_pressed, ..PLAN };
+        run_surface(&spec, plan, case.seed, &mut recorder)?;
+    }
     recorder.finish()?;
-    let a = discrepancy_cmd::analyse_file(&args(&path, dir, 0.01), false)?;
+    let a = discrepancy_cmd::analyse_file(&args, false)?;
     if !keep {
         std::fs::remove_file(&path)?;
+        if let Some(model) = &args.model {
+            std::fs::remove_file(model)?;
+        }
     }
     let r = &a.report;
     let mut named: Vec<String> = r.effects.iter().map(|e| e.id.clone()).collect();
@@ -318,19 +366,33 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
     let before = r.refit.rms;
     let ideal = 1.0 - r.noise_floor / before;
     let remaining = format!("{:?}", r.remaining).to_lowercase();
+    let pair = |p: &[String; 2]| {
+        let mut p = p.clone();
+        p.sort();
+        p.join(" or ")
+    };
+    let ambiguous: Vec<String> = r.ambiguous.iter().map(|a| pair(&a.between)).collect();
+    let expected_ambiguous = case.ambiguous.map(|p| pair(&p.map(String::from)));
+    let exact = match &expected_ambiguous {
+        Some(p) => named.is_empty() && remaining == "ambiguous" && ambiguous.contains(p),
+        None => named == expected && (!case.out_of_library || remaining == "unexplained"),
+    };
     Ok(Outcome {
         case: case.name.clone(),
-        exact: named == expected && (!case.out_of_library || remaining == "unexplained"),
+        exact,
         out_of_library: case.out_of_library,
         expected,
+        expected_ambiguous,
         named,
+        ambiguous,
         remaining,
         visible_in: case.visible_in.into(),
         size_sigma: before / r.noise_floor,
         noise_floor: r.noise_floor,
         rms_before: before,
         rms_after: r.final_rms,
-        shrink_of_ideal: (!case.expected.is_empty() && ideal > 0.0).then(|| (1.0 - r.final_rms / before) / ideal),
+        shrink_of_ideal: (!case.expected.is_empty() && case.ambiguous.is_none() && ideal > 0.0)
+            .then(|| (1.0 - r.final_rms / before) / ideal),
     })
 }
 
@@ -345,6 +407,9 @@ pub struct Summary {
     /// Out-of-library cases, and those answered with no name and `unexplained`.
     pub out_of_library_cases: usize,
     pub out_of_library_unexplained: usize,
+    /// Cases whose answer is an ambiguity, and those answered with it (counted in the effect cases too).
+    pub ambiguous_cases: usize,
+    pub ambiguous_answered: usize,
     pub median_shrink_of_ideal: f64,
     pub outcomes: Vec<Outcome>,
 }
@@ -398,6 +463,8 @@ pub fn run(threads: usize, only: Option<&str>, keep: Option<&Path>) -> anyhow::R
         false_names_on_nulls: nulls.iter().filter(|o| !o.named.is_empty()).count(),
         out_of_library_cases: outside.len(),
         out_of_library_unexplained: outside.iter().filter(|o| o.exact).count(),
+        ambiguous_cases: outcomes.iter().filter(|o| o.expected_ambiguous.is_some()).count(),
+        ambiguous_answered: outcomes.iter().filter(|o| o.expected_ambiguous.is_some() && o.exact).count(),
         median_shrink_of_ideal: shrink.get(shrink.len() / 2).copied().unwrap_or(f64::NAN),
         outcomes,
     })
@@ -412,16 +479,27 @@ fn tempfile_dir() -> anyhow::Result<std::path::PathBuf> {
 /// The table printed by `softcontact bench discrepancy` (and committed in docs/discrepancy-corpus.md).
 pub fn table(s: &Summary) -> String {
     let mut t = String::from(
-        "| case | hidden | named | remaining | visible in | gap/σ | σ [N] | RMS before → after [N] | shrink/ideal |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| case | hidden | expected answer | named | remaining | visible in | gap/σ | σ [N] | RMS before → after [N] | shrink/ideal |\n|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for o in &s.outcomes {
         let list = |v: &[String]| if v.is_empty() { "—".to_string() } else { v.join(", ") };
+        let answer = match &o.expected_ambiguous {
+            Some(p) => format!("ambiguous: {p}"),
+            None if o.out_of_library => "unexplained".into(),
+            None => list(&o.expected),
+        };
+        let named = if o.ambiguous.is_empty() {
+            list(&o.named)
+        } else {
+            format!("{} (ambiguous: {})", list(&o.named), o.ambiguous.join("; "))
+        };
         t += &format!(
-            "| {}{} | {} | {} | {} | {} | {:.1} | {:.3} | {:.3} → {:.3} | {} |\n",
+            "| {}{} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.3} → {:.3} | {} |\n",
             o.case,
             if o.exact { "" } else { " ✗" },
             list(&o.expected),
-            list(&o.named),
+            answer,
+            named,
             o.remaining,
             o.visible_in,
             o.size_sigma,
@@ -432,10 +510,12 @@ pub fn table(s: &Summary) -> String {
         );
     }
     t += &format!(
-        "\nEffect cases named exactly: {}/{} ({:.0} %); false names on nulls: {}/{}; out of library left unexplained: {}/{}; median shrink of the ideal: {:.0} %\n",
+        "\nEffect cases named exactly: {}/{} ({:.0} %; of them answered ambiguous as expected: {}/{}); false names on nulls: {}/{}; out of library left unexplained: {}/{}; median shrink of the ideal: {:.0} %\n",
         s.named_exactly,
         s.effect_cases,
         100.0 * s.named_exactly as f64 / s.effect_cases.max(1) as f64,
+        s.ambiguous_answered,
+        s.ambiguous_cases,
         s.false_names_on_nulls,
         s.null_cases,
         s.out_of_library_unexplained,

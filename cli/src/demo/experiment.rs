@@ -190,6 +190,40 @@ impl<O: Observer> Runner<'_, O> {
     }
 }
 
+/// One long hold, as when a surface identified earlier is pressed again: the sensor tared out of contact
+/// at start-up, the hand lowered onto the surface, the controller given `model` (the surface where the
+/// simulator has it), one force command of `force` [N] over 2 s and a hold of `hold` seconds; the
+/// recording ends in contact. Over such a hold a drifting sensor and a creeping surface read alike.
+pub fn run_hold(
+    spec: &SurfaceSpec,
+    model: &ContactModel,
+    force: f64,
+    hold: f64,
+    seed: u64,
+    observer: &mut impl Observer,
+) -> anyhow::Result<f64> {
+    let normal = Vector3::new(0.0, 0.0, -1.0);
+    let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
+    sim.sensor = spec.sensor.clone();
+    let surface = sim.surface.as_ref().context("a surface")?.point;
+    let controller =
+        DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), model.clone())?;
+    let params = contact_estimator::Params::default();
+    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(params.estimator_config())?, normal)?;
+    let last = cell.start(5000)?;
+    let mut r = Runner { cell, observer, params, next_refit: f64::INFINITY, newest: None, last };
+    let mut waited = 0.0;
+    while !r.tick()?.controller.in_contact {
+        waited += CYCLE;
+        anyhow::ensure!(waited < 20.0, "{}: no contact after 20 s", spec.name);
+    }
+    r.cell.controller.adopt_estimate(model.clone(), &surface, None)?;
+    r.cell.controller.command_force(force, 2.0)?;
+    r.observer.force_command(r.last.time, force, 2.0)?;
+    r.run(2.0 + hold, |_| {})?;
+    Ok(r.last.time)
+}
+
 /// Runs both experiments on one surface.
 pub fn run_surface(
     spec: &SurfaceSpec,

@@ -54,7 +54,8 @@ pub use fit::{
     regressors, robust_least_squares,
 };
 pub use model::{
-    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, Tangential, gravity_change,
+    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, StickAnchor, Tangential,
+    gravity_change,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

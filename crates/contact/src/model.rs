@@ -79,6 +79,11 @@ pub struct Tangential {
     pub friction: f64,
 }
 
+/// The tangential law's memory: where the tool first touched (dragged along while it slides); `None` out
+/// of contact. See [`ContactModel::tangential_step`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StickAnchor(pub Option<[f64; 3]>);
+
 /// A named augmentation of the base law (design.md section 7 ids). Surface effects change the force the
 /// surface exerts; sensor effects change what the F/T sensor reports of it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -412,6 +417,41 @@ impl ContactModel {
         let stick = t.stiffness * z.sqrt() * delta_t;
         let limit = t.friction * normal_force.max(0.0);
         Ok(Some(if stick.abs() <= limit { (stick, false) } else { (limit.copysign(stick), true) }))
+    }
+
+    /// The tangential force on the tool [N, world] with the Walton law and its friction cone, and whether
+    /// the contact slides, for a tool at `position` [m, world] pressed `z` deep with normal force
+    /// `normal_force` along the unit `normal`; zero without a tangential law or out of contact. The
+    /// displacement δ_t is the tool's tangential offset from `anchor`, where it first touched; while it
+    /// slides, the anchor follows so that the spring holds exactly the friction limit. The simulated
+    /// surface and the discrepancy workflow's wrench prediction both call this.
+    pub fn tangential_step(
+        &self,
+        anchor: &mut StickAnchor,
+        position: [f64; 3],
+        normal: [f64; 3],
+        z: f64,
+        normal_force: f64,
+    ) -> Result<([f64; 3], bool), ContactError> {
+        let Some(t) = self.tangential.filter(|_| z > 0.0) else {
+            anchor.0 = None;
+            return Ok(([0.0; 3], false));
+        };
+        let start = *anchor.0.get_or_insert(position);
+        let offset: [f64; 3] = std::array::from_fn(|i| position[i] - start[i]);
+        let along = (0..3).map(|i| offset[i] * normal[i]).sum::<f64>();
+        let delta: [f64; 3] = std::array::from_fn(|i| offset[i] - along * normal[i]);
+        let magnitude = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
+        if magnitude <= 0.0 {
+            return Ok(([0.0; 3], false));
+        }
+        let (ft, slides) = self.tangential_force(z, magnitude, normal_force)?.unwrap_or((0.0, false));
+        let direction: [f64; 3] = std::array::from_fn(|i| delta[i] / magnitude);
+        if slides && t.stiffness > 0.0 {
+            let stretch = t.friction * normal_force / (t.stiffness * z.sqrt());
+            anchor.0 = Some(std::array::from_fn(|i| position[i] - along * normal[i] - stretch * direction[i]));
+        }
+        Ok((std::array::from_fn(|i| -ft.abs() * direction[i]), slides))
     }
 
     /// A fresh state for [`ContactModel::step`].

@@ -47,6 +47,7 @@
 mod fit;
 #[cfg(test)]
 mod tests;
+mod wrench;
 
 use std::collections::BTreeMap;
 
@@ -54,6 +55,7 @@ use serde::Serialize;
 use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, MAX_DELAY, SensorInputs};
 
 use fit::{Data, Fit, Structure, Term};
+pub use wrench::{CHANNELS, Channel, Wrench, predict_wrench};
 
 /// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
 /// free space), its rate ż [m/s] and the measured normal force f [N]; and the times [s] the sensor was
@@ -70,6 +72,9 @@ pub struct Series {
     pub tares: Vec<f64>,
     pub tangential: Vec<[f64; 3]>,
     pub gravity_change: Vec<f64>,
+    /// The whole wrench as the sensor read it, and the pose it needs, for the residual of every channel
+    /// ([`Series::with_wrench`]).
+    pub wrench: Option<Wrench>,
 }
 
 /// Relaxation branches (time constants) the workflow names at most.
@@ -94,7 +99,16 @@ pub const MIN_CONTACT_SAMPLES: usize = 20;
 impl Series {
     /// Checks equal lengths, finite values and strictly increasing time.
     pub fn new(t: Vec<f64>, z: Vec<f64>, zdot: Vec<f64>, f: Vec<f64>) -> Result<Self, DiscrepancyError> {
-        let s = Series { t, z, zdot, f, tares: Vec::new(), tangential: Vec::new(), gravity_change: Vec::new() };
+        let s = Series {
+            t,
+            z,
+            zdot,
+            f,
+            tares: Vec::new(),
+            tangential: Vec::new(),
+            gravity_change: Vec::new(),
+            wrench: None,
+        };
         s.validate()?;
         Ok(s)
     }
@@ -109,6 +123,13 @@ impl Series {
         self.tangential = tangential;
         self.gravity_change = gravity_change;
         self.validate()?;
+        Ok(self)
+    }
+
+    /// The same samples with the whole wrench and the pose that predicts it (see [`Wrench`]).
+    pub fn with_wrench(mut self, wrench: Wrench) -> Result<Self, DiscrepancyError> {
+        wrench.validate(self.len())?;
+        self.wrench = Some(wrench);
         Ok(self)
     }
 
@@ -200,6 +221,8 @@ pub enum DiscrepancyError {
     NonFinite { name: &'static str, index: usize },
     #[error("time stamps must increase strictly (sample {0})")]
     Time(usize),
+    #[error("`{name}` must be a unit vector (its norm is {norm})")]
+    NotUnit { name: &'static str, norm: f64 },
     #[error(
         "too few samples: {got} ({in_contact} in contact); need {MIN_SAMPLES} and {MIN_CONTACT_SAMPLES} in contact"
     )]
@@ -408,7 +431,7 @@ pub fn simulate(model: &ContactModel, series: &Series) -> Result<Vec<f64>, Discr
 
 /// (surface force, measured force) at every sample, stepped with [`ContactModel::step`] from a fresh state,
 /// the sensor tared where the series says.
-fn steps(model: &ContactModel, series: &Series) -> Result<Vec<(f64, f64)>, DiscrepancyError> {
+pub(crate) fn steps(model: &ContactModel, series: &Series) -> Result<Vec<(f64, f64)>, DiscrepancyError> {
     let mut state = model.effect_state();
     let dt = step_sizes(series);
     let tared = series.tared_before();
@@ -553,6 +576,8 @@ pub struct Locate {
     /// sample; smooth motions make the peak broad).
     pub lag_s: f64,
     pub lag_correlation: f64,
+    /// The residual of every wrench channel, when the series carries the wrench ([`Series::with_wrench`]).
+    pub channels: Vec<Channel>,
 }
 
 /// Quartile bins of `key` over the in-contact samples.
@@ -636,6 +661,7 @@ fn locate(series: &Series, phases: &[Phase], given: &[f64], before: &[f64], afte
         whiteness_after: lag1(after),
         lag_s,
         lag_correlation,
+        channels: Vec::new(),
     }
 }
 
@@ -1481,7 +1507,14 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 Ok(simulate(m, &series.shifted(shift))?.iter().zip(&series.f).map(|(p, f)| f - p).collect())
             };
             let given = simulate(baseline, series)?;
-            locate(series, &ph, &given, &residual(&refit_model, refit_shift)?, &residual(&model, st.shift)?)
+            let mut l =
+                locate(series, &ph, &given, &residual(&refit_model, refit_shift)?, &residual(&model, st.shift)?);
+            if let Some(w) = &series.wrench {
+                let before = predict_wrench(&refit_model, &series.shifted(refit_shift), w)?;
+                let after = predict_wrench(&model, &series.shifted(st.shift), w)?;
+                l.channels = wrench::channels(series, &ph, w, &before, &after);
+            }
+            l
         },
         contact_shift: st.shift,
         contact_shift_ci: 1.96 * shift_se,

@@ -1,8 +1,8 @@
-//! A flat soft surface: any contact model of crates/contact along its normal, the Walton tangential law
-//! with a friction cone and slip across it.
+//! A flat soft surface: any contact model of crates/contact along its normal, and across it the model's
+//! Walton tangential law with a friction cone and slip (`ContactModel::tangential_step`).
 
 use nalgebra::Vector3;
-use softcontact_contact::{ContactModel, EffectState, SensorInputs};
+use softcontact_contact::{ContactModel, EffectState, SensorInputs, StickAnchor};
 
 use crate::SimError;
 
@@ -41,7 +41,7 @@ pub struct Surface {
     config: SurfaceConfig,
     normal: Vector3<f64>,
     effects: EffectState,
-    anchor: Option<Vector3<f64>>,
+    anchor: StickAnchor,
 }
 
 impl Surface {
@@ -52,7 +52,7 @@ impl Surface {
         }
         config.model.validate()?;
         let effects = config.model.effect_state();
-        Ok(Self { normal: config.normal / norm, effects, anchor: None, config })
+        Ok(Self { normal: config.normal / norm, effects, anchor: StickAnchor::default(), config })
     }
 
     pub fn config(&self) -> &SurfaceConfig {
@@ -65,34 +65,12 @@ impl Surface {
         let z = (position - self.config.point).dot(&n);
         let zd = velocity.dot(&n);
         let f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
-        let mut force = -f * n;
-        let mut sliding = false;
-        if z > 0.0 {
-            if let Some(t) = self.config.model.tangential {
-                let anchor = *self.anchor.get_or_insert(*position);
-                let offset = position - anchor;
-                let delta = offset - offset.dot(&n) * n;
-                let magnitude = delta.norm();
-                if magnitude > 0.0 {
-                    let (ft, slides) =
-                        self.config.model.tangential_force(z, magnitude, f)?.expect("tangential law present");
-                    let direction = delta / magnitude;
-                    force -= ft.abs() * direction;
-                    sliding = slides;
-                    if slides && t.stiffness > 0.0 {
-                        // Slip: the anchor follows so that the spring holds exactly the friction limit.
-                        let stretch = t.friction * f / (t.stiffness * z.sqrt());
-                        self.anchor = Some(position - offset.dot(&n) * n - stretch * direction);
-                    }
-                }
-            }
-        } else {
-            self.anchor = None;
-        }
+        let (tangential, sliding) =
+            self.config.model.tangential_step(&mut self.anchor, (*position).into(), n.into(), z, f)?;
+        let force = -f * n + Vector3::from(tangential);
         // The sensor effects on the normal reading; the tangential load of this step feeds crosstalk. (A
         // model's unknown tool weight is carried by the sensor's load instead: see `Sim::new`.)
-        let tangential = force + f * n;
-        let inputs = SensorInputs { tangential_force: tangential.into(), gravity_change: 0.0 };
+        let inputs = SensorInputs { tangential_force: tangential, gravity_change: 0.0 };
         let measured = self.config.model.sense(&mut self.effects, f, &inputs)?;
         let sensed_force = force - (measured - f) * n;
         Ok(Contact {
