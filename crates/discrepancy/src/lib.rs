@@ -1446,6 +1446,13 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
         // re-mask with the augmented model and refit.
         d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
+        // The re-masked fit moves the surface again (its position column would otherwise carry an offset
+        // in contact that the model, which knows the surface only by its position, does not have).
+        let se_rate;
+        (st, shift_se, se_rate) = refine_surface(&d, &st);
+        if order.iter().any(|x| x.0 == Family::OffsetDrift) {
+            rate_se = se_rate;
+        }
         cur = fit::fit(&d, &st);
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         model.validate()?;
@@ -1460,6 +1467,13 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, v_sat) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
+        // The re-masked fit moves the surface again (its position column would otherwise carry an offset
+        // in contact that the model, which knows the surface only by its position, does not have).
+        let se_rate;
+        (st, shift_se, se_rate) = refine_surface(&d, &st);
+        if order.iter().any(|x| x.0 == Family::OffsetDrift) {
+            rate_se = se_rate;
+        }
         cur = fit::fit(&d, &st);
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         model.validate()?;
