@@ -1,7 +1,9 @@
 //! The robot cell in-process, in lockstep with the simulator: the very driver and F/T node code
 //! exchanges real FRI and RDT bytes with the simulated arm and sensor each 1 ms cycle, the deformation
-//! controller closes the loop and the contact estimator watches, exactly as their node binaries wire
-//! them over DDS — without DDS, clocks or threads, so runs are fast and deterministic (tests, the demo).
+//! controller closes the loop and the contact estimator watches — without DDS, clocks or threads, so runs
+//! are fast and deterministic (tests, the demo). The loop runs as ros2_control runs it, read → update →
+//! write on one thread: each FRI measurement is answered with the torque the controller computed for that
+//! very measurement (`LwrDriver::measure`, `set_command`, `answer`), from the F/T sensor's newest record.
 
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
@@ -11,7 +13,7 @@ use softcontact_wire::fri::InterfaceState;
 use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
 use crate::deformation_controller::{ControlError, ControllerState, DeformationController};
 use crate::ft_sensor::{FtConfig, FtOutput, FtSensorNode};
-use crate::lwr_driver::{DriverConfig, DriverError, DriverOutput, LwrDriver};
+use crate::lwr_driver::{DriverConfig, DriverError, DriverOutput, LwrDriver, Measured};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
@@ -111,22 +113,23 @@ impl Cell {
         Ok(())
     }
 
-    /// One 1 ms cycle through the wire formats; `None` until the KRC commands.
+    /// One 1 ms cycle through the wire formats, read → update → write as one process runs it: the F/T
+    /// node reads the sensor's newest record, the driver reads the KRC's measurement, the controller
+    /// computes the torque for that very measurement and the driver answers with it (or holds); then the
+    /// simulator moves. `None` until the KRC commands.
     pub fn cycle(&mut self) -> Result<Option<Tick>, CellError> {
-        let m = self.sim.measurement().encode();
-        let (reply, driver) = self.driver.handle(&m)?;
-        self.sim.command(&reply);
-        self.sim.step_cycle()?;
+        let time = self.sim.time();
+        let record = self.sim.ft_record().encode();
+        let measured = self.driver.measure(&self.sim.measurement().encode())?;
+        let out = &measured.output;
         // /lwr/ee_pose, which the F/T node's tare checks for motion.
-        self.ft.observe_tool_pose(&driver.tool_pose);
-        self.model.forward_kinematics(&mut self.data, &driver.q);
+        self.ft.observe_tool_pose(&out.tool_pose);
+        self.model.forward_kinematics(&mut self.data, &out.q);
         let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
         self.orientation = Some(orientation);
-        let ft = self
-            .ft
-            .handle(&self.sim.ft_record().encode(), Some(&orientation))
-            .map_err(|e| CellError::Ft(e.to_string()))?;
-        if driver.state != InterfaceState::Command {
+        let ft = self.ft.handle(&record, Some(&orientation)).map_err(|e| CellError::Ft(e.to_string()))?;
+        if out.state != InterfaceState::Command {
+            self.write(measured)?;
             return Ok(None);
         }
         self.commanding += 1;
@@ -139,31 +142,28 @@ impl Cell {
             None => Vector3::zeros(),
         };
         let f = (-force_world.dot(&self.normal)).max(0.0);
-        self.controller.follow_session(Some(driver.session), true, self.sim.krc_cycle());
-        // As the controller node does: a failed tick sends an empty command, and the driver holds.
+        self.controller.follow_session(Some(out.session), true, self.sim.krc_cycle());
         // Until the F/T node has tared it publishes no /ft_sensor/wrench, and an invalid sample
-        // (saturated, an error bit) is withheld from it: no tick, no command, the driver holds.
+        // (saturated, an error bit) is withheld from it: no tick, and the driver holds. A failed tick
+        // also holds: never an older torque.
         let withheld = !self.tared || ft.invalid;
-        let tick = (!withheld).then(|| self.controller.tick(&driver.q, &driver.dq, f, &force_world));
+        let tick = (!withheld).then(|| self.controller.tick(&out.q, &out.dq, f, &force_world));
         let (torque, controller, refused) = match tick {
             None => (None, ControllerState { f, ..Default::default() }, None),
             Some(Ok((tau, state))) => (Some(tau), state, None),
             Some(Err(e)) => (None, ControllerState { f, ..Default::default() }, Some(e)),
         };
-        let v = driver.tool_twist;
-        let estimator = self.estimator.update(
-            self.sim.time(),
-            &driver.tool_pose.translation.vector,
-            &Vector3::new(v[0], v[1], v[2]),
-            f,
-        )?;
+        let v = out.tool_twist;
+        let estimator =
+            self.estimator.update(time, &out.tool_pose.translation.vector, &Vector3::new(v[0], v[1], v[2]), f)?;
         match torque {
-            Some(tau) => self.driver.set_command(&tau)?,
-            None if withheld => {}
-            None => self.driver.set_command(&[]).map_or((), |_| ()),
+            // A refused torque (not 7 finite values) clears the command: the driver holds.
+            Some(tau) => self.driver.set_command(&tau).map_or((), |_| ()),
+            None => self.driver.clear_command(),
         }
+        let driver = self.write(measured)?;
         Ok(Some(Tick {
-            time: self.sim.time(),
+            time,
             driver,
             ft,
             tared: self.tared,
@@ -174,6 +174,14 @@ impl Cell {
             refused,
             estimator,
         }))
+    }
+
+    /// The driver's answer to the KRC, and the simulator's cycle under it.
+    fn write(&mut self, measured: Measured) -> Result<DriverOutput, CellError> {
+        let (reply, driver) = self.driver.answer(measured);
+        self.sim.command(&reply);
+        self.sim.step_cycle()?;
+        Ok(driver)
     }
 
     /// Cycles until the KRC commands and the F/T node has tared (at most `limit` cycles).

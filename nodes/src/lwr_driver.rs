@@ -211,6 +211,14 @@ pub struct DriverOutput {
     pub session: u32,
 }
 
+/// A measurement read by [`LwrDriver::measure`], waiting for [`LwrDriver::answer`].
+#[derive(Debug, Clone)]
+pub struct Measured {
+    m: fri::Measurement,
+    /// What the measurement says (`holding` is decided by the answer).
+    pub output: DriverOutput,
+}
+
 /// The driver: one instance per FRI connection.
 pub struct LwrDriver {
     config: DriverConfig,
@@ -323,6 +331,12 @@ impl LwrDriver {
         Ok(())
     }
 
+    /// No command from this cycle on: the driver holds (an in-process controller's way to ask for it; not
+    /// counted as a refusal).
+    pub fn clear_command(&mut self) {
+        self.command = None;
+    }
+
     /// A command that arrived over the network: it names the session of the joint state it answers and
     /// is `age` seconds old by that joint state's stamp. One from another session, or older than
     /// `max_command_age` (or stamped as far in the future), is refused and the present command ages out as usual.
@@ -361,9 +375,19 @@ impl LwrDriver {
         Ok(())
     }
 
-    /// Handles one datagram from the KRC: the reply to send back and the state to publish. A malformed
-    /// datagram is counted and refused (no reply: the KRC bridges a missing answer).
+    /// Handles one datagram from the KRC: the reply to send back (with the present command) and the state
+    /// to publish. A malformed datagram is counted and refused (no reply: the KRC bridges a missing
+    /// answer). [`LwrDriver::measure`] then [`LwrDriver::answer`].
     pub fn handle(&mut self, datagram: &[u8]) -> Result<(fri::Command, DriverOutput), DriverError> {
+        let measured = self.measure(datagram)?;
+        Ok(self.answer(measured))
+    }
+
+    /// Reads one datagram from the KRC: decoded, checked, counted, with the joint velocities and the
+    /// tool's pose and twist. The answer is chosen by [`LwrDriver::answer`]: in between, an in-process
+    /// controller can compute the torque for this very measurement and hand it over with
+    /// [`LwrDriver::set_command`] (or ask for a hold with [`LwrDriver::clear_command`]).
+    pub fn measure(&mut self, datagram: &[u8]) -> Result<Measured, DriverError> {
         let m = match fri::Measurement::decode(datagram) {
             Ok(m) => m,
             Err(e) => {
@@ -395,7 +419,33 @@ impl LwrDriver {
         }
         self.last_msr = Some((seq, q));
         self.cycle += 1;
+        self.model.forward_kinematics(&mut self.data, &q);
+        let tool_pose = self.model.frame_pose(&self.data, self.tool);
+        self.model.frame_jacobian(&self.data, self.tool, Axes::World, &mut self.jacobian);
+        let mut tool_twist = Vector6::zeros();
+        for (j, v) in dq.iter().enumerate() {
+            tool_twist += self.jacobian.column(j) * *v;
+        }
+        let output = DriverOutput {
+            q,
+            dq,
+            effort: std::array::from_fn(|i| m.data.msr_jnt_trq[i] as f64),
+            tool_pose,
+            tool_twist,
+            state: m.intf.state,
+            quality: m.intf.quality,
+            holding: false,
+            sequence: seq,
+            session: self.session,
+        };
+        Ok(Measured { m, output })
+    }
 
+    /// The answer to a measurement: the present command when it is fresh and no joint overspeeds, the
+    /// hold otherwise, or, while the KRC does not command, what the KRC commands itself.
+    pub fn answer(&mut self, measured: Measured) -> (fri::Command, DriverOutput) {
+        let Measured { m, mut output } = measured;
+        let (q, dq, seq) = (output.q, output.dq, output.sequence);
         let commanding = m.intf.state == InterfaceState::Command && m.robot.power != 0;
         let overspeed = dq.iter().zip(&self.velocity_limits).any(|(v, l)| v.abs() > self.config.velocity_margin * l);
         let fresh = self.command.filter(|(_, at)| self.cycle.saturating_sub(*at) <= self.config.watchdog_cycles);
@@ -450,26 +500,8 @@ impl LwrDriver {
             holding = true;
         }
 
-        self.model.forward_kinematics(&mut self.data, &q);
-        let tool_pose = self.model.frame_pose(&self.data, self.tool);
-        self.model.frame_jacobian(&self.data, self.tool, Axes::World, &mut self.jacobian);
-        let mut tool_twist = Vector6::zeros();
-        for (j, v) in dq.iter().enumerate() {
-            tool_twist += self.jacobian.column(j) * *v;
-        }
-        let output = DriverOutput {
-            q,
-            dq,
-            effort: std::array::from_fn(|i| m.data.msr_jnt_trq[i] as f64),
-            tool_pose,
-            tool_twist,
-            state: m.intf.state,
-            quality: m.intf.quality,
-            holding,
-            sequence: seq,
-            session: self.session,
-        };
-        Ok((reply, output))
+        output.holding = holding;
+        (reply, output)
     }
 }
 

@@ -215,3 +215,46 @@ fn a_controller_that_stalls_while_pushing_does_not_kick_the_hand_back() {
     }
     assert!((l.0.sim.contact().normal_force - 150.0).abs() < 7.5, "back at the command after the stall");
 }
+
+/// Read → update → write in one process: after start-up (the KRC commands and the F/T node has tared),
+/// every FRI measurement is answered with the torque the controller computed for that very measurement —
+/// no held or older command, through approach, contact and force commands — and the torque the KRC
+/// receives is that one, less the KRC's own gravity.
+#[test]
+fn every_measurement_is_answered_with_the_torque_computed_for_it() {
+    let config = SimConfig::above_surface(softcontact_sim::sponge(), 5);
+    let controller =
+        DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge()).unwrap();
+    let mut l = Loop::new(config, controller);
+    l.0.start(5000).unwrap();
+    let model = softcontact_dynamics::lwr4::model();
+    let mut data = model.data();
+    let stale_at_start = l.0.driver.counters.stale_cycles;
+    let (mut answered, mut commands) = (0, 0);
+    for i in 0..8000 {
+        if i == 5000 {
+            l.0.controller.command_force(120.0, 1.0).unwrap();
+            commands += 1;
+        }
+        let tick = l.0.cycle().unwrap().expect("the KRC commands");
+        let tau = tick.torque.unwrap_or_else(|| panic!("cycle {i}: no torque ({:?})", tick.refused));
+        assert!(!tick.driver.holding, "cycle {i}: the driver held");
+        // What the KRC received: this tick's torque (within the joint limits) less the KRC's own gravity.
+        let received = l.0.sim.krc.last_command().expect("a reply").add_jnt_trq;
+        let gravity = model.gravity_torques(&mut data, &tick.driver.q);
+        for j in 0..7 {
+            let limit = model.joints[j].limits.effort;
+            let expected = tau[j].clamp(-limit, limit) - gravity[j];
+            assert!(
+                (received[j] as f64 - expected).abs() < 1e-4,
+                "cycle {i}, joint {}: the KRC received {} N·m, this tick's torque less gravity is {expected} N·m",
+                j + 1,
+                received[j]
+            );
+        }
+        answered += 1;
+    }
+    assert_eq!(l.0.driver.counters.stale_cycles, stale_at_start, "cycles answered with a held command");
+    assert!(answered == 8000 && commands == 1);
+    assert!(l.0.sim.contact().normal_force > 60.0, "the force command was carried out");
+}

@@ -67,3 +67,39 @@ fn the_controller_tick_does_not_allocate() {
     drop(std::hint::black_box(probe));
     assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 1, "the counter counts");
 }
+
+/// The in-process hand-over on the FRI thread allocates nothing: the driver reads a measurement, the
+/// torque for it is handed over, and the driver answers with it.
+#[test]
+fn the_driver_hand_over_does_not_allocate() {
+    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    let mut sim =
+        softcontact_sim::Simulator::new(softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 3))
+            .unwrap();
+    // The KRC's measurements of a few cycles, made beforehand.
+    let datagrams: Vec<[u8; 916]> = (0..50)
+        .map(|_| {
+            let m = sim.measurement().encode();
+            sim.step_cycle().unwrap();
+            m
+        })
+        .collect();
+    let mut driver = LwrDriver::new(DriverConfig::default());
+    let tau = [0.5, 20.0, 0.1, -8.0, 0.2, 1.0, 0.0];
+    let mut sequence = 0u64;
+    for d in &datagrams[..5] {
+        let measured = driver.measure(d).unwrap();
+        driver.set_command(&tau).unwrap();
+        driver.answer(measured);
+    }
+    COUNTING.with(|c| c.set(true));
+    for d in &datagrams[5..] {
+        let measured = driver.measure(d).unwrap();
+        driver.set_command(&tau).unwrap();
+        let (reply, out) = driver.answer(measured);
+        sequence += u64::from(reply.header.refl_seq) + u64::from(out.holding);
+    }
+    COUNTING.with(|c| c.set(false));
+    assert!(sequence > 0);
+    assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 0, "allocations in 45 hand-overs");
+}

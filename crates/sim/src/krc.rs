@@ -110,6 +110,11 @@ impl Krc {
         }
     }
 
+    /// The newest command datagram received from the remote.
+    pub fn last_command(&self) -> Option<&fri::Command> {
+        self.command.as_ref()
+    }
+
     pub fn state(&self) -> InterfaceState {
         self.state
     }

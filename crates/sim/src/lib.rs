@@ -181,7 +181,7 @@ impl Simulator {
         let krc = Krc::new(config.krc.clone(), config.initial_q);
         let sensor = FtSensor::new(config.sensor.clone(), sensed_load(config.surface.as_ref()));
         let data = model.data();
-        Ok(Self {
+        let mut sim = Self {
             data,
             tool,
             sensor_frame,
@@ -197,7 +197,10 @@ impl Simulator {
             model,
             last_contact: Contact::default(),
             last_torque: [0.0; 7],
-        })
+        };
+        // The contact of the initial state (no time passed).
+        sim.touch(0.0)?;
+        Ok(sim)
     }
 
     /// The FRI cycle [s].
@@ -217,7 +220,7 @@ impl Simulator {
     pub fn dq(&self) -> &[f64; 7] {
         &self.dq
     }
-    /// The contact of the last step.
+    /// The contact at the current state.
     pub fn contact(&self) -> &Contact {
         &self.last_contact
     }
@@ -283,24 +286,30 @@ impl Simulator {
         Ok(event)
     }
 
-    fn step(&mut self) -> Result<(), SimError> {
-        let h = self.config.step;
-        // Contact at the current state.
+    /// The contact at the current state, the surface's memory advanced by dt (the time since the last
+    /// state): what the F/T sensor reads now and what acts on the arm during the next step.
+    fn touch(&mut self, dt: f64) -> Result<(), SimError> {
         self.model.forward_kinematics(&mut self.data, &self.q);
         let pose = self.model.frame_pose(&self.data, self.tool);
         let velocity = self.model.frame_velocity(&mut self.data, &self.q, &self.dq, self.tool); // FK reused
         let tool_velocity = Vector3::new(velocity[0], velocity[1], velocity[2]);
         self.last_contact = match self.surface.as_mut() {
-            Some(s) => s.contact(&pose.translation.vector, &tool_velocity, h)?,
+            Some(s) => s.contact(&pose.translation.vector, &tool_velocity, dt)?,
             None => Contact::default(),
         };
+        Ok(())
+    }
+
+    fn step(&mut self) -> Result<(), SimError> {
+        let h = self.config.step;
+        // The contact at the current state is `last_contact`; after the step, the new state's.
         let Some(mut tau) = self.krc.motor_torque(&self.model, &mut self.data, &self.q, &self.dq) else {
             // Brakes: the KRC holds the arm.
             self.dq = [0.0; 7];
             self.last_torque =
                 self.model.gravity_torques(&mut self.data, &self.q).as_slice().try_into().expect("7 joints");
             self.time += h;
-            return Ok(());
+            return self.touch(h);
         };
         for (i, j) in self.model.joints.iter().enumerate() {
             tau[i] = tau[i].clamp(-j.limits.effort, j.limits.effort);
@@ -324,6 +333,6 @@ impl Simulator {
             self.dq = [0.0; 7];
         }
         self.time += h;
-        Ok(())
+        self.touch(h)
     }
 }
