@@ -76,14 +76,24 @@ fn the_driver_hand_over_does_not_allocate() {
     let mut sim =
         softcontact_sim::Simulator::new(softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 3))
             .unwrap();
-    // The KRC's measurements of a few cycles, made beforehand.
-    let datagrams: Vec<[u8; 916]> = (0..50)
-        .map(|_| {
-            let m = sim.measurement().encode();
-            sim.step_cycle().unwrap();
-            m
-        })
-        .collect();
+    // The KRC's measurements of 50 commanding cycles, made beforehand (a driver answers the KRC into
+    // command mode; encoding allocates).
+    let mut warm = LwrDriver::new(DriverConfig::default());
+    let mut datagrams: Vec<[u8; 916]> = Vec::new();
+    for _ in 0..10_000 {
+        let m = sim.measurement();
+        let bytes = m.encode();
+        if m.intf.state == softcontact_wire::fri::InterfaceState::Command {
+            datagrams.push(bytes);
+        }
+        let (reply, _) = warm.handle(&bytes).unwrap();
+        sim.command(&reply);
+        sim.step_cycle().unwrap();
+        if datagrams.len() == 50 {
+            break;
+        }
+    }
+    assert_eq!(datagrams.len(), 50, "the KRC reached command mode");
     let mut driver = LwrDriver::new(DriverConfig::default());
     let tau = [0.5, 20.0, 0.1, -8.0, 0.2, 1.0, 0.0];
     let mut sequence = 0u64;
@@ -97,7 +107,9 @@ fn the_driver_hand_over_does_not_allocate() {
         let measured = driver.measure(d).unwrap();
         driver.set_command(&tau).unwrap();
         let (reply, out) = driver.answer(measured);
-        sequence += u64::from(reply.header.refl_seq) + u64::from(out.holding);
+        // The command path itself, not a hold.
+        assert!(!out.holding && reply.add_jnt_trq.iter().any(|t| *t != 0.0));
+        sequence += u64::from(reply.header.refl_seq);
     }
     COUNTING.with(|c| c.set(false));
     assert!(sequence > 0);

@@ -182,12 +182,41 @@ impl<O: Observer> Runner<'_, O> {
         Ok(&self.last)
     }
 
+    /// Approach: the hand descends at 1 cm/s until the controller's onset fires.
+    fn approach(&mut self, name: &str) -> anyhow::Result<()> {
+        let mut waited = 0.0;
+        while !self.tick()?.controller.in_contact {
+            waited += CYCLE;
+            anyhow::ensure!(waited < 20.0, "{name}: no contact after 20 s");
+        }
+        Ok(())
+    }
+
     fn run(&mut self, seconds: f64, mut each: impl FnMut(&Tick)) -> anyhow::Result<()> {
         for _ in 0..(seconds / CYCLE).round() as usize {
             each(self.tick()?);
         }
         Ok(())
     }
+}
+
+/// The cell on `spec`'s surface (as `sim` places it) with its sensor, started (the KRC commands and the
+/// F/T node has tared), the estimator on the node's schedule.
+fn start<'a, O: Observer>(
+    spec: &SurfaceSpec,
+    mut sim: SimConfig,
+    controller_model: ContactModel,
+    estimator: contact_estimator::EstimatorConfig,
+    observer: &'a mut O,
+) -> anyhow::Result<Runner<'a, O>> {
+    sim.sensor = spec.sensor.clone();
+    let controller =
+        DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), controller_model)?;
+    let normal = Vector3::new(0.0, 0.0, -1.0);
+    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(estimator)?, normal)?;
+    let last = cell.start(5000)?;
+    let params = contact_estimator::Params::default();
+    Ok(Runner { cell, observer, params, next_refit: f64::INFINITY, newest: None, last })
 }
 
 /// One long hold, as when a surface identified earlier is pressed again: the sensor tared out of contact
@@ -202,21 +231,11 @@ pub fn run_hold(
     seed: u64,
     observer: &mut impl Observer,
 ) -> anyhow::Result<f64> {
-    let normal = Vector3::new(0.0, 0.0, -1.0);
-    let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
-    sim.sensor = spec.sensor.clone();
+    let sim = SimConfig::above_surface(spec.truth.clone(), seed);
     let surface = sim.surface.as_ref().context("a surface")?.point;
-    let controller =
-        DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), model.clone())?;
-    let params = contact_estimator::Params::default();
-    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(params.estimator_config())?, normal)?;
-    let last = cell.start(5000)?;
-    let mut r = Runner { cell, observer, params, next_refit: f64::INFINITY, newest: None, last };
-    let mut waited = 0.0;
-    while !r.tick()?.controller.in_contact {
-        waited += CYCLE;
-        anyhow::ensure!(waited < 20.0, "{}: no contact after 20 s", spec.name);
-    }
+    let estimator = contact_estimator::Params::default().estimator_config();
+    let mut r = start(spec, sim, model.clone(), estimator, observer)?;
+    r.approach(spec.name)?;
     r.cell.controller.adopt_estimate(model.clone(), &surface, None)?;
     r.cell.controller.command_force(force, 2.0)?;
     r.observer.force_command(r.last.time, force, 2.0)?;
@@ -231,28 +250,17 @@ pub fn run_surface(
     seed: u64,
     observer: &mut impl Observer,
 ) -> anyhow::Result<SurfaceRun> {
-    let normal = Vector3::new(0.0, 0.0, -1.0);
     let mut sim = SimConfig::above_surface(spec.truth.clone(), seed);
     if let (Some(depth), Some(surface)) = (plan.start_pressed, sim.surface.as_mut()) {
         surface.point -= (0.04 + depth) * surface.normal;
     }
-    sim.sensor = spec.sensor.clone();
     let params = contact_estimator::Params::default();
     // Identification keeps every sample of every run (seed 001 fits all of them at once).
     let identification = contact_estimator::EstimatorConfig { window: 100_000, ..params.estimator_config() };
     // The controller knows nothing of the surface yet: it only moves the hand during identification.
     let guess = ContactModel::new(Kind::KelvinVoigt, 5000.0, 0.0)?;
-    let controller = DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), guess)?;
-    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(identification)?, normal)?;
-    let last = cell.start(5000)?;
-    let mut r = Runner { cell, observer, params: params.clone(), next_refit: f64::INFINITY, newest: None, last };
-
-    // Approach: the hand descends at 1 cm/s until the controller's onset fires.
-    let mut waited = 0.0;
-    while !r.tick()?.controller.in_contact {
-        waited += CYCLE;
-        anyhow::ensure!(waited < 20.0, "{}: no contact after 20 s", spec.name);
-    }
+    let mut r = start(spec, sim, guess, identification, observer)?;
+    r.approach(spec.name)?;
 
     // Identification: ramp into the lowest push point, 1 Hz pushes, retreat, rest; 10 times.
     let mut id_series = Series::default();
