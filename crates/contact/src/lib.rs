@@ -55,7 +55,7 @@ pub use fit::{
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, StickAnchor, Tangential,
-    gravity_change,
+    gravity_change, maxwell_step, maxwell_step_with_decay,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

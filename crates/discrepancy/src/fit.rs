@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector};
 use std::ops::Range;
 
-use softcontact_contact::ContactModel;
+use softcontact_contact::{ContactModel, maxwell_step, maxwell_step_with_decay};
 
 use crate::Series;
 
@@ -52,6 +52,32 @@ pub(crate) struct Structure {
     /// The reading's delay [s]: every column is read at t − delay.
     pub delay: f64,
     pub terms: Vec<Term>,
+    /// In contact but the law would pull (fast unloading of a shallow contact): [`ContactModel::step`]
+    /// clamps the surface force to 0 there, so the contact columns are zeroed. Where that happens moves
+    /// with the surface position: [`Structure::remask`] after moving it.
+    pub clamped: Vec<bool>,
+}
+
+impl Structure {
+    /// Re-masks the samples where the law clamps, with the surface force of coefficients `beta` (of this
+    /// structure's columns; the linearised surface terms, whose content a Gauss-Newton step has just moved
+    /// into the structure, left out).
+    pub fn remask(&mut self, d: &Data, beta: &[f64]) {
+        let undelayed = Structure { delay: 0.0, ..self.clone() };
+        let raw = columns_masked(d, &undelayed, &vec![false; d.s.len()]);
+        self.clamped = surface_clamped(&self.terms, &raw, beta, |t| matches!(t, Term::Shift | Term::OffsetLin));
+    }
+}
+
+/// Samples in contact where the surface force Σ βⱼ·colⱼ over the surface columns (not the sensor's, nor
+/// those `skip` names) is ≤ 0; `raw` unmasked and undelayed.
+fn surface_clamped(terms: &[Term], raw: &[Vec<f64>], beta: &[f64], skip: impl Fn(Term) -> bool) -> Vec<bool> {
+    let surface = |j: usize| j < 2 || !(terms[j - 2].of_sensor() || skip(terms[j - 2]));
+    (0..raw[0].len())
+        .map(|i| {
+            raw[0][i] > 0.0 && (0..raw.len()).filter(|&j| surface(j)).map(|j| beta[j] * raw[j][i]).sum::<f64>() <= 0.0
+        })
+        .collect()
 }
 
 /// The series with what every fit needs precomputed.
@@ -63,8 +89,7 @@ pub(crate) struct Data<'a> {
     pub since_tare: Vec<f64>,
     pub dt: Vec<f64>,
     pub folds: Vec<Range<usize>>,
-    /// In contact but the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0, fast unloading of a shallow
-    /// contact): [`ContactModel::step`] clamps the force to 0 there, so the contact columns are zeroed.
+    /// Where the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0): the first structure's mask.
     pub clamped: Vec<bool>,
     /// The unit axis of the tangential force (its principal direction) and the force along it, when the
     /// series carries tangential force.
@@ -142,10 +167,10 @@ fn pow(z: f64, e: f64) -> f64 {
 /// The raw (unscaled) columns of a structure: [zᵃ, zᵇ·sgn(ż)|ż|ᶜ, terms…], each zero out of contact
 /// except the sensor terms.
 pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
-    columns_masked(d, st, &d.clamped)
+    columns_masked(d, st, &st.clamped)
 }
 
-/// [`columns`] with the given samples masked where the law clamps (instead of `d.clamped`).
+/// [`columns`] with the given samples masked where the law clamps (instead of the structure's).
 fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
     let s = d.s;
     let n = s.len();
@@ -162,18 +187,22 @@ fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
             Term::Bias => vec![1.0; n],
             Term::SensorDrift => d.since_tare.clone(),
             Term::Relax(tau) => {
-                // The same exact update as ContactModel::step, with unit branch stiffness.
+                // The branch of unit stiffness, updated as ContactModel::step_surface updates it.
                 let mut x = 0.0;
                 // exp(−dt/τ) again only where the step changes (a steady rate: once).
                 let mut last = (f64::NAN, 0.0);
                 (0..n)
                     .map(|i| {
                         if zeff[i] > 0.0 {
-                            if d.dt[i] != last.0 {
-                                last = (d.dt[i], (-d.dt[i] / tau).exp());
-                            }
-                            let decay = last.1;
-                            x = x * decay + s.zdot[i] * tau * (1.0 - decay);
+                            let change = if i == 0 { s.zdot[i] * d.dt[i] } else { zeff[i] - zeff[i - 1].max(0.0) };
+                            x = if d.dt[i] > 0.0 {
+                                if d.dt[i] != last.0 {
+                                    last = (d.dt[i], (-d.dt[i] / tau).exp());
+                                }
+                                maxwell_step_with_decay(x, change, d.dt[i], tau, last.1)
+                            } else {
+                                maxwell_step(x, change, 0.0, tau)
+                            };
                         } else {
                             x = 0.0;
                         }
@@ -366,18 +395,11 @@ pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
     // Read late, the law clamps where its own undelayed surface force is ≤ 0 — which the mask of the
     // undelayed fit (where the refit damping may be negative and never clamps) gets wrong at every
     // lift-off: mask with this fit's own surface force, twice.
-    let n = d.s.len();
     let undelayed = Structure { delay: 0.0, ..st.clone() };
-    let raw = columns_masked(d, &undelayed, &vec![false; n]);
-    let surface = |j: usize| j < 2 || !st.terms[j - 2].of_sensor();
+    let raw = columns_masked(d, &undelayed, &vec![false; d.s.len()]);
     let mut fitted = fitted;
     for _ in 0..2 {
-        let mask: Vec<bool> = (0..n)
-            .map(|i| {
-                raw[0][i] > 0.0
-                    && (0..raw.len()).filter(|&j| surface(j)).map(|j| fitted.beta[j] * raw[j][i]).sum::<f64>() <= 0.0
-            })
-            .collect();
+        let mask = surface_clamped(&st.terms, &raw, &fitted.beta, |_| false);
         fitted = fit_columns(d, &columns_masked(d, st, &mask));
     }
     fitted

@@ -80,6 +80,9 @@ pub struct Series {
 /// Relaxation branches (time constants) the workflow names at most.
 pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
+/// The time constants a relaxation branch may have [s].
+pub const RELAXATION_TIME_RANGE: (f64, f64) = (0.05, 20.0);
+
 /// The least range of the gravity change along the normal [m/s²] under which `tool_gravity` is not
 /// tried: about a 6° tilt from the tare's orientation.
 pub const MIN_GRAVITY_CHANGE: f64 = 0.05;
@@ -813,7 +816,7 @@ impl Family {
             (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
         };
         match self {
-            Family::Relaxation => log(0.05, 20.0, 14)
+            Family::Relaxation => log(RELAXATION_TIME_RANGE.0, RELAXATION_TIME_RANGE.1, 14)
                 .into_iter()
                 .filter(|&tau| {
                     st.terms.iter().all(|t| !matches!(*t, Term::Relax(other) if (tau / other).ln().abs() < 3f64.ln()))
@@ -1067,9 +1070,9 @@ fn gap(series: &Series, phases: &[Phase], pred: &[f64]) -> Gap {
 
 /// Refines the surface position (always) and its drift rate (when [`Term::OffsetLin`] is in the structure)
 /// by Gauss-Newton on the exact law (z − z₀ − r·t)ᵃ: each fit's linearised coefficients k·δz₀ and k·δr are
-/// moved into the structure until they vanish. Both linear columns stay in the structure, so that every
-/// later fit refits the position and the drift jointly with its candidate. Returns the standard errors of
-/// z₀ and r too.
+/// moved into the structure until they vanish, and the samples where the law clamps re-masked at the moved
+/// surface. Both linear columns stay in the structure, so that every later fit refits the position and the
+/// drift jointly with its candidate. Returns the standard errors of z₀ and r too.
 fn refine_surface(d: &Data, st: &Structure) -> (Structure, f64, f64) {
     let mut st = st.clone();
     let (mut se_shift, mut se_rate) = (0.0, 0.0);
@@ -1090,7 +1093,11 @@ fn refine_surface(d: &Data, st: &Structure) -> (Structure, f64, f64) {
             st.offset_rate += delta;
             converged &= delta.abs() <= 1e-4 * st.offset_rate.abs();
         }
-        if converged {
+        // Where the law clamps moves with the surface: a sample that enters contact during fast unloading
+        // would otherwise be fitted with the pull the model clamps away.
+        let mask = st.clamped.clone();
+        st.remask(d, &f.beta);
+        if converged && st.clamped == mask {
             break;
         }
     }
@@ -1205,52 +1212,90 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
     p
 }
 
-/// The whole workflow: phases, noise floor, baseline gap, naming, adding; see the crate documentation.
-/// Polish: each shape (τ, v₀) was chosen with the effects of its own round; refine each one in the
-/// current structure, the others held (two passes of ten golden-section steps within ×2, a second
-/// relaxation branch kept 3× away), and keep it when the in-sample fit improves. True if any moved.
+/// Polish: each shape (τ of a relaxation branch, v₀ of the hysteresis) was chosen in its own round, with
+/// the effects of that round, and the shapes trade against each other and against the damping (a fast
+/// branch and a hysteresis both stiffen fast pushes). Refine them jointly in the current structure by
+/// Gauss–Newton on their logarithms — each shape's column differentiated numerically, the change of its
+/// shape read from a joint fit as the surface position's is (variable projection) — within their bounds
+/// (τ in the screening grid's range with branches 3× apart, v₀ up to the saturating speed), halving a step
+/// that does not lower the in-sample error. True if any shape moved.
 fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64)], v_sat: f64) -> bool {
-    let shaped = |f: Family| matches!(f, Family::Relaxation | Family::Hysteresis);
-    let mut moved = false;
-    for _ in 0..2 {
-        for slot in order.iter_mut() {
-            let (f, sh) = *slot;
-            let Some(term) = f.term(sh).filter(|_| shaped(f)) else { continue };
-            let Some(j) = st.terms.iter().position(|t| *t == term) else { continue };
-            let (mut lo, mut hi) = (sh / 2.0, sh * 2.0);
-            if f == Family::Hysteresis {
-                hi = hi.min(v_sat);
+    let shaped: Vec<usize> =
+        (0..st.terms.len()).filter(|&j| matches!(st.terms[j], Term::Relax(_) | Term::Hyst(_))).collect();
+    if shaped.is_empty() {
+        return false;
+    }
+    let scaled = |t: Term, factor: f64| match t {
+        Term::Relax(tau) => Term::Relax(tau * factor),
+        Term::Hyst(v0) => Term::Hyst(v0 * factor),
+        other => other,
+    };
+    let within_bounds = |s: &Structure| {
+        let taus: Vec<f64> =
+            s.terms.iter().filter_map(|t| if let Term::Relax(tau) = *t { Some(tau) } else { None }).collect();
+        s.terms.iter().all(|t| match *t {
+            Term::Relax(tau) => (RELAXATION_TIME_RANGE.0..=RELAXATION_TIME_RANGE.1).contains(&tau),
+            Term::Hyst(v0) => v0 > 0.0 && v0 <= v_sat,
+            _ => true,
+        }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
+    };
+    let (start, start_sse) = (st.terms.clone(), cur.sse);
+    const H: f64 = 1e-3;
+    for _ in 0..POLISH_ITERATIONS {
+        let mut cols = fit::columns(d, st);
+        let p = cols.len();
+        for &j in &shaped {
+            let mut up = st.clone();
+            up.terms[j] = scaled(st.terms[j], H.exp());
+            let moved = fit::columns(d, &up).swap_remove(j + 2);
+            cols.push(moved.iter().zip(&cols[j + 2]).map(|(u, c)| (u - c) / H).collect());
+        }
+        let linear = fit::fit_columns(d, &cols);
+        let mut step: Vec<f64> = shaped
+            .iter()
+            .enumerate()
+            .map(|(m, &j)| (linear.beta[p + m] / linear.beta[j + 2]).clamp(-2f64.ln(), 2f64.ln()))
+            .collect();
+        let mut improved = false;
+        for _ in 0..5 {
+            let mut trial = st.clone();
+            for (m, &j) in shaped.iter().enumerate() {
+                trial.terms[j] = scaled(st.terms[j], step[m].exp());
             }
-            for t in &st.terms {
-                if let Term::Relax(other) = *t
-                    && f == Family::Relaxation
-                    && other != sh
-                {
-                    if other < sh { lo = lo.max(3.0 * other) } else { hi = hi.min(other / 3.0) }
+            if step.iter().all(|x| x.is_finite()) && within_bounds(&trial) {
+                let (trial, _, _) = refine_surface(d, &trial);
+                let ft = fit::fit(d, &trial);
+                if ft.sse < cur.sse {
+                    *st = trial;
+                    *cur = ft;
+                    improved = true;
+                    break;
                 }
             }
-            if lo >= hi {
-                continue;
-            }
-            let with_shape = |x: f64| {
-                let mut s = st.clone();
-                s.terms[j] = f.term(x).unwrap_or(term);
-                s
-            };
-            let x = golden(|x| fit::fit(d, &with_shape(x.exp())).sse, lo.ln(), hi.ln(), 10).exp();
-            let (polished, _, _) = refine_surface(d, &with_shape(x));
-            let fp = fit::fit(d, &polished);
-            if fp.sse < cur.sse {
-                *st = polished;
-                *cur = fp;
-                slot.1 = x;
-                moved = true;
-            }
+            step.iter_mut().for_each(|x| *x *= 0.5);
+        }
+        if !improved || step.iter().all(|x| x.abs() < 1e-4) {
+            break;
         }
     }
-    moved
+    if cur.sse >= start_sse {
+        return false;
+    }
+    for &j in &shaped {
+        let (before, after) = (start[j], st.terms[j]);
+        let fam = if matches!(before, Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
+        let shape = |t: Term| if let Term::Relax(x) | Term::Hyst(x) = t { x } else { 0.0 };
+        if let Some(slot) = order.iter_mut().find(|x| x.0 == fam && x.1 == shape(before)) {
+            slot.1 = shape(after);
+        }
+    }
+    true
 }
 
+/// Gauss–Newton iterations of [`polish`].
+const POLISH_ITERATIONS: usize = 8;
+
+/// The whole workflow: phases, noise floor, baseline gap, naming, adding; see the crate documentation.
 pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> Result<Report, DiscrepancyError> {
     series.validate()?;
     baseline.validate()?;
@@ -1266,13 +1311,21 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
 
     // The baseline's k, λ and the surface position refitted (the position's column stays in every later
     // fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more.
-    let mut d = Data::new(series, o.folds, baseline);
+    let d = Data::new(series, o.folds, baseline);
     let ex = baseline.exponents;
-    let start =
-        Structure { a: ex.a, b: ex.b, c: ex.c, shift: 0.0, offset_rate: 0.0, delay: 0.0, terms: vec![Term::Shift] };
+    let start = Structure {
+        a: ex.a,
+        b: ex.b,
+        c: ex.c,
+        shift: 0.0,
+        offset_rate: 0.0,
+        delay: 0.0,
+        terms: vec![Term::Shift],
+        clamped: d.clamped.clone(),
+    };
     let mut order: Vec<(Family, f64)> = vec![];
     let (mut st, _, _) = refine_surface(&d, &start);
-    d.clamped =
+    st.clamped =
         clamp_mask(&to_model(baseline, d.lateral_axis, &st, &fit::fit(&d, &st), &order), &series.shifted(st.shift))?;
     let (refined, mut shift_se, _) = refine_surface(&d, &st);
     st = refined;
@@ -1445,7 +1498,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         // Where the augmented model's force clamps at zero in contact, the linear columns do not hold:
         // re-mask with the augmented model and refit.
-        d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
+        st.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         // The re-masked fit moves the surface again (its position column would otherwise carry an offset
         // in contact that the model, which knows the surface only by its position, does not have).
         let se_rate;
@@ -1466,7 +1519,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
 
     if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, v_sat) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
-        d.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
+        st.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         // The re-masked fit moves the surface again (its position column would otherwise carry an offset
         // in contact that the model, which knows the surface only by its position, does not have).
         let se_rate;
