@@ -960,8 +960,15 @@ fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, v_sat: f64, cv_now: 
         return Cand { fams: vec![(fam, shape)], st, fit, t: vec![0.0], stable: vec![false], physical: false };
     }
     if fam.has_shape() && grid.len() > 2 {
-        let lo = grid[best.saturating_sub(1)];
-        let hi = grid[(best + 1).min(grid.len() - 1)];
+        let (mut lo, mut hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(grid.len() - 1)]);
+        // The grid leaves out time constants within 3× of a branch already there; so does the refinement.
+        for t in &cur.terms {
+            if let Term::Relax(other) = *t
+                && fam == Family::Relaxation
+            {
+                if other < shape { lo = lo.max(3.0 * other) } else { hi = hi.min(other / 3.0) }
+            }
+        }
         let logscale = fam != Family::StiffnessExponent;
         type Map = fn(f64) -> f64;
         let (tx, fx): (Map, Map) = if logscale { (f64::ln, f64::exp) } else { (|x| x, |x| x) };
@@ -1219,7 +1226,7 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
 /// shape read from a joint fit as the surface position's is (variable projection) — within their bounds
 /// (τ in the screening grid's range with branches 3× apart, v₀ up to the saturating speed), halving a step
 /// that does not lower the in-sample error. True if any shape moved.
-fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64)], v_sat: f64) -> bool {
+fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64)], (p95, v_sat): (f64, f64)) -> bool {
     let shaped: Vec<usize> =
         (0..st.terms.len()).filter(|&j| matches!(st.terms[j], Term::Relax(_) | Term::Hyst(_))).collect();
     if shaped.is_empty() {
@@ -1240,6 +1247,42 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
         }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
     };
     let (start, start_sse) = (st.terms.clone(), cur.sse);
+    // First the shapes re-chosen on their grids, the others held — two relaxation branches as a pair: a
+    // branch chosen early (between two time scales, before the second branch was in) sits in a basin that
+    // Gauss–Newton does not leave.
+    let try_terms = |st: &mut Structure, cur: &mut Fit, set: &[(usize, Term)]| {
+        let mut trial = st.clone();
+        for &(j, t) in set {
+            trial.terms[j] = t;
+        }
+        let ft = fit::fit(d, &trial);
+        if ft.sse < cur.sse {
+            *st = trial;
+            *cur = ft;
+        }
+    };
+    if let [i, j] = shaped.iter().copied().filter(|&j| matches!(st.terms[j], Term::Relax(_))).collect::<Vec<_>>()[..] {
+        let mut without = st.clone();
+        without.terms.retain(|t| !matches!(t, Term::Relax(_)));
+        let grid = Family::Relaxation.grid(p95, &without);
+        for (m, &a) in grid.iter().enumerate() {
+            for &b in grid[m + 1..].iter().filter(|&&b| b >= 3.0 * a) {
+                try_terms(st, cur, &[(i, Term::Relax(a)), (j, Term::Relax(b))]);
+            }
+        }
+    }
+    for &j in &shaped {
+        let fam = if matches!(st.terms[j], Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
+        let mut without = st.clone();
+        without.terms.remove(j);
+        for x in fam.grid(p95, &without).into_iter().filter(|&x| fam != Family::Hysteresis || x <= v_sat) {
+            try_terms(st, cur, &[(j, fam.term(x).unwrap_or(st.terms[j]))]);
+        }
+    }
+    if st.terms != start {
+        *st = refine_surface(d, st).0;
+        *cur = fit::fit(d, st);
+    }
     const H: f64 = 1e-3;
     for _ in 0..POLISH_ITERATIONS {
         let mut cols = fit::columns(d, st);
@@ -1490,7 +1533,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         if accepted {
             rounds += 1;
             polished = false;
-        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, v_sat) {
+        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat)) {
             break;
         } else {
             polished = true;
@@ -1517,7 +1560,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
     }
 
-    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, v_sat) {
+    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat)) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         st.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         // The re-masked fit moves the surface again (its position column would otherwise carry an offset
