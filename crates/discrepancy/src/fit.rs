@@ -95,6 +95,8 @@ pub(crate) struct Data<'a> {
     /// series carries tangential force.
     pub lateral_axis: Option<[f64; 3]>,
     pub lateral: Vec<f64>,
+    /// Columns already computed (see [`ColumnCache`]).
+    pub cache: std::cell::RefCell<ColumnCache>,
 }
 
 /// The principal direction u of the tangential forces (largest Σ(F_t·u)²): the leading eigenvector of
@@ -140,7 +142,7 @@ impl<'a> Data<'a> {
             Some(u) => s.tangential.iter().map(|f| f[0] * u[0] + f[1] * u[1] + f[2] * u[2]).collect(),
             None => Vec::new(),
         };
-        Data { s, time, since_tare, dt, folds, clamped, lateral_axis, lateral }
+        Data { s, time, since_tare, dt, folds, clamped, lateral_axis, lateral, cache: Default::default() }
     }
 }
 
@@ -170,72 +172,69 @@ pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
     columns_masked(d, st, &st.clamped)
 }
 
+/// A column of the design: the base law's two, or a term's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Column {
+    Elastic,
+    Rate,
+    Term(Term),
+}
+
+/// Columns already computed, unmasked, each with what it depends on besides its own shape (the exponents,
+/// the surface position and drift), most recently used last: a screen tries a dozen shapes of one term on a
+/// structure whose other columns stay the same, the exponent's screen leaves the branches alone, and a
+/// delayed fit or a re-mask reads the same columns under other masks.
+#[derive(Default)]
+pub(crate) struct ColumnCache {
+    columns: Vec<(Column, [f64; 5], Vec<f64>)>,
+}
+
+/// Columns a [`ColumnCache`] keeps (19 MB at 60 000 samples).
+const CACHED_COLUMNS: usize = 40;
+
 /// [`columns`] with the given samples masked where the law clamps (instead of the structure's).
 fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
-    let s = d.s;
-    let n = s.len();
-    let zeff: Vec<f64> = (0..n).map(|i| s.z[i] - st.shift - st.offset_rate * d.time[i]).collect();
+    let mut cache = d.cache.borrow_mut();
+    let cache = &mut cache.columns;
+    let wanted = [Column::Elastic, Column::Rate].into_iter().chain(st.terms.iter().map(|&t| Column::Term(t)));
+    let mut zeff: Option<Vec<f64>> = None;
     let mut cols = Vec::with_capacity(2 + st.terms.len());
-    cols.push(zeff.iter().map(|&z| if z > 0.0 { pow(z, st.a) } else { 0.0 }).collect());
-    cols.push(
-        (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.b) * signed_pow(s.zdot[i], st.c) } else { 0.0 }).collect(),
-    );
-    // The smallest deformation used where a column has a negative power of z (a < 1 or ln z).
-    let zmin = 1e-3 * zeff.iter().cloned().fold(0.0, f64::max).max(1e-9);
-    for t in &st.terms {
-        let col: Vec<f64> = match *t {
-            Term::Bias => vec![1.0; n],
-            Term::SensorDrift => d.since_tare.clone(),
-            Term::Relax(tau) => {
-                // The branch of unit stiffness, updated as ContactModel::step_surface updates it.
-                let mut x = 0.0;
-                // exp(−dt/τ) again only where the step changes (a steady rate: once).
-                let mut last = (f64::NAN, 0.0);
-                (0..n)
-                    .map(|i| {
-                        if zeff[i] > 0.0 {
-                            let change = if i == 0 { s.zdot[i] * d.dt[i] } else { zeff[i] - zeff[i - 1].max(0.0) };
-                            x = if d.dt[i] > 0.0 {
-                                if d.dt[i] != last.0 {
-                                    last = (d.dt[i], (-d.dt[i] / tau).exp());
-                                }
-                                maxwell_step_with_decay(x, change, d.dt[i], tau, last.1)
-                            } else {
-                                maxwell_step(x, change, 0.0, tau)
-                            };
-                        } else {
-                            x = 0.0;
-                        }
-                        x
-                    })
-                    .collect()
-            }
-            Term::Hyst(v0) => {
-                (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * (s.zdot[i] / v0).tanh() } else { 0.0 }).collect()
-            }
-            Term::Shift => {
-                (0..n).map(|i| if zeff[i] > 0.0 { -st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 }).collect()
-            }
-            Term::OffsetLin => (0..n)
-                .map(|i| if zeff[i] > 0.0 { -d.time[i] * st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 })
-                .collect(),
-            Term::ExpDeriv => {
-                (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * zeff[i].max(zmin).ln() } else { 0.0 }).collect()
-            }
-            Term::Crosstalk if d.lateral.len() == n => d.lateral.clone(),
-            Term::Gravity if s.gravity_change.len() == n => s.gravity_change.clone(),
-            Term::Crosstalk | Term::Gravity => vec![0.0; n],
+    for id in wanted {
+        // What the column depends on: the surface (not the sensor's columns), and the exponent its
+        // power of z has (the branches have none).
+        let key = match id {
+            Column::Term(t) if t.of_sensor() => [0.0; 5],
+            Column::Term(Term::Relax(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
+            Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
+            _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
         };
-        cols.push(col);
-    }
-    for (j, col) in cols.iter_mut().enumerate() {
-        if j < 2 || !st.terms[j - 2].of_sensor() {
+        let mut col = match cache.iter().position(|(c, k, _)| *c == id && *k == key) {
+            Some(i) => {
+                let hit = cache.remove(i);
+                let col = hit.2.clone();
+                cache.push(hit);
+                col
+            }
+            None => {
+                let zeff = zeff.get_or_insert_with(|| {
+                    (0..d.s.len()).map(|i| d.s.z[i] - st.shift - st.offset_rate * d.time[i]).collect()
+                });
+                let col = column(d, st, zeff, id);
+                if cache.len() >= CACHED_COLUMNS {
+                    cache.remove(0);
+                }
+                cache.push((id, key, col.clone()));
+                col
+            }
+        };
+        if !matches!(id, Column::Term(t) if t.of_sensor()) {
             for (v, &c) in col.iter_mut().zip(clamped) {
                 if c {
                     *v = 0.0;
                 }
             }
         }
+        cols.push(col);
     }
     // The sensor reads everything late: clamped where the surface lets go, then delayed.
     if st.delay > 0.0 {
@@ -244,6 +243,71 @@ fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
         }
     }
     cols
+}
+
+/// One unmasked column at the effective deformation `zeff`.
+fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
+    let s = d.s;
+    let n = s.len();
+    // The smallest deformation used where a column has a negative power of z (a < 1 or ln z).
+    let zmin = || 1e-3 * zeff.iter().cloned().fold(0.0, f64::max).max(1e-9);
+    let t = match id {
+        Column::Elastic => return zeff.iter().map(|&z| if z > 0.0 { pow(z, st.a) } else { 0.0 }).collect(),
+        Column::Rate => {
+            return (0..n)
+                .map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.b) * signed_pow(s.zdot[i], st.c) } else { 0.0 })
+                .collect();
+        }
+        Column::Term(t) => t,
+    };
+    match t {
+        Term::Bias => vec![1.0; n],
+        Term::SensorDrift => d.since_tare.clone(),
+        Term::Relax(tau) => {
+            // The branch of unit stiffness, updated as ContactModel::step_surface updates it.
+            let mut x = 0.0;
+            // exp(−dt/τ) again only where the step changes (a steady rate: once).
+            let mut last = (f64::NAN, 0.0);
+            (0..n)
+                .map(|i| {
+                    if zeff[i] > 0.0 {
+                        let change = if i == 0 { s.zdot[i] * d.dt[i] } else { zeff[i] - zeff[i - 1].max(0.0) };
+                        x = if d.dt[i] > 0.0 {
+                            if d.dt[i] != last.0 {
+                                last = (d.dt[i], (-d.dt[i] / tau).exp());
+                            }
+                            maxwell_step_with_decay(x, change, d.dt[i], tau, last.1)
+                        } else {
+                            maxwell_step(x, change, 0.0, tau)
+                        };
+                    } else {
+                        x = 0.0;
+                    }
+                    x
+                })
+                .collect()
+        }
+        Term::Hyst(v0) => {
+            (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * (s.zdot[i] / v0).tanh() } else { 0.0 }).collect()
+        }
+        Term::Shift => {
+            let zmin = zmin();
+            (0..n).map(|i| if zeff[i] > 0.0 { -st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 }).collect()
+        }
+        Term::OffsetLin => {
+            let zmin = zmin();
+            (0..n)
+                .map(|i| if zeff[i] > 0.0 { -d.time[i] * st.a * pow(zeff[i].max(zmin), st.a - 1.0) } else { 0.0 })
+                .collect()
+        }
+        Term::ExpDeriv => {
+            let zmin = zmin();
+            (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * zeff[i].max(zmin).ln() } else { 0.0 }).collect()
+        }
+        Term::Crosstalk if d.lateral.len() == n => d.lateral.clone(),
+        Term::Gravity if s.gravity_change.len() == n => s.gravity_change.clone(),
+        Term::Crosstalk | Term::Gravity => vec![0.0; n],
+    }
 }
 
 /// `x` read `delay` late: x(t − delay) by linear interpolation between samples (the first value before the

@@ -1279,10 +1279,6 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
             try_terms(st, cur, &[(j, fam.term(x).unwrap_or(st.terms[j]))]);
         }
     }
-    if st.terms != start {
-        *st = refine_surface(d, st).0;
-        *cur = fit::fit(d, st);
-    }
     const H: f64 = 1e-3;
     for _ in 0..POLISH_ITERATIONS {
         let mut cols = fit::columns(d, st);
@@ -1305,8 +1301,8 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
             for (m, &j) in shaped.iter().enumerate() {
                 trial.terms[j] = scaled(st.terms[j], step[m].exp());
             }
+            // The surface position's column stays in the fit: it is moved into the structure once, below.
             if step.iter().all(|x| x.is_finite()) && within_bounds(&trial) {
-                let (trial, _, _) = refine_surface(d, &trial);
                 let ft = fit::fit(d, &trial);
                 if ft.sse < cur.sse {
                     *st = trial;
@@ -1324,6 +1320,8 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
     if cur.sse >= start_sse {
         return false;
     }
+    *st = refine_surface(d, st).0;
+    *cur = fit::fit(d, st);
     for &j in &shaped {
         let (before, after) = (start[j], st.terms[j]);
         let fam = if matches!(before, Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
