@@ -1225,8 +1225,16 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
 /// Gauss–Newton on their logarithms — each shape's column differentiated numerically, the change of its
 /// shape read from a joint fit as the surface position's is (variable projection) — within their bounds
 /// (τ in the screening grid's range with branches 3× apart, v₀ up to the saturating speed), halving a step
-/// that does not lower the in-sample error. True if any shape moved.
-fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64)], (p95, v_sat): (f64, f64)) -> bool {
+/// that does not lower the in-sample error. With `regrid`, each shape is first re-chosen on its grid. True if
+/// any shape moved.
+fn polish(
+    d: &Data,
+    st: &mut Structure,
+    cur: &mut Fit,
+    order: &mut [(Family, f64)],
+    (p95, v_sat): (f64, f64),
+    regrid: bool,
+) -> bool {
     let shaped: Vec<usize> =
         (0..st.terms.len()).filter(|&j| matches!(st.terms[j], Term::Relax(_) | Term::Hyst(_))).collect();
     if shaped.is_empty() {
@@ -1261,7 +1269,8 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
             *cur = ft;
         }
     };
-    if let [i, j] = shaped.iter().copied().filter(|&j| matches!(st.terms[j], Term::Relax(_))).collect::<Vec<_>>()[..] {
+    let relaxation: Vec<usize> = shaped.iter().copied().filter(|&j| matches!(st.terms[j], Term::Relax(_))).collect();
+    if let (&[i, j], true) = (&relaxation[..], regrid) {
         let mut without = st.clone();
         without.terms.retain(|t| !matches!(t, Term::Relax(_)));
         let grid = Family::Relaxation.grid(p95, &without);
@@ -1271,7 +1280,7 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
             }
         }
     }
-    for &j in &shaped {
+    for &j in shaped.iter().filter(|_| regrid) {
         let fam = if matches!(st.terms[j], Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
         let mut without = st.clone();
         without.terms.remove(j);
@@ -1280,7 +1289,7 @@ fn polish(d: &Data, st: &mut Structure, cur: &mut Fit, order: &mut [(Family, f64
         }
     }
     const H: f64 = 1e-3;
-    for _ in 0..POLISH_ITERATIONS {
+    for _ in 0..if regrid { POLISH_ITERATIONS } else { POLISH_ITERATIONS / 2 } {
         let mut cols = fit::columns(d, st);
         let p = cols.len();
         for &j in &shaped {
@@ -1524,6 +1533,10 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                     cur = fr;
                 }
             }
+            // The shapes of the effects named so far, refined together with the new one, before the next
+            // round judges what is left (a branch's τ a few per cent off leaves a residual that a proxy
+            // second branch would take).
+            polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), false);
             true
         };
         // Before giving up, polish the shapes in the current structure and look once more: a shape chosen
@@ -1531,7 +1544,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         if accepted {
             rounds += 1;
             polished = false;
-        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat)) {
+        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), true) {
             break;
         } else {
             polished = true;
@@ -1558,7 +1571,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
     }
 
-    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat)) {
+    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), true) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         st.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         // The re-masked fit moves the surface again (its position column would otherwise carry an offset
