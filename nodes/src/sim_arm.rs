@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
+use softcontact_contact::ContactModel;
 use softcontact_sim::Simulator;
 use softcontact_wire::{fri, rdt};
 
@@ -220,6 +221,10 @@ pub struct Params {
     /// The simulated Net F/T box's RDT address.
     pub rdt_bind: SocketAddr,
     pub surface: SurfaceKind,
+    /// A contact model file (the model YAML `softcontact discrepancy` and `identify` write) for the
+    /// surface's law and effects in place of the preset's; "" keeps the preset. The `surface` preset still
+    /// places the surface (none: no surface, and no file either) and chooses the sensor.
+    pub surface_model: String,
     /// Stop after this many simulated seconds (0: run until stopped).
     pub seconds: f64,
     /// Fraction of FRI datagrams lost once commanding, in each direction.
@@ -239,6 +244,7 @@ impl Default for Params {
             fri_bind: ([127, 0, 0, 1], 0).into(),
             rdt_bind: ([127, 0, 0, 1], 49152).into(),
             surface: SurfaceKind::Sponge,
+            surface_model: String::new(),
             seconds: 0.0,
             drop_rate: 0.0,
             rdt_rate: 1000.0,
@@ -248,8 +254,24 @@ impl Default for Params {
     }
 }
 
+impl Params {
+    /// The contact model of `surface_model`, read and checked (None: the preset's).
+    pub fn surface_model(&self) -> Result<Option<ContactModel>, String> {
+        if self.surface_model.is_empty() {
+            return Ok(None);
+        }
+        if self.surface == SurfaceKind::None {
+            return Err("surface_model given with surface none".into());
+        }
+        let text = std::fs::read_to_string(&self.surface_model)
+            .map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
+        ContactModel::from_yaml(&text).map(Some).map_err(|e| format!("surface_model {}: {e}", self.surface_model))
+    }
+}
+
 impl crate::params::NodeParams for Params {
     fn validate(&self) -> Result<(), String> {
+        self.surface_model()?;
         if !(0.0..1.0).contains(&self.drop_rate) {
             return Err(format!("drop_rate must lie in [0, 1), not {}", self.drop_rate));
         }
@@ -260,5 +282,37 @@ impl crate::params::NodeParams for Params {
             return Err(format!("rdt_rate must lie in 1..=7000 Hz, not {}", self.rdt_rate));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::NodeParams;
+
+    #[test]
+    fn a_surface_model_file_replaces_the_presets_law_and_a_bad_one_is_refused() {
+        let dir = std::env::temp_dir().join(format!("sim_arm_model_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let good = dir.join("augmented.yaml");
+        let mut model = softcontact_sim::lab_sponge();
+        model.stiffness = 20_000.0;
+        std::fs::write(&good, model.to_yaml()).unwrap();
+        let p = Params { surface_model: good.display().to_string(), ..Params::default() };
+        assert!(p.validate().is_ok());
+        assert_eq!(p.surface_model().unwrap(), Some(model));
+        assert_eq!(Params::default().surface_model().unwrap(), None);
+        // A missing file, one that is no model, a non-finite or negative law, and a file without a surface.
+        let bad = dir.join("bad.yaml");
+        for text in ["kind: kelvin_voigt\nstiffness: .nan\n", "kind: kelvin_voigt\nstiffness: -5.0\n", "hello: 1\n"] {
+            std::fs::write(&bad, text).unwrap();
+            let p = Params { surface_model: bad.display().to_string(), ..Params::default() };
+            assert!(p.validate().unwrap_err().contains("surface_model"), "{text}");
+        }
+        let missing = Params { surface_model: dir.join("none.yaml").display().to_string(), ..Params::default() };
+        assert!(missing.validate().is_err());
+        let nowhere = Params { surface: SurfaceKind::None, ..p };
+        assert!(nowhere.validate().unwrap_err().contains("surface none"));
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

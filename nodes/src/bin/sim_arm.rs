@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
         SurfaceKind::LabDice => Some(softcontact_sim::lab_dice()),
         SurfaceKind::None => None,
     };
-    match model {
+    match p.surface_model().map_err(anyhow::Error::msg)?.or(model) {
         Some(m) => config.surface.as_mut().expect("preset has a surface").model = m,
         None => config.surface = None,
     }
