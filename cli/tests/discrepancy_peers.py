@@ -38,10 +38,12 @@ def profile(t):
         return (z, -0.02) if z > -0.005 else (-0.005, 0.0)
     s = t - touch
     w = 2 * math.pi
-    blend = min(s / 0.5, 1.0)
+    # From the ramp into the pushes over half a second; the rate is z's own derivative, blend's included.
+    blend, blend_rate = (s / 0.5, 1 / 0.5) if s < 0.5 else (1.0, 0.0)
     mid, amp = (lo + hi) / 2, (hi - lo) / 2
     target = mid - amp * math.cos(w * s)
-    return blend * target + (1 - blend) * speed * s, blend * amp * w * math.sin(w * s) + (1 - blend) * speed
+    rate = blend * amp * w * math.sin(w * s) + (1 - blend) * speed + blend_rate * (target - speed * s)
+    return blend * target + (1 - blend) * speed * s, rate
 
 
 def messages(ts, rate):

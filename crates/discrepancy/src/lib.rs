@@ -1271,6 +1271,9 @@ fn polish(
     };
     let relaxation: Vec<usize> = shaped.iter().copied().filter(|&j| matches!(st.terms[j], Term::Relax(_))).collect();
     if let (&[i, j], true) = (&relaxation[..], regrid) {
+        // The faster branch stays the faster (its slot in `order` keeps its round).
+        let tau = |k: usize| if let Term::Relax(x) = st.terms[k] { x } else { 0.0 };
+        let (i, j) = if tau(i) < tau(j) { (i, j) } else { (j, i) };
         let mut without = st.clone();
         without.terms.retain(|t| !matches!(t, Term::Relax(_)));
         let grid = Family::Relaxation.grid(p95, &without);
@@ -1342,7 +1345,7 @@ fn polish(
     true
 }
 
-/// Gauss–Newton iterations of [`polish`].
+/// Gauss–Newton iterations of [`polish`] (half of them after each accepted round).
 const POLISH_ITERATIONS: usize = 8;
 
 /// The whole workflow: phases, noise floor, baseline gap, naming, adding; see the crate documentation.
