@@ -43,8 +43,9 @@ const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
 fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) -> anyhow::Result<Series> {
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let n = Vector3::new(x, y, z).normalize();
-    let mut tool_to_sensor = ForcePairing::urdf_tool_to_sensor_pose()?;
-    let mut pairing = ForcePairing::new(tool_to_sensor.rotation, n, 0.05);
+    let mut tool_to_sensor = geometry::lwr4_tool_to_sensor();
+    let mut pairing = ForcePairing::new(tool_to_sensor.rotation, n, 0.05)
+        .ok_or_else(|| anyhow::anyhow!("--normal must be a non-zero direction"))?;
     let (mut t, mut zs, mut zdot, mut f, mut tares) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut tangential, mut gravity) = (Vec::new(), Vec::new());
     let (mut positions, mut rotations, mut wrenches) = (Vec::new(), Vec::new(), Vec::new());
@@ -64,7 +65,7 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                     (softcontact_dynamics::lwr4::TOOL_FRAME, softcontact_dynamics::lwr4::FT_SENSOR_FRAME);
                 if let Some(pose) = geometry::static_transform(&[&tf], tool, sensor) {
                     tool_to_sensor = pose;
-                    pairing.tool_to_sensor = pose.rotation;
+                    pairing.geometry.tool_to_sensor = pose.rotation;
                 }
             }
             POSE => {

@@ -11,8 +11,10 @@ use softcontact_sim::{SimConfig, SimError, Simulator};
 use softcontact_wire::fri::InterfaceState;
 
 use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
-use crate::deformation_controller::{ControlError, ControllerState, DeformationController};
-use crate::ft_sensor::{FtConfig, FtOutput, FtSensorNode};
+use crate::deformation_controller::{
+    self, ControlError, ControllerNode, ControllerState, DeformationController, JointSample, Reply,
+};
+use crate::ft_sensor::{self, FtConfig, FtOutput, FtSensorNode, StartupTare};
 use crate::lwr_driver::{DriverConfig, DriverError, DriverOutput, LwrDriver, Measured};
 
 #[derive(Debug, thiserror::Error)]
@@ -50,35 +52,30 @@ pub struct Tick {
     pub estimator: ContactStateOut,
 }
 
-/// The simulated cell and the nodes, wired as `launch-scripts/sim.sh` wires their processes.
+/// The simulated cell and the nodes, wired as `launch-scripts/sim.sh` wires them: the very node
+/// structs and policies of the graph (the controller's [`ControllerNode`], the F/T node's start-up tare),
+/// run on the simulator's clock.
 pub struct Cell {
     pub sim: Simulator,
     pub driver: LwrDriver,
     pub ft: FtSensorNode,
-    pub controller: DeformationController,
+    pub controller: ControllerNode,
     pub estimator: ContactEstimatorNode,
-    normal: Vector3<f64>,
     model: Model,
     data: Data,
     sensor: FrameId,
     orientation: Option<UnitQuaternion<f64>>,
-    /// Command cycles before the F/T node tares itself (the ft_sensor node's `tare_after`).
-    tare_after: usize,
-    tared: bool,
+    startup_tare: StartupTare,
     pending_tare: Option<[f64; 6]>,
-    commanding: usize,
 }
 
 impl Cell {
-    /// The cell with the F/T node set up for the LWR's hand (tared after 100 command cycles, as the
-    /// ft_sensor node does at start-up, with the node's checks) and the estimator and controller given.
-    pub fn new(
-        sim: SimConfig,
-        controller: DeformationController,
-        estimator: ContactEstimatorNode,
-        normal: Vector3<f64>,
-    ) -> Result<Self, CellError> {
+    /// The cell with the F/T node set up for the LWR's hand (its parameters' defaults: tared at start-up
+    /// after `tare_after`, with the node's checks), the estimator, and the controller node around `law`
+    /// (the node's default policy, the law's normal).
+    pub fn new(sim: SimConfig, law: DeformationController, estimator: ContactEstimatorNode) -> Result<Self, CellError> {
         let model = lwr4::model();
+        let ft_params = ft_sensor::Params::default();
         let ft = FtSensorNode::new(FtConfig {
             calibration: sim.sensor.calibration,
             tool: lwr4::tool_load(),
@@ -86,22 +83,25 @@ impl Cell {
             low_pass: None,
             sample_rate: 1000.0,
         })
-        .map_err(CellError::Ft)?;
+        .map_err(CellError::Ft)?
+        .with_tare_policy(ft_params.tare_policy());
+        let params = deformation_controller::Params {
+            normal: law.config().normal.into(),
+            restart_after: law.config().restart_after,
+            ..Default::default()
+        };
         Ok(Self {
             sim: Simulator::new(sim)?,
             driver: LwrDriver::new(DriverConfig::default()),
             ft,
-            controller,
+            controller: ControllerNode::new(&params, law)?,
             estimator,
-            normal: normal.try_normalize(1e-9).unwrap_or_else(|| Vector3::new(0.0, 0.0, -1.0)),
             data: model.data(),
             sensor: model.frame_id(lwr4::FT_SENSOR_FRAME).map_err(ControlError::from)?,
             model,
             orientation: None,
-            tare_after: 100,
-            tared: false,
+            startup_tare: StartupTare::new(ft_params.tare_after),
             pending_tare: None,
-            commanding: 0,
         })
     }
 
@@ -109,14 +109,14 @@ impl Cell {
     /// hand is in contact or moving, or the reading is unsteady.
     pub fn tare(&mut self) -> Result<(), CellError> {
         self.pending_tare = Some(self.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?);
-        self.tared = true;
+        self.startup_tare.taken();
         Ok(())
     }
 
     /// One 1 ms cycle through the wire formats, read → update → write as one process runs it: the F/T
     /// node reads the sensor's newest record, the driver reads the KRC's measurement, the controller
-    /// computes the torque for that very measurement and the driver answers with it (or holds); then the
-    /// simulator moves. `None` until the KRC commands.
+    /// node computes the torque for that very measurement and the driver answers with it (or holds); then
+    /// the simulator moves. `None` until the KRC commands.
     pub fn cycle(&mut self) -> Result<Option<Tick>, CellError> {
         let time = self.sim.time();
         let record = self.sim.ft_record().encode();
@@ -128,34 +128,32 @@ impl Cell {
         let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
         self.orientation = Some(orientation);
         let ft = self.ft.handle(&record, Some(&orientation)).map_err(|e| CellError::Ft(e.to_string()))?;
-        if out.state != InterfaceState::Command {
+        if let Some(Ok(bias)) = self.startup_tare.poll(&mut self.ft, &orientation, time) {
+            self.pending_tare = Some(bias);
+        }
+        // /ft_sensor/wrench: published once tared, an invalid sample (saturated, an error bit) withheld.
+        match ft.compensated.filter(|_| self.startup_tare.tared() && !ft.invalid) {
+            Some(c) => self.controller.on_force(time, Vector3::new(c[0], c[1], c[2]), time),
+            None => self.controller.force_withheld(),
+        }
+        let commanding = out.state == InterfaceState::Command;
+        let joint_state =
+            JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
+        let step = self.controller.on_joint_state(&joint_state, time);
+        if !commanding {
             self.write(measured)?;
             return Ok(None);
         }
-        self.commanding += 1;
-        // The start-up tare, retried every `tare_after` cycles while refused, as the node retries it.
-        if self.commanding.is_multiple_of(self.tare_after) && !self.tared {
-            let _refused = self.tare();
-        }
-        let force_world = match ft.compensated.filter(|_| self.tared && !ft.invalid) {
-            Some(c) => orientation * Vector3::new(c[0], c[1], c[2]),
-            None => Vector3::zeros(),
-        };
-        let f = (-force_world.dot(&self.normal)).max(0.0);
-        self.controller.follow_session(Some(out.session), true, self.sim.krc_cycle());
-        // Until the F/T node has tared it publishes no /ft_sensor/wrench, and an invalid sample
-        // (saturated, an error bit) is withheld from it: no tick, and the driver holds. A failed tick
-        // also holds: never an older torque.
-        let withheld = !self.tared || ft.invalid;
-        let tick = (!withheld).then(|| self.controller.tick(&out.q, &out.dq, f, &force_world));
-        let (torque, controller, refused) = match tick {
-            None => (None, ControllerState { f, ..Default::default() }, None),
-            Some(Ok((tau, state))) => (Some(tau), state, None),
-            Some(Err(e)) => (None, ControllerState { f, ..Default::default() }, Some(e)),
-        };
+        let f = self.controller.geometry().normal_force(&step.force_world);
         let v = out.tool_twist;
         let estimator =
             self.estimator.update(time, &out.tool_pose.translation.vector, &Vector3::new(v[0], v[1], v[2]), f)?;
+        // On the FRI thread nothing is late: anything but a torque for this measurement holds at once.
+        let (torque, refused) = match step.reply {
+            Reply::Torque(tau) => (Some(tau), None),
+            Reply::Hold(e) => (None, Some(e)),
+            Reply::Nothing(_) => (None, None),
+        };
         match torque {
             // A refused torque (not 7 finite values) clears the command: the driver holds.
             Some(tau) => self.driver.set_command(&tau).map_or((), |_| ()),
@@ -166,10 +164,10 @@ impl Cell {
             time,
             driver,
             ft,
-            tared: self.tared,
+            tared: self.startup_tare.tared(),
             tare: self.pending_tare.take(),
-            force_world,
-            controller,
+            force_world: step.force_world,
+            controller: ControllerState { f, ..step.state },
             torque,
             refused,
             estimator,
@@ -187,7 +185,7 @@ impl Cell {
     /// Cycles until the KRC commands and the F/T node has tared (at most `limit` cycles).
     pub fn start(&mut self, limit: usize) -> Result<Tick, CellError> {
         for _ in 0..limit {
-            if let Some(t) = self.cycle()?.filter(|_| self.tared) {
+            if let Some(t) = self.cycle()?.filter(|t| t.tared) {
                 return Ok(t);
             }
         }

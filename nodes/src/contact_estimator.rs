@@ -4,6 +4,8 @@
 //! and estimates where the surface really is (the onset threshold fires late on a soft surface).
 
 use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::geometry::ContactGeometry;
 use softcontact_contact::{
     ContactError, ContactModel, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample, WindowEstimator,
     estimate_contact_offset,
@@ -302,9 +304,8 @@ pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), Co
 /// tool's position and velocity. The node and `softcontact identify` pair readings the same way.
 #[derive(Debug, Clone)]
 pub struct ForcePairing {
-    /// The sensor frame's rotation in the tool frame (/tf_static, or the URDF).
-    pub tool_to_sensor: UnitQuaternion<f64>,
-    normal: Vector3<f64>,
+    /// The normal and the sensor's mounting (its `tool_to_sensor` from /tf_static, or the URDF).
+    pub geometry: ContactGeometry,
     stale_after: f64,
     /// Tool position, rotation and the time they were taken [s].
     pose: Option<(Vector3<f64>, UnitQuaternion<f64>, f64)>,
@@ -328,30 +329,20 @@ pub struct Paired {
 }
 
 impl ForcePairing {
-    pub fn new(tool_to_sensor: UnitQuaternion<f64>, normal: Vector3<f64>, stale_after: f64) -> Self {
-        Self {
-            tool_to_sensor,
-            normal: normal.normalize(),
+    /// `None` for a zero or non-finite normal.
+    pub fn new(tool_to_sensor: UnitQuaternion<f64>, normal: Vector3<f64>, stale_after: f64) -> Option<Self> {
+        Some(Self {
+            geometry: ContactGeometry::new(normal, tool_to_sensor)?,
             stale_after,
             pose: None,
             velocity: Vector3::zeros(),
             twists_seen: false,
-        }
+        })
     }
 
     /// The sensor's rotation in the tool frame as the URDF gives it.
     pub fn urdf_tool_to_sensor() -> Result<UnitQuaternion<f64>, softcontact_dynamics::Error> {
-        Ok(Self::urdf_tool_to_sensor_pose()?.rotation)
-    }
-
-    /// The sensor frame's pose in the tool frame, from the URDF (/tf_static carries the same).
-    pub fn urdf_tool_to_sensor_pose() -> Result<nalgebra::Isometry3<f64>, softcontact_dynamics::Error> {
-        use softcontact_dynamics::lwr4;
-        let model = lwr4::model();
-        let mut data = model.data();
-        model.forward_kinematics(&mut data, &[0.0; 7]);
-        Ok(model.frame_pose(&data, model.frame_id(lwr4::TOOL_FRAME)?).inverse()
-            * model.frame_pose(&data, model.frame_id(lwr4::FT_SENSOR_FRAME)?))
+        Ok(crate::geometry::lwr4_tool_to_sensor().rotation)
     }
 
     pub fn pose(&mut self, t: f64, position: Vector3<f64>, rotation: UnitQuaternion<f64>) {
@@ -376,9 +367,10 @@ impl ForcePairing {
         if t - seen > self.stale_after || !force_in_sensor.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let sensor_rotation = rotation * self.tool_to_sensor;
-        let force = sensor_rotation * force_in_sensor;
-        let normal_reading = -force.dot(&self.normal);
+        let geometry = &self.geometry;
+        let sensor_rotation = geometry.sensor_rotation(&rotation);
+        let force = geometry.world_force(&rotation, &force_in_sensor);
+        let normal_reading = geometry.normal_reading(&force);
         Some(Paired {
             position,
             velocity: self.velocity,

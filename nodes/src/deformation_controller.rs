@@ -25,6 +25,9 @@ use softcontact_control::{
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 
+mod node;
+pub use node::{ControllerNode, JointSample, NodeCounters, Notices, Reply, Silence, Step};
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerConfig {
     /// Contact direction n in the world: the way the hand moves to compress the surface.
@@ -49,7 +52,8 @@ pub struct ControllerConfig {
     pub max_surface_offset: f64,
     /// Joint states interrupted this long [s] mean a new KRC session or a moved arm: approach again.
     pub restart_after: f64,
-    /// Control period [s].
+    /// Nominal control period [s]: the step of the first tick after a (re)start; later ticks step by the
+    /// time between their joint states.
     pub period: f64,
 }
 
@@ -104,6 +108,8 @@ pub enum ControlError {
     ZeroNormal,
     #[error("{0} is not a finite number: no torque this tick")]
     NonFinite(&'static str),
+    #[error("joint state at {time} s is not newer than the last one ticked ({last} s): no torque this tick")]
+    TimeNotAdvancing { time: f64, last: f64 },
     #[error("implausible contact model refused: {0}")]
     ImplausibleModel(String),
     /// A move across the surface or a tilt beyond its limit (see [`MAX_LATERAL`], [`MAX_TILT`]).
@@ -242,7 +248,9 @@ pub struct DeformationController {
     origin: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
     /// The hold across the surface and in orientation, relative to `start`; `None` holds the start.
     across: Option<AcrossMove>,
+    /// Time since the (re)start on the joint states' clock [s], and that clock's reading at the last tick.
     time: f64,
+    last_tick: Option<f64>,
     plan: Option<(Trajectory, f64)>,
     f_cmd: f64,
     contact_lost: bool,
@@ -278,6 +286,7 @@ impl DeformationController {
             origin: None,
             across: None,
             time: 0.0,
+            last_tick: None,
             plan: None,
             f_cmd: 0.0,
             contact_lost: false,
@@ -345,12 +354,16 @@ impl DeformationController {
     }
 
     /// The measured force's rate [N/s], smoothed over ~10 ms so that sensor noise does not trip it.
-    fn force_rate(&mut self, force: f64) -> f64 {
-        let alpha = (self.config.period / 0.01).min(1.0);
+    fn force_rate(&mut self, force: f64, dt: f64) -> f64 {
+        let alpha = (dt / 0.01).min(1.0);
         let (previous, rate) = self.force_trend.unwrap_or((force, 0.0));
-        let rate = rate + alpha * ((force - previous) / self.config.period - rate);
+        let rate = rate + alpha * ((force - previous) / dt - rate);
         self.force_trend = Some((force, rate));
         rate
+    }
+
+    pub fn config(&self) -> &ControllerConfig {
+        &self.config
     }
 
     pub fn contact_model(&self) -> &ContactModel {
@@ -388,6 +401,7 @@ impl DeformationController {
         self.start = None;
         self.across = None;
         self.time = 0.0;
+        self.last_tick = None;
         self.plan = None;
         self.f_cmd = 0.0;
         self.contact_lost = false;
@@ -572,10 +586,14 @@ impl DeformationController {
         }
     }
 
-    /// One control tick: total joint torques (gravity included) for the measured joint state, the
-    /// measured normal force f and the contact force on the hand in the world.
+    /// One control tick: total joint torques (gravity included) for the joint state measured at `time`
+    /// (its stamp, on any clock that advances with the arm: the driver's, or the simulation's), the
+    /// measured normal force f and the contact force on the hand in the world. Plans run on that clock;
+    /// a time that does not advance is refused (a replayed or reordered joint state), and a step longer
+    /// than `restart_after` counts as that long (the node restarts the controller after such a gap).
     pub fn tick(
         &mut self,
+        time: f64,
         q: &[f64; 7],
         dq: &[f64; 7],
         normal_force: f64,
@@ -587,8 +605,17 @@ impl DeformationController {
         if !(normal_force.is_finite() && contact_force.iter().all(|v| v.is_finite())) {
             return Err(ControlError::NonFinite("the measured force"));
         }
-        self.time += self.config.period;
-        let force_rate = self.force_rate(normal_force);
+        if !time.is_finite() {
+            return Err(ControlError::NonFinite("the joint state's time"));
+        }
+        let dt = match self.last_tick {
+            None => self.config.period,
+            Some(last) if time > last => (time - last).min(self.config.restart_after),
+            Some(last) => return Err(ControlError::TimeNotAdvancing { time, last }),
+        };
+        self.last_tick = Some(time);
+        self.time += dt;
+        let force_rate = self.force_rate(normal_force, dt);
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -696,7 +723,7 @@ impl DeformationController {
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
         let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
-        if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, self.config.period) {
+        if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, dt) {
             // Nothing to send this tick; the next one holds the hand where it is (across the surface:
             // where its reference is now).
             self.hold_across();
@@ -912,7 +939,8 @@ mod tests {
     /// `ticks` ticks of an arm standing at the start posture, no force.
     fn tick(c: &mut DeformationController, ticks: usize) {
         for _ in 0..ticks {
-            c.tick(&softcontact_sim::DEFAULT_Q, &[0.0; 7], 0.0, &Vector3::zeros()).unwrap();
+            let time = c.last_tick.map_or(0.0, |t| t + c.config.period);
+            c.tick(time, &softcontact_sim::DEFAULT_Q, &[0.0; 7], 0.0, &Vector3::zeros()).unwrap();
         }
     }
 
@@ -920,15 +948,15 @@ mod tests {
     fn free_cell() -> Cell {
         let config = SimConfig { surface: None, ..SimConfig::above_surface(softcontact_sim::sponge(), 41) };
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-        let mut cell = Cell::new(config, controller(), estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        let mut cell = Cell::new(config, controller(), estimator).unwrap();
         cell.start(5000).unwrap();
         cell
     }
 
     /// The hand's lateral offset from the start (⊥ n) and its rotation's distance from exp(tilt)·R_start.
     fn hand_error(cell: &mut Cell, lateral: &Vector3<f64>, tilt: &Vector3<f64>) -> (f64, f64) {
-        let (r0, rot0, _) = cell.controller.start.unwrap();
-        let n = cell.controller.config.normal;
+        let (r0, rot0, _) = cell.controller.law.start.unwrap();
+        let n = cell.controller.law.config.normal;
         let pose = cell.sim.tool_pose();
         let d = pose.translation.vector - r0;
         let across = d - d.dot(&n) * n;
@@ -944,10 +972,10 @@ mod tests {
         for _ in 0..50 {
             cell.cycle().unwrap();
         }
-        let (_, first, _) = cell.controller.start.unwrap();
+        let (_, first, _) = cell.controller.law.start.unwrap();
         let mut refused = 0;
         for _ in 0..4 {
-            match cell.controller.command_across(Vector3::zeros(), Vector3::new(0.0, 0.0, 0.3), 1.4) {
+            match cell.controller.law.command_across(Vector3::zeros(), Vector3::new(0.0, 0.0, 0.3), 1.4) {
                 Ok(()) => {}
                 Err(ControlError::Across { limit, .. }) => {
                     assert_eq!(limit, MAX_TILT);
@@ -958,7 +986,7 @@ mod tests {
             for _ in 0..2000 {
                 cell.cycle().unwrap();
             }
-            cell.controller.restart();
+            cell.controller.law.restart();
             for _ in 0..100 {
                 cell.cycle().unwrap();
             }
@@ -971,15 +999,15 @@ mod tests {
         for _ in 0..50 {
             cell.cycle().unwrap();
         }
-        cell.controller.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap();
+        cell.controller.law.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap();
         for _ in 0..1500 {
             cell.cycle().unwrap();
         }
-        cell.controller.restart();
+        cell.controller.law.restart();
         for _ in 0..100 {
             cell.cycle().unwrap();
         }
-        let e = cell.controller.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap_err();
+        let e = cell.controller.law.command_across(Vector3::new(0.02, 0.0, 0.0), Vector3::zeros(), 1.0).unwrap_err();
         assert!(matches!(e, ControlError::Across { limit: MAX_LATERAL, .. }), "{e}");
     }
 
@@ -1059,13 +1087,13 @@ mod tests {
             cell.cycle().unwrap();
         }
         let (lateral, tilt) = (Vector3::new(0.01, 0.0, 0.0), Vector3::new(0.05, 0.0, 0.0));
-        cell.controller.command_across(lateral, tilt, 1.0).unwrap();
+        cell.controller.law.command_across(lateral, tilt, 1.0).unwrap();
         // While it moves the hand keeps up with the reference (velocity and acceleration fed forward).
         let mut lag: (f64, f64) = (0.0, 0.0);
         for _ in 0..1000 {
             let tick = cell.cycle().unwrap().unwrap();
             assert!(tick.refused.is_none(), "{:?}", tick.refused);
-            let now = cell.controller.across_reference();
+            let now = cell.controller.law.across_reference();
             let (p, o) = hand_error(&mut cell, &now.lateral, &now.tilt);
             lag = (lag.0.max(p), lag.1.max(o));
         }
@@ -1085,7 +1113,7 @@ mod tests {
         // (Without the feed-forward it lags 1.8 mm and 0.009 rad.)
         assert!(lag.0 < 2e-4 && lag.1 < 2e-3, "the hand lagged {lag:?} behind the moving reference");
         // Back to the start, from where the reference is.
-        cell.controller.command_across(Vector3::zeros(), Vector3::zeros(), 1.0).unwrap();
+        cell.controller.law.command_across(Vector3::zeros(), Vector3::zeros(), 1.0).unwrap();
         for _ in 0..1500 {
             cell.cycle().unwrap();
         }
@@ -1097,19 +1125,19 @@ mod tests {
     fn pressing_the_sponge_the_hand_moves_across_and_tilts_below_the_force_limit() {
         let config = SimConfig::above_surface(softcontact_sim::sponge(), 42);
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-        let mut cell = Cell::new(config, controller(), estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        let mut cell = Cell::new(config, controller(), estimator).unwrap();
         let mut cycles = 0;
         while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
             cycles += 1;
             assert!(cycles < 10_000, "no contact");
         }
-        cell.controller.command_force(40.0, 1.0).unwrap();
+        cell.controller.law.command_force(40.0, 1.0).unwrap();
         for _ in 0..1500 {
             cell.cycle().unwrap();
         }
         let before = cell.sim.contact().normal_force;
         let (lateral, tilt) = (Vector3::new(0.0, 0.008, 0.0), Vector3::new(0.0, -0.04, 0.0));
-        cell.controller.command_across(lateral, tilt, 1.5).unwrap();
+        cell.controller.law.command_across(lateral, tilt, 1.5).unwrap();
         let mut peak: f64 = 0.0;
         for _ in 0..2500 {
             let tick = cell.cycle().unwrap().unwrap();

@@ -143,6 +143,61 @@ impl Default for TarePolicy {
     }
 }
 
+/// Time between start-up tare attempts while they are refused [s].
+pub const TARE_RETRY: f64 = 0.1;
+
+/// The start-up tare (the node's `tare_after`, one default for every host): once, `after` seconds after
+/// the stream and the hand's orientation are both there, retried every [`TARE_RETRY`] while the checks
+/// refuse it (the hand in contact, moving, an unsteady reading). Negative `after`: never; the user tares
+/// through /ft_sensor/bias, and /ft_sensor/wrench is published from the start, untared.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StartupTare {
+    after: f64,
+    due: Option<f64>,
+    tared: bool,
+    /// Why the last attempt was refused.
+    pub refusal: Option<String>,
+}
+
+impl StartupTare {
+    pub fn new(after: f64) -> Self {
+        Self { after, due: None, tared: after < 0.0, refusal: None }
+    }
+
+    /// /ft_sensor/wrench may be published.
+    pub fn tared(&self) -> bool {
+        self.tared
+    }
+
+    /// A tare was taken on request (/ft_sensor/bias).
+    pub fn taken(&mut self) {
+        self.tared = true;
+        self.refusal = None;
+    }
+
+    /// With the hand's orientation known at `now` [s, the host's clock]: the start-up tare's outcome when
+    /// one was attempted now (its bias, or why it was refused).
+    pub fn poll(
+        &mut self,
+        node: &mut FtSensorNode,
+        orientation: &UnitQuaternion<f64>,
+        now: f64,
+    ) -> Option<Result<[f64; 6], String>> {
+        if self.tared || now < *self.due.get_or_insert(now + self.after) {
+            return None;
+        }
+        let outcome = node.checked_tare(Some(orientation));
+        match &outcome {
+            Ok(_) => self.taken(),
+            Err(e) => {
+                self.refusal = Some(e.clone());
+                self.due = Some(now + TARE_RETRY);
+            }
+        }
+        Some(outcome)
+    }
+}
+
 /// One fresh record as the tare checks see it.
 #[derive(Debug, Clone, Copy)]
 struct Sample {

@@ -53,7 +53,8 @@ impl Identifier {
         let (normal, fit) = (config.normal, config.fit);
         Ok(Self {
             estimator: ContactEstimatorNode::new(config)?,
-            pairing: ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, stale_after),
+            pairing: ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, stale_after)
+                .ok_or_else(|| anyhow::anyhow!("the normal must be a non-zero direction"))?,
             frames: FramesFrom::Urdf,
             tool_frame: softcontact_dynamics::lwr4::TOOL_FRAME.into(),
             readings: 0,
@@ -68,7 +69,7 @@ impl Identifier {
     pub fn tf_static(&mut self, msg: &TFMessage) {
         let sensor = softcontact_dynamics::lwr4::FT_SENSOR_FRAME;
         if let Some(r) = geometry::static_rotation(&[msg], &self.tool_frame, sensor) {
-            self.pairing.tool_to_sensor = r;
+            self.pairing.geometry.tool_to_sensor = r;
             self.frames = FramesFrom::TfStatic;
         }
     }

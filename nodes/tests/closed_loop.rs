@@ -3,7 +3,6 @@
 //! and the contact model and surface position come from the estimator node ([`softcontact_nodes::cell`]). Force commands
 //! on the simulated sponge must be reached within 5 %.
 
-use nalgebra::Vector3;
 use softcontact_contact::Kind;
 use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
@@ -16,7 +15,7 @@ struct Loop(Cell);
 impl Loop {
     fn new(sim: SimConfig, controller: DeformationController) -> Self {
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-        Loop(Cell::new(sim, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap())
+        Loop(Cell::new(sim, controller, estimator).unwrap())
     }
 
     /// One cycle; the controller's state once commanding.
@@ -43,7 +42,7 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
     // seen), using the guessed model; the estimator node watches. 12 s fill the 1200-sample window.
     for _ in 0..12 {
         for force in [100.0, 30.0] {
-            l.0.controller.command_force(force, 0.5).unwrap();
+            l.0.controller.law.command_force(force, 0.5).unwrap();
             for _ in 0..500 {
                 l.cycle().unwrap();
             }
@@ -68,12 +67,12 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
         sponge.stiffness
     );
     assert!((learned.contact_position.z - surface_top).abs() < 1e-3, "surface placed within 1 mm");
-    l.0.controller.set_contact_model(learned.model.clone(), learned.offset).unwrap();
+    l.0.controller.law.set_contact_model(learned.model.clone(), learned.offset).unwrap();
     // Seed 001's control experiment, shortened: 2 s quintic moves, force read at the end of each move.
     let mut errors = Vec::new();
     for ratio in [0.5, 0.3, 0.7, 0.4, 0.6] {
         let command = ratio * 280.0;
-        l.0.controller.command_force(command, 2.0).unwrap();
+        l.0.controller.law.command_force(command, 2.0).unwrap();
         let mut at_end = Vec::new();
         for k in 0..2000 {
             let s = l.cycle().unwrap();
@@ -98,8 +97,8 @@ fn losing_the_surface_stops_the_push() {
     let controller = DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap();
     let mut l = Loop::new(config, controller);
     while !l.cycle().is_some_and(|s| s.in_contact) {}
-    assert!(l.0.controller.command_force(500.0, 2.0).is_err(), "beyond the surface's force limit");
-    l.0.controller.command_force(60.0, 2.0).unwrap();
+    assert!(l.0.controller.law.command_force(500.0, 2.0).is_err(), "beyond the surface's force limit");
+    l.0.controller.law.command_force(60.0, 2.0).unwrap();
     for _ in 0..2500 {
         l.cycle();
     }
@@ -134,7 +133,7 @@ fn a_push_from_a_light_touch_on_a_relaxing_surface_is_not_a_lost_contact() {
         held = l.cycle().unwrap().f;
     }
     assert!(held < 0.5, "the touch relaxed below the threshold: {held} N");
-    l.0.controller.command_force(100.0, 1.0).unwrap();
+    l.0.controller.law.command_force(100.0, 1.0).unwrap();
     let mut last = None;
     for _ in 0..1500 {
         let s = l.cycle().unwrap();
@@ -156,7 +155,7 @@ fn a_model_far_too_soft_cannot_crush_the_surface() {
     let force_limit = config_limits.limits.force_limit;
     let mut l = Loop::new(config, DeformationController::new(config_limits, too_soft).unwrap());
     while !l.cycle().is_some_and(|s| s.in_contact) {}
-    l.0.controller.command_force(100.0, 2.0).unwrap();
+    l.0.controller.law.command_force(100.0, 2.0).unwrap();
     let (mut peak, mut limited_at) = (0.0f64, None);
     for k in 0..3000 {
         let s = l.cycle().unwrap();
@@ -176,7 +175,7 @@ fn a_model_far_too_soft_cannot_crush_the_surface() {
     assert!(peak < force_limit + 10.0, "peak {peak:.1} N: the back-off came late (limit {force_limit} N)");
     assert!(l.0.sim.dq().iter().all(|v| v.abs() < 0.05), "still after backing off: {:?}", l.0.sim.dq());
     // A new command is taken (within the limit of this wrong model's deformations).
-    l.0.controller.command_force(40.0, 1.0).unwrap();
+    l.0.controller.law.command_force(40.0, 1.0).unwrap();
     assert!(!l.cycle().unwrap().force_limited);
 }
 
@@ -189,7 +188,7 @@ fn a_controller_that_stalls_while_pushing_does_not_kick_the_hand_back() {
     let model = softcontact_contact::ContactModel::new(Kind::AzadFeatherstone, 25_044.0, 1_100.0).unwrap();
     let mut l = Loop::new(config, DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), model).unwrap());
     while !l.cycle().is_some_and(|s| s.in_contact) {}
-    l.0.controller.command_force(150.0, 2.0).unwrap();
+    l.0.controller.law.command_force(150.0, 2.0).unwrap();
     for _ in 0..3000 {
         l.cycle().unwrap();
     }
@@ -233,7 +232,7 @@ fn every_measurement_is_answered_with_the_torque_computed_for_it() {
     let (mut answered, mut commands) = (0, 0);
     for i in 0..8000 {
         if i == 5000 {
-            l.0.controller.command_force(120.0, 1.0).unwrap();
+            l.0.controller.law.command_force(120.0, 1.0).unwrap();
             commands += 1;
         }
         let tick = l.0.cycle().unwrap().expect("the KRC commands");

@@ -1,12 +1,15 @@
-//! The controller's 1 kHz tick allocates nothing after start-up: counted by a global allocator that
-//! counts this thread's allocations while a flag is set.
+//! The 1 kHz path allocates nothing after start-up — the controller's tick, the controller node's
+//! policy around it, the driver's hand-over: counted by a global allocator that counts this thread's
+//! allocations while a flag is set.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use nalgebra::Vector3;
-use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
+use softcontact_nodes::deformation_controller::{
+    ControllerConfig, ControllerNode, DeformationController, JointSample, Params, Reply,
+};
 
 struct Counting;
 
@@ -43,18 +46,21 @@ fn the_controller_tick_does_not_allocate() {
     let mut q = softcontact_sim::DEFAULT_Q;
     let dq = [0.0, 0.01, 0.0, -0.02, 0.0, 0.01, 0.0];
     // Start-up and contact: the first ticks may allocate (nothing is preallocated before the first state).
+    let mut time = 100.0;
     for i in 0..600 {
         q[1] += 1e-5;
+        time += 1e-3;
         let f = if i > 300 { (i - 300) as f64 * 0.1 } else { 0.0 };
-        controller.tick(&q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+        controller.tick(time, &q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
     }
     controller.command_force(120.0, 2.0).unwrap();
     COUNTING.with(|c| c.set(true));
     let mut sum = 0.0;
     for i in 0..2000 {
         q[3] -= 1e-6;
+        time += 1e-3;
         let f = 30.0 + i as f64 * 0.01;
-        let (tau, state) = controller.tick(&q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+        let (tau, state) = controller.tick(time, &q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
         sum += tau[1] + state.z_cmd;
     }
     COUNTING.with(|c| c.set(false));
@@ -114,4 +120,31 @@ fn the_driver_hand_over_does_not_allocate() {
     COUNTING.with(|c| c.set(false));
     assert!(sequence > 0);
     assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 0, "allocations in 45 hand-overs");
+}
+
+/// The controller node's policy around the tick (freshness, sessions, the sensor's force into the world)
+/// allocates nothing either: what the composed process runs on its FRI thread.
+#[test]
+fn the_controller_node_does_not_allocate() {
+    let mut node = ControllerNode::from_params(&Params::default()).unwrap();
+    let mut q = softcontact_sim::DEFAULT_Q;
+    let dq = [0.0; 7];
+    let mut step = |q: &[f64; 7], i: usize| {
+        let t = 50.0 + i as f64 * 1e-3;
+        node.on_force(t, Vector3::new(0.1, -0.2, 0.3), t);
+        let js = JointSample { stamp: t, session: Some(1), commanding: true, q: *q, dq };
+        node.on_joint_state(&js, t)
+    };
+    for i in 0..100 {
+        assert!(matches!(step(&q, i).reply, Reply::Torque(_)));
+    }
+    COUNTING.with(|c| c.set(true));
+    let mut torques = 0;
+    for i in 100..1100 {
+        q[0] += 1e-6;
+        torques += usize::from(matches!(step(&q, i).reply, Reply::Torque(_)));
+    }
+    COUNTING.with(|c| c.set(false));
+    assert_eq!(torques, 1000, "every joint state answered with a torque");
+    assert_eq!(ALLOCATIONS.load(Ordering::Relaxed), 0, "allocations in 1000 steps of the controller node");
 }

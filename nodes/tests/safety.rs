@@ -28,13 +28,13 @@ fn pressing(seed: u64) -> Cell {
     let controller =
         DeformationController::new(ControllerConfig::lwr4(MAX_FORCE, 0.06), softcontact_sim::sponge()).unwrap();
     let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-    let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+    let mut cell = Cell::new(config, controller, estimator).unwrap();
     let mut cycles = 0;
     while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
         cycles += 1;
         assert!(cycles < 10_000, "no contact");
     }
-    cell.controller.command_force(60.0, 1.0).unwrap();
+    cell.controller.law.command_force(60.0, 1.0).unwrap();
     run(&mut cell, 1500);
     cell
 }
@@ -89,20 +89,20 @@ fn commands_outside_their_physical_range_are_refused_and_the_arm_stays_put() {
     // Class 1: `softcontact force 60 --duration 1e200` made the quintic NaN and swept the hand 1 m.
     let mut cell = pressing(21);
     for duration in [1e200, 1e154, 1e61, 601.0, f64::INFINITY, f64::NAN, 0.0, -1.0, 1e-300, 0.01] {
-        assert!(cell.controller.command_force(60.0, duration).is_err(), "duration {duration}");
-        assert!(cell.controller.command_force(100.0, duration).is_err(), "duration {duration}");
-        assert!(cell.controller.command_deformation(0.01, duration).is_err(), "duration {duration}");
+        assert!(cell.controller.law.command_force(60.0, duration).is_err(), "duration {duration}");
+        assert!(cell.controller.law.command_force(100.0, duration).is_err(), "duration {duration}");
+        assert!(cell.controller.law.command_deformation(0.01, duration).is_err(), "duration {duration}");
     }
     for force in [f64::NAN, f64::INFINITY, -1.0, 1e300, MAX_FORCE + 1.0] {
-        assert!(cell.controller.command_force(force, 2.0).is_err(), "force {force}");
+        assert!(cell.controller.law.command_force(force, 2.0).is_err(), "force {force}");
     }
     for z in [f64::NAN, -1e300, -0.06, 0.07, 1e300, f64::NEG_INFINITY] {
-        assert!(cell.controller.command_deformation(z, 2.0).is_err(), "deformation {z}");
+        assert!(cell.controller.law.command_deformation(z, 2.0).is_err(), "deformation {z}");
     }
     for (low, high, frequency, periods) in
         [(0.0, 0.01, 1e-300, 3), (0.0, 0.01, 1e300, 3), (0.0, 0.01, 1.0, u32::MAX), (-1e300, 0.01, 1.0, 3)]
     {
-        assert!(cell.controller.command_pushes(low, high, frequency, periods).is_err(), "{frequency} {periods}");
+        assert!(cell.controller.law.command_pushes(low, high, frequency, periods).is_err(), "{frequency} {periods}");
     }
     assert_stays_put(&mut cell, "refused commands");
 }
@@ -122,10 +122,10 @@ fn implausible_models_are_refused_and_a_command_through_them_does_not_crush() {
         (sponge.clone(), Vector3::new(f64::NAN, 0.0, 0.0)),
         (ContactModel::general(2e4, 0.0, Exponents { a: 9.0, b: 0.0, c: 1.0 }).unwrap(), surface),
     ] {
-        assert!(cell.controller.adopt_estimate(model, &at, Some(0.5)).is_err(), "{at:?}");
+        assert!(cell.controller.law.adopt_estimate(model, &at, Some(0.5)).is_err(), "{at:?}");
     }
     assert_stays_put(&mut cell, "refused models");
-    cell.controller.command_force(50.0, 1.0).unwrap();
+    cell.controller.law.command_force(50.0, 1.0).unwrap();
     run(&mut cell, 2000);
     let f = cell.sim.contact().normal_force;
     assert!((f - 50.0).abs() < 5.0, "50 N commanded, {f:.1} N reached");
@@ -138,8 +138,8 @@ fn a_model_far_too_soft_and_misplaced_backs_off_below_max_force() {
     let surface = cell.sim.surface.as_ref().unwrap().config().point;
     let too_soft = ContactModel::new(Kind::AzadFeatherstone, 15_000.0, 0.0).unwrap();
     // Within the plausible offset, but the wrong way: the model thinks the hand is 9 mm shallower.
-    cell.controller.adopt_estimate(too_soft, &(surface + Vector3::new(0.0, 0.0, -0.009)), None).unwrap();
-    cell.controller.command_force(MAX_FORCE * 0.8, 2.0).unwrap();
+    cell.controller.law.adopt_estimate(too_soft, &(surface + Vector3::new(0.0, 0.0, -0.009)), None).unwrap();
+    cell.controller.law.command_force(MAX_FORCE * 0.8, 2.0).unwrap();
     let mut limited = false;
     for k in 0..4000 {
         limited |= cell.cycle().unwrap().is_some_and(|t| t.controller.force_limited);
@@ -171,7 +171,7 @@ fn a_restarted_krc_session_makes_the_controller_approach_again() {
     }
     // A gentle approach stops within a few millimetres of the 1 N onset.
     assert!(deepest < 5e-3, "the hand went {:.1} mm into the sponge", deepest * 1e3);
-    assert!(cell.controller.contact_model().stiffness > 0.0);
+    assert!(cell.controller.law.contact_model().stiffness > 0.0);
 }
 
 /// One random or extreme value: a third of the time an extreme.
@@ -203,9 +203,9 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
     let mut recent = std::collections::VecDeque::new();
     for case in 0..cases {
         let result = match rng.random_range(0..4) {
-            0 => cell.controller.command_force(value(&mut rng, -50.0..400.0), value(&mut rng, 0.0..5.0)),
-            1 => cell.controller.command_deformation(value(&mut rng, -0.08..0.08), value(&mut rng, 0.0..5.0)),
-            2 => cell.controller.command_pushes(
+            0 => cell.controller.law.command_force(value(&mut rng, -50.0..400.0), value(&mut rng, 0.0..5.0)),
+            1 => cell.controller.law.command_deformation(value(&mut rng, -0.08..0.08), value(&mut rng, 0.0..5.0)),
+            2 => cell.controller.law.command_pushes(
                 value(&mut rng, -0.01..0.05),
                 value(&mut rng, -0.01..0.05),
                 value(&mut rng, 0.0..20.0),
@@ -220,7 +220,7 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
                 let offset = Vector3::new(0.0, 0.0, value(&mut rng, -0.02..0.02));
                 let retarget = rng.random_bool(0.5).then(|| value(&mut rng, 0.0..2.0));
                 match ContactModel::general(value(&mut rng, 1e2..1e6), value(&mut rng, 0.0..1e4), exponents) {
-                    Ok(model) => cell.controller.adopt_estimate(model, &(surface + offset), retarget),
+                    Ok(model) => cell.controller.law.adopt_estimate(model, &(surface + offset), retarget),
                     Err(_) => Ok(()), // refused by the model itself, never reaches the controller
                 }
             }
@@ -252,12 +252,12 @@ fn a_new_session_while_pressing_places_the_surface_by_the_force_read() {
     // Adversarial finding: after a restart while pushing 200 N, the onset fired at the deformed
     // position, taken for the surface, and a 10 N command then held 220 N.
     let mut cell = pressing(27);
-    cell.controller.command_force(200.0, 2.0).unwrap();
+    cell.controller.law.command_force(200.0, 2.0).unwrap();
     run(&mut cell, 2500);
     cell.driver.begin_session();
     let moved = run(&mut cell, 1000);
     assert!(moved < 5e-3, "the new session moved the hand {:.1} mm", moved * 1e3);
-    cell.controller.command_force(10.0, 2.0).unwrap();
+    cell.controller.law.command_force(10.0, 2.0).unwrap();
     run(&mut cell, 3000);
     let f = cell.sim.contact().normal_force;
     assert!((f - 10.0).abs() < 5.0, "10 N commanded after the new session, {f:.1} N held");
@@ -276,7 +276,7 @@ fn a_controller_stalled_while_pressing_leaves_the_hand_in_place() {
     // Adversarial finding: the controller stopped for 1.5 s while pushing 200 N; the hold faded the
     // torque that balanced the sponge and the sponge threw the hand back 27 mm.
     let mut cell = pressing(28);
-    cell.controller.command_force(200.0, 2.0).unwrap();
+    cell.controller.law.command_force(200.0, 2.0).unwrap();
     run(&mut cell, 2500);
     let f0 = cell.sim.contact().normal_force;
     let start = cell.sim.tool_pose().translation.vector;
@@ -299,7 +299,7 @@ fn a_controller_stalled_while_pressing_leaves_the_hand_in_place() {
 fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload() {
     // The other side of the stiff hold: what it carries on moves the arm should the surface give way.
     let mut cell = pressing(29);
-    cell.controller.command_force(200.0, 2.0).unwrap();
+    cell.controller.law.command_force(200.0, 2.0).unwrap();
     run(&mut cell, 2500);
     // The watchdog holds after 5 cycles without a command; then the surface goes.
     for _ in 0..6 {
@@ -347,13 +347,13 @@ fn an_approach_that_finds_no_surface_stops_after_max_approach() {
     controller_config.max_approach = 0.03;
     let controller = DeformationController::new(controller_config, softcontact_sim::sponge()).unwrap();
     let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-    let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+    let mut cell = Cell::new(config, controller, estimator).unwrap();
     cell.start(2000).unwrap();
     let start = cell.sim.tool_pose().translation.vector;
     // 8 s at 1 cm/s would be 8 cm.
     run(&mut cell, 8000);
     let travelled = (cell.sim.tool_pose().translation.vector - start).norm();
-    assert!(cell.controller.approach_exhausted());
+    assert!(cell.controller.law.approach_exhausted());
     assert!(travelled < 0.031, "the approach went {:.1} mm, max_approach 30 mm", travelled * 1e3);
     let still = run(&mut cell, 1000);
     assert!(still < 1e-3, "then it holds: {:.2} mm in 1 s", still * 1e3);
@@ -446,7 +446,7 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         config.sensor = softcontact_sim::FtSensorConfig::gamma();
         let controller = DeformationController::new(cp.controller_config(), cp.initial_model.clone()).unwrap();
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-        let mut cell = Cell::new(config, controller, estimator, Vector3::new(0.0, 0.0, -1.0)).unwrap();
+        let mut cell = Cell::new(config, controller, estimator).unwrap();
         cell.driver = LwrDriver::new(dp.driver_config());
         let bound = 1.2 * cp.force_limit;
         let check = |cell: &mut Cell, cycles: usize, what: &str| {
@@ -459,9 +459,9 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         };
         check(&mut cell, 6000, "approach");
         let force = cp.max_force.min(100.0) * 0.8;
-        let forced = cell.controller.command_force(force, 1.0);
+        let forced = cell.controller.law.command_force(force, 1.0);
         check(&mut cell, 2000, &format!("force {force} N: {forced:?}"));
-        let pressed = cell.controller.command_deformation(0.01, 1.0);
+        let pressed = cell.controller.law.command_deformation(0.01, 1.0);
         check(&mut cell, 1500, &format!("deformation 10 mm: {pressed:?}"));
     }
     eprintln!("fuzzed parameter sets: {accepted} accepted and run, {refused} refused, no violation");
@@ -476,8 +476,8 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
     let surface = cell.sim.surface.as_ref().unwrap().config().point;
     // A model far too soft, within the plausible offset: a force command overshoots into the guard.
     let too_soft = ContactModel::new(Kind::AzadFeatherstone, 18_000.0, 0.0).unwrap();
-    cell.controller.adopt_estimate(too_soft, &surface, None).unwrap();
-    cell.controller.command_force(MAX_FORCE * 0.95, 0.5).unwrap();
+    cell.controller.law.adopt_estimate(too_soft, &surface, None).unwrap();
+    cell.controller.law.command_force(MAX_FORCE * 0.95, 0.5).unwrap();
     let mut limited = false;
     for _ in 0..1000 {
         limited = cell.cycle().unwrap().is_some_and(|t| t.controller.force_limited);
@@ -486,7 +486,7 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
         }
     }
     assert!(limited, "the guard fired");
-    cell.controller.command_deformation(0.058, 0.4).unwrap();
+    cell.controller.law.command_deformation(0.058, 0.4).unwrap();
     let mut peak: f64 = 0.0;
     for k in 0..2000 {
         cell.cycle().unwrap();

@@ -212,8 +212,7 @@ fn start<'a, O: Observer>(
     sim.sensor = spec.sensor.clone();
     let controller =
         DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), controller_model)?;
-    let normal = Vector3::new(0.0, 0.0, -1.0);
-    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(estimator)?, normal)?;
+    let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(estimator)?)?;
     let last = cell.start(5000)?;
     let params = contact_estimator::Params::default();
     Ok(Runner { cell, observer, params, next_refit: f64::INFINITY, newest: None, last })
@@ -236,8 +235,8 @@ pub fn run_hold(
     let estimator = contact_estimator::Params::default().estimator_config();
     let mut r = start(spec, sim, model.clone(), estimator, observer)?;
     r.approach(spec.name)?;
-    r.cell.controller.adopt_estimate(model.clone(), &surface, None)?;
-    r.cell.controller.command_force(force, 2.0)?;
+    r.cell.controller.law.adopt_estimate(model.clone(), &surface, None)?;
+    r.cell.controller.law.command_force(force, 2.0)?;
     r.observer.force_command(r.last.time, force, 2.0)?;
     r.run(2.0 + hold, |_| {})?;
     Ok(r.last.time)
@@ -277,20 +276,20 @@ pub fn run_surface(
             }
             k += 1;
         };
-        r.cell.controller.command_pushes(low, high, 1.0, plan.push_periods)?;
+        r.cell.controller.law.command_pushes(low, high, 1.0, plan.push_periods)?;
         let sway = Vector3::new(SWAY * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0, 0.0);
         if plan.across {
             // Across the surface while pushing: the tangential load, in every run.
-            r.cell.controller.command_across(sway, Vector3::zeros(), 2.0)?;
+            r.cell.controller.law.command_across(sway, Vector3::zeros(), 2.0)?;
         }
         r.run(1.0 + f64::from(plan.push_periods), &mut watch)?;
-        r.cell.controller.command_deformation(RETREAT, 1.0)?;
+        r.cell.controller.law.command_deformation(RETREAT, 1.0)?;
         r.run(1.5, &mut watch)?;
         if plan.across {
             // Tilt the hand in free space and back: the sensor's orientation against gravity.
             let tilt = Vector3::new(0.0, TILT * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0);
             for to in [tilt, Vector3::zeros()] {
-                r.cell.controller.command_across(sway, to, 3.0)?;
+                r.cell.controller.law.command_across(sway, to, 3.0)?;
                 r.run(3.5, &mut watch)?;
             }
         }
@@ -307,8 +306,8 @@ pub fn run_surface(
     r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?;
     r.next_refit = r.last.time;
     r.newest = None;
-    r.cell.controller.adopt_estimate(identified.model.clone(), &identified.contact_position, None)?;
-    r.cell.controller.command_deformation(0.005, 2.0)?;
+    r.cell.controller.law.adopt_estimate(identified.model.clone(), &identified.contact_position, None)?;
+    r.cell.controller.law.command_deformation(0.005, 2.0)?;
     r.run(3.0, |_| {})?;
 
     let mut control = Series::default();
@@ -321,13 +320,13 @@ pub fn run_surface(
             && let Some(m) = r.newest.take()
         {
             // Seed 001: from cycle 2 on, the newest model of the last 12 s at each command.
-            r.cell.controller.adopt_estimate(m.model, &m.contact_position, None)?;
+            r.cell.controller.law.adopt_estimate(m.model, &m.contact_position, None)?;
         }
-        let stiffness = r.cell.controller.contact_model().stiffness;
-        r.cell.controller.command_force(command, plan.move_duration)?;
+        let stiffness = r.cell.controller.law.contact_model().stiffness;
+        r.cell.controller.law.command_force(command, plan.move_duration)?;
         if plan.across {
             let sway = SWAY * if i % 2 == 0 { 1.0 } else { -1.0 };
-            r.cell.controller.command_across(Vector3::new(sway, 0.0, 0.0), Vector3::zeros(), plan.move_duration)?;
+            r.cell.controller.law.command_across(Vector3::new(sway, 0.0, 0.0), Vector3::zeros(), plan.move_duration)?;
         }
         r.observer.force_command(r.last.time, command, plan.move_duration)?;
         command_times.push(r.last.time);

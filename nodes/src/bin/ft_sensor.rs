@@ -16,7 +16,7 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::contact_estimator::ForcePairing;
-use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
+use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params, StartupTare};
 use softcontact_nodes::geometry;
 use softcontact_nodes::liveness::{DeadStream, StreamWatch};
 use softcontact_nodes::messages;
@@ -73,10 +73,7 @@ fn main() -> anyhow::Result<()> {
     let mut last_saturated = false;
     let mut next_diagnostics = Instant::now();
     let mut logged_network_errors = 0;
-    // Tared yet? With `tare_after` < 0 the user tares through the service; until then only raw data.
-    let mut tared = p.tare_after < 0.0;
-    let mut tare_due: Option<Instant> = None;
-    let mut tare_refusal: Option<String> = None;
+    let mut startup_tare = StartupTare::new(p.tare_after);
     let start = Instant::now();
     let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
     let mut poses_dead: Option<DeadStream> = None;
@@ -111,37 +108,28 @@ fn main() -> anyhow::Result<()> {
             if !out.invalid {
                 let stamp = clock.now();
                 raw_pub.publish(messages::wrench(&out.raw, stamp))?;
-                if let Some(c) = out.compensated.filter(|_| tared) {
+                if let Some(c) = out.compensated.filter(|_| startup_tare.tared()) {
                     wrench_pub.publish(messages::wrench(&c, stamp))?;
                 }
             }
         }
-        if !tared && orientation.is_some() {
-            let due = *tare_due.get_or_insert_with(|| Instant::now() + Duration::from_secs_f64(p.tare_after));
-            if Instant::now() >= due {
-                // Refused (the hand in contact, moving, an unsteady reading): try again in a while.
-                match client.node.checked_tare(orientation.as_ref()) {
-                    Ok(b) => {
-                        tared = true;
-                        tare_refusal = None;
-                        tare_pub.publish(messages::wrench(&b, clock.now()))?;
-                        ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
-                    }
-                    Err(e) => {
-                        if tare_refusal.as_ref() != Some(&e) {
-                            ros::log(&node, LogLevel::Warn, &format!("start-up {e}; retrying"));
-                        }
-                        tare_refusal = Some(e);
-                        tare_due = Some(Instant::now() + Duration::from_millis(100));
-                    }
+        if let Some(o) = orientation {
+            let refused_before = startup_tare.refusal.clone();
+            match startup_tare.poll(&mut client.node, &o, start.elapsed().as_secs_f64()) {
+                Some(Ok(b)) => {
+                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
+                    ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
                 }
+                Some(Err(e)) if refused_before.as_ref() != Some(&e) => {
+                    ros::log(&node, LogLevel::Warn, &format!("start-up {e}; retrying"));
+                }
+                _ => {}
             }
         }
         while let Ok(Some((id, _))) = bias.receive_request() {
             let response = match client.node.checked_tare(orientation.as_ref()) {
                 Ok(b) => {
-                    tared = true;
-                    tare_refusal = None;
+                    startup_tare.taken();
                     tare_pub.publish(messages::wrench(&b, clock.now()))?;
                     ros::log(&node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
                     TriggerResponse { success: true, message: format!("bias set to {b:?}") }
@@ -188,8 +176,8 @@ fn main() -> anyhow::Result<()> {
                 (DiagnosticStatus::ERROR, what.join(", "))
             } else if orientation.is_none() {
                 (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
-            } else if !tared {
-                let why = tare_refusal.as_deref().unwrap_or("waiting for tare_after");
+            } else if !startup_tare.tared() {
+                let why = startup_tare.refusal.as_deref().unwrap_or("waiting for tare_after");
                 (DiagnosticStatus::WARN, format!("not tared yet ({why}): /ft_sensor/wrench waits"))
             } else {
                 (DiagnosticStatus::OK, "streaming".into())
