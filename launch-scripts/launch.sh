@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The node graph, started, watched and stopped as one: the implementation behind sim.sh and robot.sh.
 #
-#   launch.sh --sim|--robot [--isolated] [--lockstep] [--surface sponge|dice|lab_sponge|lab_dice|none] [--log-dir DIR]
-#             [--params-file FILE]... [--nodes N1,N2...] [--run COMMAND [ARGS...]]
+#   launch.sh --sim|--robot [--isolated] [--lockstep] [--separate] [--surface sponge|dice|lab_sponge|lab_dice|none]
+#             [--log-dir DIR] [--params-file FILE]... [--nodes N1,N2...] [--run COMMAND [ARGS...]]
 #
 # Starts the nodes with the parameter files of config/ (plus any --params-file overlays, later ones win),
 # waits until every node has said it is ready, then either runs COMMAND (and stops the graph when it
@@ -10,6 +10,10 @@
 # Stopping is SIGTERM to each node in turn (controller first, so the driver holds the arm), SIGKILL after
 # 5 s. The exit status is non-zero if a node failed or was killed, or COMMAND failed. Each node's log
 # (its exit report included) is in the log folder.
+#
+# The 1 kHz path runs composed by default: lwr_driver, ft_sensor and deformation_controller as components of one
+# process, lwr_control (the controller answers each FRI measurement on the driver's thread); the contact
+# estimator is a process of its own. --separate runs each of the three as its own process instead.
 #
 # --nodes starts only the nodes named (e.g. --nodes contact_estimator to replay a recording into it).
 # --isolated runs everything in a new network namespace with only loopback (DDS never leaves the machine;
@@ -19,19 +23,20 @@ set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(dirname "$here")"
-mode="" isolated=0 lockstep=0 surface="" log_dir="" only="" run=() overlays=()
+mode="" isolated=0 lockstep=0 separate=0 surface="" log_dir="" only="" run=() overlays=()
 while (($#)); do
     case "$1" in
     --sim) mode=sim ;;
     --robot) mode=robot ;;
     --isolated) isolated=1 ;;
     --lockstep) lockstep=1 ;;
+    --separate) separate=1 ;;
     --surface) surface="$2"; shift ;;
     --log-dir) log_dir="$2"; shift ;;
     --params-file) overlays+=("$(realpath "$2")"); shift ;;
     --nodes) only="$2"; shift ;;
     --run) shift; run=("$@"); break ;;
-    -h | --help) sed -n '2,19p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,23p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "launch: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     shift
@@ -43,6 +48,7 @@ if ((isolated)) && [[ -z "${SOFTCONTACT_NETNS:-}" ]]; then
     command -v ip >/dev/null || { echo "launch: --isolated needs ip (iproute2)" >&2; exit 2; }
     args=("--$mode" --isolated)
     ((lockstep)) && args+=(--lockstep)
+    ((separate)) && args+=(--separate)
     [[ -n "$surface" ]] && args+=(--surface "$surface")
     [[ -n "$log_dir" ]] && args+=(--log-dir "$(realpath -m "$log_dir")")
     for o in "${overlays[@]}"; do args+=(--params-file "$o"); done
@@ -58,7 +64,11 @@ if [[ -n "${SOFTCONTACT_NETNS:-}" ]]; then
 fi
 
 bin="${SOFTCONTACT_BIN:-$root/target/release}"
-nodes=(lwr_driver ft_sensor contact_estimator deformation_controller)
+if ((separate)); then
+    nodes=(lwr_driver ft_sensor contact_estimator deformation_controller)
+else
+    nodes=(lwr_control contact_estimator)
+fi
 [[ "$mode" == sim ]] && nodes=(sim_arm "${nodes[@]}")
 if [[ -n "$only" ]]; then
     for n in ${only//,/ }; do
@@ -81,7 +91,12 @@ echo "launch: logs in $log_dir" >&2
 
 # The parameters of one node: its file, the robot overlay, the user's overlays, then the mode's settings.
 params_of() {
-    local n="$1" p=(--params-file "$root/config/$n.yaml")
+    local n="$1" p=() f
+    if [[ "$n" == lwr_control ]]; then
+        for f in lwr_driver ft_sensor deformation_controller; do p+=(--params-file "$root/config/$f.yaml"); done
+    else
+        p+=(--params-file "$root/config/$n.yaml")
+    fi
     [[ "$mode" == robot ]] && p+=(--params-file "$root/config/robot.yaml")
     for o in "${overlays[@]}"; do p+=(--params-file "$o"); done
     if ((lockstep)); then
@@ -96,7 +111,7 @@ stopping=0
 stop_all() {
     ((stopping)) && return
     stopping=1
-    local order=(deformation_controller contact_estimator ft_sensor lwr_driver sim_arm) n
+    local order=(deformation_controller contact_estimator ft_sensor lwr_driver lwr_control sim_arm) n
     for n in "${order[@]}"; do
         [[ -n "${pid_of[$n]:-}" ]] || continue
         kill -TERM "${pid_of[$n]}" 2>/dev/null || continue
@@ -109,7 +124,7 @@ trap 'echo "launch: stopping" >&2; stop_all' INT TERM
 # The FRI path first: the driver (and the cell it answers) keep the normal priority, the controller and
 # the sensor a little less, the estimator's refits least (unprivileged users may lower priority only; on
 # the robot give the driver a real-time priority, see launch-scripts/README.md).
-declare -A nice_of=([sim_arm]=0 [lwr_driver]=0 [deformation_controller]=2 [ft_sensor]=2 [contact_estimator]=10)
+declare -A nice_of=([sim_arm]=0 [lwr_control]=0 [lwr_driver]=0 [deformation_controller]=2 [ft_sensor]=2 [contact_estimator]=10)
 for n in "${nodes[@]}"; do
     mapfile -t p < <(params_of "$n")
     nice -n "${nice_of[$n]}" "$bin/$n" "${p[@]}" </dev/null >"$log_dir/$n.log" 2>&1 &

@@ -137,8 +137,7 @@ impl Cell {
             None => self.controller.force_withheld(),
         }
         let commanding = out.state == InterfaceState::Command;
-        let joint_state =
-            JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
+        let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
         let step = self.controller.on_joint_state(&joint_state, time);
         if !commanding {
             self.write(measured)?;

@@ -25,7 +25,9 @@ use softcontact_control::{
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 
+pub mod component;
 mod node;
+pub use component::InProcessController;
 pub use node::{ControllerNode, JointSample, NodeCounters, Notices, Reply, Silence, Step};
 
 #[derive(Debug, Clone, PartialEq)]

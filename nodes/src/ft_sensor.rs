@@ -12,6 +12,8 @@
 //! measured = external + (R_WSᵀ m g_W, c × R_WSᵀ m g_W) + bias. `wrench_raw` removes the bias,
 //! `wrench` also the tool's weight.
 
+pub mod component;
+
 use std::collections::VecDeque;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};

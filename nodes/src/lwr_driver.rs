@@ -31,6 +31,8 @@
 //!   empty command when its tick failed); a command from another session, or older than the watchdog by
 //!   its stamp, is refused and the previous one ages out.
 
+pub mod component;
+
 use std::net::{IpAddr, SocketAddr};
 
 use nalgebra::{Isometry3, Matrix6xX, Vector6};

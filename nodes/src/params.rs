@@ -24,6 +24,27 @@ pub struct ParamArgs {
     pub ros_args: bool,
 }
 
+impl ParamArgs {
+    /// The arguments of one node of a composed process: every file (each node reads its own section),
+    /// the overrides without a node (`name:=value`) and those for this one (`node:name:=value`).
+    pub fn for_node(&self, node: &str) -> ParamArgs {
+        let overrides = self
+            .overrides
+            .iter()
+            .filter_map(|o| {
+                // Without `:=` it is kept, for `load` to refuse.
+                let Some((name, _)) = o.split_once(":=") else { return Some(o.clone()) };
+                match name.split_once(':') {
+                    None => Some(o.clone()),
+                    Some((n, _)) if n == node => Some(o[n.len() + 1..].to_string()),
+                    Some(_) => None,
+                }
+            })
+            .collect();
+        ParamArgs { files: self.files.clone(), overrides, ros_args: self.ros_args }
+    }
+}
+
 /// A node's parameter struct: its defaults come from serde, its checks from here.
 pub trait NodeParams: Serialize + DeserializeOwned {
     /// Every value that serde cannot check by its type alone.
@@ -267,5 +288,18 @@ mod tests {
         assert!(matches!(load::<Demo>("demo", &args(&[&broken], &[])), Err(ParamError::Format { .. })));
         let missing = ParamArgs { files: vec!["/nonexistent/x.yaml".into()], ..Default::default() };
         assert!(matches!(load::<Demo>("demo", &missing), Err(ParamError::Io { .. })));
+    }
+
+    #[test]
+    fn a_composed_process_gives_each_node_its_own_overrides() {
+        let a = args(&[], &["rate:=5", "demo:gains.kp:=9", "other:rate:=7", "broken"]);
+        let demo = a.for_node("demo");
+        assert_eq!(demo.overrides, ["rate:=5", "gains.kp:=9", "broken"]);
+        assert_eq!(a.for_node("other").overrides, ["rate:=5", "rate:=7", "broken"]);
+        // A malformed one still reaches `load`, which refuses it.
+        assert!(matches!(load::<Demo>("demo", &demo), Err(ParamError::Override(_))));
+        let (p, _): (Demo, _) =
+            load("demo", &args(&[], &["rate:=5", "demo:gains.kp:=9", "x:y:=1"]).for_node("demo")).unwrap();
+        assert_eq!((p.rate, p.gains.kp), (5.0, 9.0));
     }
 }

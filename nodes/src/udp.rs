@@ -1,8 +1,12 @@
 //! The driver's and the sensor node's UDP ends. One socket, one owner, no threads here: the node's
 //! main loop (or a test) calls `cycle`/`receive`.
 
+use std::io::IoSliceMut;
 use std::net::{SocketAddr, UdpSocket};
-use std::time::{Duration, Instant};
+use std::os::fd::AsRawFd;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use nix::sys::socket::{ControlMessageOwned, MsgFlags, SockaddrStorage, recvmsg, setsockopt, sockopt};
 
 use nalgebra::UnitQuaternion;
 use softcontact_wire::rdt::{RdtCommand, Request};
@@ -22,7 +26,8 @@ pub(crate) fn no_datagram(e: &std::io::Error) -> bool {
 pub struct FriClient {
     socket: UdpSocket,
     pub driver: LwrDriver,
-    /// Time from a measurement's arrival to its answer leaving the driver for the kernel [s].
+    /// Time from a measurement's arrival (the kernel's receive timestamp, SO_TIMESTAMPNS: scheduling
+    /// delays before `recv` returns count) to its answer leaving the driver for the kernel [s].
     pub reply_latency: Histogram,
     /// Time the kernel takes to accept the answer (on loopback it also delivers it) [s].
     pub send_duration: Histogram,
@@ -31,8 +36,10 @@ pub struct FriClient {
 
 impl FriClient {
     pub fn bind(addr: SocketAddr, driver: LwrDriver) -> std::io::Result<Self> {
+        let socket = UdpSocket::bind(addr)?;
+        setsockopt(&socket, sockopt::ReceiveTimestampns, &true).map_err(std::io::Error::from)?;
         Ok(Self {
-            socket: UdpSocket::bind(addr)?,
+            socket,
             driver,
             reply_latency: Histogram::new(1e-6, 20_000),
             send_duration: Histogram::new(1e-6, 20_000),
@@ -48,11 +55,22 @@ impl FriClient {
     /// what to publish; `None` on timeout or a socket error. Malformed, implausible and strangers'
     /// datagrams are counted by the driver and skipped.
     pub fn cycle(&mut self, timeout: Duration) -> std::io::Result<Option<DriverOutput>> {
+        self.cycle_with(timeout, |_, _| {})
+    }
+
+    /// [`cycle`](Self::cycle) with `respond` run between reading the measurement and answering it: an
+    /// in-process controller computes the torque for this very measurement and hands it to the driver
+    /// ([`LwrDriver::set_command`], or [`LwrDriver::clear_command`] to hold).
+    pub fn cycle_with(
+        &mut self,
+        timeout: Duration,
+        mut respond: impl FnMut(&mut LwrDriver, &DriverOutput),
+    ) -> std::io::Result<Option<DriverOutput>> {
         let mut buf = [0u8; 2048];
         self.socket.set_read_timeout(Some(timeout))?;
         let deadline = Instant::now() + timeout;
         loop {
-            let (n, from) = match self.socket.recv_from(&mut buf) {
+            let (n, from, received) = match receive(&self.socket, &mut buf) {
                 Ok(r) => r,
                 Err(e) if no_datagram(&e) => return Ok(None),
                 Err(_) => {
@@ -68,6 +86,8 @@ impl FriClient {
                 }
             };
             let arrived = Instant::now();
+            // The kernel's timestamp, on the system clock; without one, when `recv` returned.
+            let waited = received.and_then(|t| SystemTime::now().duration_since(t).ok()).unwrap_or_default();
             let silence = self.last_arrival.map_or(f64::INFINITY, |t| (arrived - t).as_secs_f64());
             if self.driver.accept_sender(from, silence).is_none() {
                 continue;
@@ -76,18 +96,43 @@ impl FriClient {
                 self.driver.resumed_after(silence);
             }
             self.last_arrival = Some(arrived);
-            if let Ok((reply, output)) = self.driver.handle(&buf[..n]) {
+            if let Ok(measured) = self.driver.measure(&buf[..n]) {
+                respond(&mut self.driver, &measured.output);
+                let (reply, output) = self.driver.answer(measured);
                 let datagram = reply.encode();
                 let sending = Instant::now();
                 if self.socket.send_to(&datagram, from).is_err() {
                     self.driver.counters.network_errors += 1;
                 }
-                self.reply_latency.record((sending - arrived).as_secs_f64());
+                self.reply_latency.record((waited + (sending - arrived)).as_secs_f64());
                 self.send_duration.record(sending.elapsed().as_secs_f64());
                 return Ok(Some(output));
             }
         }
     }
+}
+
+/// One datagram, its sender, and the kernel's receive timestamp (SO_TIMESTAMPNS) when there is one.
+fn receive(socket: &UdpSocket, buf: &mut [u8]) -> std::io::Result<(usize, SocketAddr, Option<SystemTime>)> {
+    let mut iov = [IoSliceMut::new(buf)];
+    let mut space = nix::cmsg_space!(nix::sys::time::TimeSpec);
+    let msg = recvmsg::<SockaddrStorage>(socket.as_raw_fd(), &mut iov, Some(&mut space), MsgFlags::empty())
+        .map_err(std::io::Error::from)?;
+    let timestamp = msg.cmsgs().ok().and_then(|mut c| {
+        c.find_map(|m| match m {
+            ControlMessageOwned::ScmTimestampns(t) => {
+                Some(UNIX_EPOCH + Duration::new(t.tv_sec().try_into().ok()?, t.tv_nsec().try_into().ok()?))
+            }
+            _ => None,
+        })
+    });
+    let from = msg.address.and_then(|a| {
+        a.as_sockaddr_in()
+            .map(|v4| SocketAddr::V4((*v4).into()))
+            .or_else(|| a.as_sockaddr_in6().map(|v6| SocketAddr::V6((*v6).into())))
+    });
+    let from = from.ok_or_else(|| std::io::Error::other("a datagram without an IP sender"))?;
+    Ok((msg.bytes, from, timestamp))
 }
 
 /// The client end of RDT, talking to one sensor. No datagram and no socket error ends it: an ICMP

@@ -79,7 +79,11 @@ fn main() -> anyhow::Result<()> {
                 Ok(()) => {
                     let m = control.law.contact_model();
                     let what = format!("{:?} k {:.0} λ {:.1}", m.kind, m.stiffness, m.damping);
-                    ros::log(&node, LogLevel::Info, &format!("force command {:.2} N over {:.2} s ({what})", c.force, c.duration));
+                    ros::log(
+                        &node,
+                        LogLevel::Info,
+                        &format!("force command {:.2} N over {:.2} s ({what})", c.force, c.duration),
+                    );
                 }
                 Err(e) => ros::log(&node, LogLevel::Error, &format!("force command {} N refused: {e}", c.force)),
             }
@@ -125,7 +129,11 @@ fn main() -> anyhow::Result<()> {
                     torque_pub.publish(messages::hold_request(&names, &js.header))?;
                 }
                 Reply::Nothing(Silence::NoFreshForce) if Instant::now() >= next_stale_log => {
-                    ros::log(&node, LogLevel::Warn, "no fresh /ft_sensor/wrench: sending no command (the driver holds)");
+                    ros::log(
+                        &node,
+                        LogLevel::Warn,
+                        "no fresh /ft_sensor/wrench: sending no command (the driver holds)",
+                    );
                     next_stale_log = Instant::now() + Duration::from_secs(1);
                 }
                 Reply::Nothing(_) => {}
@@ -144,6 +152,10 @@ fn main() -> anyhow::Result<()> {
             break;
         }
     }
-    eprintln!("deformation_controller: exit: {}; peak RSS {:.1} MB", control.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
+    eprintln!(
+        "deformation_controller: exit: {}; peak RSS {:.1} MB",
+        control.counters,
+        ros::peak_rss_mb().unwrap_or(f64::NAN)
+    );
     dead.map_or(Ok(()), |d| Err(d.into()))
 }

@@ -156,7 +156,8 @@ impl ControllerNode {
         if force_in_sensor.iter().all(|v| v.is_finite()) && stamp > self.newest_force_stamp {
             self.newest_force_stamp = stamp;
             self.force = Some((force_in_sensor, now));
-        } else {
+        } else if stamp != self.newest_force_stamp {
+            // (The same reading again, as a host that polls its newest one may hand it over, is no news.)
             self.counters.readings_dropped += 1;
         }
     }
@@ -206,7 +207,8 @@ impl ControllerNode {
 
     /// One joint state, arrived at `now`: what the driver is told.
     pub fn on_joint_state(&mut self, js: &JointSample, now: f64) -> Step {
-        let nothing = |why, state| Step { reply: Reply::Nothing(why), state, force_world: Vector3::zeros(), restarted: false };
+        let nothing =
+            |why, state| Step { reply: Reply::Nothing(why), state, force_world: Vector3::zeros(), restarted: false };
         if !(js.stamp > self.newest_joint_state_stamp) {
             self.counters.not_newer += 1;
             return nothing(Silence::NotNewer, ControllerState::default());

@@ -1,0 +1,242 @@
+//! The `ft_sensor` node's process loop, hosted by its own binary or by `lwr_control` (see the binary
+//! for what it publishes and serves).
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
+use ros2_client::{Name, ParameterValue, ServiceTypeName};
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+
+use super::{FtConfig, FtSensorNode, Params, StartupTare};
+use crate::contact_estimator::ForcePairing;
+use crate::geometry;
+use crate::handover::{ForceReading, Latest, ToolPose};
+use crate::liveness::{DeadStream, StreamWatch};
+use crate::messages;
+use crate::ros::{self, LogLevel};
+use crate::udp::RdtClient;
+
+/// What the node shares with the components of its process, when composed (`lwr_control`): the tool
+/// pose comes from the driver in memory instead of /lwr/ee_pose, and the compensated force goes to the
+/// controller in memory as well as on /ft_sensor/wrench.
+#[derive(Default)]
+pub struct Links {
+    pub poses: Option<Arc<Latest<ToolPose>>>,
+    pub forces: Option<Arc<Latest<ForceReading>>>,
+}
+
+/// The node until `stop` is set (or it exits after a silence): the binary's `main`, and a thread of
+/// `lwr_control`.
+pub fn run(
+    p: Params,
+    declared: Vec<(String, ParameterValue)>,
+    links: Links,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let config = FtConfig {
+        calibration: p.calibration().map_err(anyhow::Error::msg)?,
+        tool: lwr4::tool_load(),
+        gravity: Vector3::new(0.0, 0.0, -9.81),
+        low_pass: (p.low_pass > 0.0).then_some(p.low_pass),
+        sample_rate: p.rate,
+    };
+    let ft = FtSensorNode::new(config).map_err(anyhow::Error::msg)?.with_tare_policy(p.tare_policy());
+    let mut client = RdtClient::connect(p.sensor, ft)?;
+    client.new_stream_after = Duration::from_secs_f64(p.stale_after);
+    let mut node = ros::node_with_parameters("ft_sensor", declared)?;
+    let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
+    let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    // Every tare taken (its bias, stamped when taken): a recording then shows where the sensor's drifted
+    // offset was zeroed, which the discrepancy workflow needs to tell a drift from a moving surface.
+    let tare_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/tare", ros::reliable_qos())?;
+    let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
+    // Composed, the driver hands the pose over in memory.
+    let poses = match links.poses {
+        None => Some(ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?),
+        Some(_) => None,
+    };
+    let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
+    let bias = node.create_server::<TriggerRequest, TriggerResponse>(
+        ros::service_mapping(&p.service_mapping)?,
+        &Name::new("/ft_sensor", "bias")?,
+        &ServiceTypeName::new("std_srvs", "Trigger"),
+        ros::reliable_qos(),
+        ros::reliable_qos(),
+    )?;
+
+    let tool_to_sensor = ForcePairing::urdf_tool_to_sensor()?;
+
+    if let Err(e) = client.start() {
+        ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));
+    }
+    ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
+    let mut orientation: Option<UnitQuaternion<f64>> = None;
+    let mut last_status = 0u32;
+    let mut last_saturated = false;
+    let mut next_diagnostics = Instant::now();
+    let mut logged_network_errors = 0;
+    let mut startup_tare = StartupTare::new(p.tare_after);
+    let start = Instant::now();
+    let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
+    let mut poses_dead: Option<DeadStream> = None;
+    let mut newest_shared_pose = None;
+    while !ros::stopping(&stop) {
+        while let Some(Ok(Some((pose, _)))) = poses.as_ref().map(|s| s.take()) {
+            pose_watch.seen(start.elapsed().as_secs_f64());
+            let (position, rotation) = geometry::pose_of(&pose.pose);
+            client.node.observe_tool_pose(&Isometry3::from_parts(position.into(), rotation));
+            orientation = Some(rotation * tool_to_sensor);
+        }
+        if let Some(pose) =
+            links.poses.as_ref().and_then(|s| s.get()).filter(|p| Some(p.measured) != newest_shared_pose)
+        {
+            newest_shared_pose = Some(pose.measured);
+            pose_watch.seen(pose.measured.duration_since(start).as_secs_f64());
+            client.node.observe_tool_pose(&pose.pose);
+            orientation = Some(pose.pose.rotation * tool_to_sensor);
+        }
+        // Poses stopped (the driver or the middleware is dead): the hand may turn unseen, so the
+        // compensated wrench is withheld until they flow again.
+        match (pose_watch.dead(start.elapsed().as_secs_f64()), &poses_dead) {
+            (Some(d), None) => {
+                if let Some(forces) = &links.forces {
+                    forces.withdraw();
+                }
+                ros::log(&node, LogLevel::Error, &format!("{d}; /ft_sensor/wrench withheld"));
+                orientation = None;
+                poses_dead = Some(d);
+            }
+            (Some(d), Some(_)) => {
+                orientation = None;
+                poses_dead = Some(d);
+            }
+            (None, Some(_)) => {
+                ros::log(&node, LogLevel::Info, "/lwr/ee_pose flows again: /ft_sensor/wrench resumes");
+                poses_dead = None;
+            }
+            (None, None) => {}
+        }
+        if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
+            last_status = out.status.0;
+            last_saturated = out.saturated;
+            let compensated = out.compensated.filter(|_| startup_tare.tared() && !out.invalid);
+            // The composed controller first: it answers the next FRI measurement with this reading.
+            if let Some(forces) = &links.forces {
+                match compensated {
+                    Some(c) => forces.put(ForceReading {
+                        stamp: clock.now().as_secs_f64(),
+                        force: Vector3::new(c[0], c[1], c[2]),
+                        arrived: Instant::now(),
+                    }),
+                    None => forces.withdraw(),
+                }
+            }
+            if !out.invalid {
+                let stamp = clock.now();
+                raw_pub.publish(messages::wrench(&out.raw, stamp))?;
+                if let Some(c) = compensated {
+                    wrench_pub.publish(messages::wrench(&c, stamp))?;
+                }
+            }
+        }
+        if let Some(o) = orientation {
+            let refused_before = startup_tare.refusal.clone();
+            match startup_tare.poll(&mut client.node, &o, start.elapsed().as_secs_f64()) {
+                Some(Ok(b)) => {
+                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
+                    ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
+                }
+                Some(Err(e)) if refused_before.as_ref() != Some(&e) => {
+                    ros::log(&node, LogLevel::Warn, &format!("start-up {e}; retrying"));
+                }
+                _ => {}
+            }
+        }
+        while let Ok(Some((id, _))) = bias.receive_request() {
+            let response = match client.node.checked_tare(orientation.as_ref()) {
+                Ok(b) => {
+                    startup_tare.taken();
+                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
+                    ros::log(&node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
+                    TriggerResponse { success: true, message: format!("bias set to {b:?}") }
+                }
+                Err(e) => {
+                    ros::log(&node, LogLevel::Warn, &format!("/ft_sensor/bias: {e}"));
+                    TriggerResponse { success: false, message: e }
+                }
+            };
+            bias.send_response(id, response)?;
+        }
+        // The client repeats the start request while no fresh record comes (box booting, rebooting).
+        let silent = client.silence().as_secs_f64();
+        let network_errors = client.node.counters.network_errors;
+        if network_errors > logged_network_errors && silent > 1.0 {
+            ros::log(
+                &node,
+                LogLevel::Warn,
+                &format!("no record from {} for {silent:.1} s, {network_errors} network errors: retrying", p.sensor),
+            );
+            logged_network_errors = network_errors + 10;
+        }
+        if p.exit_after_silence > 0.0 && silent > p.exit_after_silence {
+            ros::log(&node, LogLevel::Info, &format!("no record for {} s, exiting", p.exit_after_silence));
+            break;
+        }
+        if Instant::now() >= next_diagnostics {
+            let c = client.node.counters;
+            let status = softcontact_wire::rdt::Status(last_status);
+            let (level, message) = if let Some(d) = &poses_dead {
+                (DiagnosticStatus::ERROR, format!("{d}: tool gravity unknown, /ft_sensor/wrench withheld"))
+            } else if silent > p.stale_after {
+                let why = if c.network_errors > 0 {
+                    format!(" ({} network errors: box not up or unreachable?)", c.network_errors)
+                } else {
+                    String::new()
+                };
+                (DiagnosticStatus::STALE, format!("no fresh record for {silent:.3} s{why}"))
+            } else if status.is_error() || last_saturated {
+                let mut what = status.describe();
+                if last_saturated && !status.is_saturated() {
+                    what.push("reading at or beyond the calibrated range");
+                }
+                (DiagnosticStatus::ERROR, what.join(", "))
+            } else if orientation.is_none() {
+                (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
+            } else if !startup_tare.tared() {
+                let why = startup_tare.refusal.as_deref().unwrap_or("waiting for tare_after");
+                (DiagnosticStatus::WARN, format!("not tared yet ({why}): /ft_sensor/wrench waits"))
+            } else {
+                (DiagnosticStatus::OK, "streaming".into())
+            };
+            diag.publish(ros::diagnostics(
+                clock.now(),
+                "ft_sensor: RDT",
+                &p.sensor.to_string(),
+                level,
+                message,
+                &[
+                    ("records", c.records),
+                    ("lost", c.lost),
+                    ("out_of_order", c.out_of_order),
+                    ("duplicate", c.duplicate),
+                    ("restarts", c.restarts),
+                    ("malformed", c.malformed),
+                    ("saturated", c.saturated),
+                    ("errors", c.errors),
+                    ("network_errors", c.network_errors),
+                    ("foreign", c.foreign),
+                    ("tares_refused", c.tares_refused),
+                ],
+            ))?;
+            next_diagnostics += Duration::from_secs(1);
+        }
+    }
+    let _ = client.stop();
+    eprintln!("ft_sensor: exit: {:?}; peak RSS {:.1} MB", client.node.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
+    Ok(())
+}

@@ -1,0 +1,255 @@
+//! The `lwr_driver` node's process loop, hosted by its own binary or as the FRI thread of `lwr_control`
+//! with the controller answering in process (see the binary for what it publishes and takes).
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use ros2_client::ParameterValue;
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
+use softcontact_msgs::sensor_msgs::JointState;
+use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_wire::fri::InterfaceState;
+
+use super::{DriverCounters, DriverOutput, LwrDriver, Params, Refusals};
+use crate::deformation_controller::InProcessController;
+use crate::handover::{Latest, ToolPose};
+use crate::liveness::{DeadStream, StreamWatch};
+use crate::messages::{self, DriverSession};
+use crate::realtime;
+use crate::ros::{self, LogLevel};
+use crate::stats::Histogram;
+use crate::udp::FriClient;
+
+/// The driver's status: a dead controller, then datagrams all refused, then any refused, then holding.
+fn diagnostics(
+    client: &FriClient,
+    command_age: &Histogram,
+    last: Option<&DriverOutput>,
+    dead: Option<&DeadStream>,
+    refusals: &Refusals,
+    stamp: Time,
+) -> DiagnosticArray {
+    let c = client.driver.counters;
+    let us = |s: f64| (s * 1e6).round() as u64;
+    let (level, message) = match (dead, last) {
+        (Some(d), _) => (DiagnosticStatus::ERROR, format!("{d}; holding position")),
+        _ if refusals.all_refused() => {
+            (DiagnosticStatus::ERROR, format!("{refusals} in the last second: the KRC is not answered"))
+        }
+        _ if refusals.refused() > 0 => (DiagnosticStatus::WARN, format!("{refusals} in the last second")),
+        (None, None) => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
+        (None, Some(o)) if o.holding => {
+            (DiagnosticStatus::WARN, format!("holding position ({:?}, quality {:?})", o.state, o.quality))
+        }
+        (None, Some(o)) => (DiagnosticStatus::OK, format!("{:?}, quality {:?}", o.state, o.quality)),
+    };
+    ros::diagnostics(
+        stamp,
+        "lwr_driver: FRI",
+        "kuka_lwr4",
+        level,
+        message,
+        &[
+            ("measurements", c.measurements),
+            ("lost", c.lost),
+            ("out_of_order", c.out_of_order),
+            ("malformed", c.malformed),
+            ("implausible", c.implausible),
+            ("strangers", c.strangers),
+            ("sessions", c.sessions),
+            ("network_errors", c.network_errors),
+            ("commands_too_old", c.commands_too_old),
+            ("stale_cycles", c.stale_cycles),
+            ("clipped_cycles", c.clipped_cycles),
+            ("overspeed_cycles", c.overspeed_cycles),
+            ("commands_refused", c.commands_refused),
+            ("reply_latency_p99_us", us(client.reply_latency.quantile(0.99))),
+            ("reply_latency_max_us", us(client.reply_latency.max())),
+            ("command_age_p99_us", us(command_age.quantile(0.99))),
+            ("command_age_max_us", us(command_age.max())),
+        ],
+    )
+}
+
+/// What the driver shares with the components of its process, when composed (`lwr_control`).
+#[derive(Default)]
+pub struct Links {
+    /// The controller answering each measurement on this thread; without it the driver takes
+    /// /lwr/joint_torque_command from the network.
+    pub controller: Option<InProcessController>,
+    /// The newest tool pose, for the F/T node.
+    pub poses: Option<Arc<Latest<ToolPose>>>,
+}
+
+/// The node until `stop` is set (or it exits after a silence): the binary's `main`, and the FRI thread of
+/// `lwr_control`.
+pub fn run(
+    p: Params,
+    declared: Vec<(String, ParameterValue)>,
+    links: Links,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let Links { mut controller, poses } = links;
+    let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
+    let mut node = ros::node_with_parameters("lwr_driver", declared)?;
+    let joint_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos())?;
+    let ee_pose = ros::publisher::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
+    let ee_twist = ros::publisher::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
+    let tf = ros::publisher::<TFMessage>(&mut node, "/tf", ros::sensor_qos())?;
+    let tf_static = ros::publisher::<TFMessage>(&mut node, "/tf_static", ros::latched_qos())?;
+    let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
+    // Composed, the controller answers in process: nobody else may command the arm.
+    let commands = match controller {
+        None => Some(ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?),
+        Some(_) => None,
+    };
+    let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
+
+    // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
+    let model = lwr4::model();
+    tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
+    let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
+    // This thread answers the KRC: it asks to run as soon as a measurement arrives.
+    let scheduling = realtime::request_short_slice(realtime::FRI_SLICE).unwrap_or_else(|e| format!("unchanged ({e})"));
+    let ready = format!("ready: FRI on {}, domain {}; {scheduling}", client.local_addr()?, node.domain_id());
+    ros::log(&node, LogLevel::Info, &ready);
+
+    // How old the joint state behind the applied command is, each cycle it is applied (the controller
+    // stamps its command with the stamp of the joint state it answered; older ones are stale cycles).
+    let mut command_age = Histogram::new(1e-5, 100_000);
+    let mut command_stamp: Option<f64> = None;
+    let mut last: Option<DriverOutput> = None;
+    let mut next_diagnostics = Instant::now();
+    let mut last_seen = Instant::now();
+    let mut next_refusal_log = Instant::now();
+    let mut publish_errors = 0u64;
+    let start = Instant::now();
+    let mut command_watch = StreamWatch::new("/lwr/joint_torque_command", 1000.0, p.dead_after);
+    let mut commands_dead: Option<DeadStream> = None;
+    // The counters at the last diagnostics, for what was refused since.
+    let mut counted = DriverCounters::default();
+    let mut all_refused_logged = false;
+    // Cycles answered with a held command once the controller first commanded (start-up excluded).
+    let mut stale_at_first_command: Option<u64> = None;
+    while !ros::stopping(&stop) {
+        if let Some(c) = controller.as_mut() {
+            c.take_inputs();
+        }
+        // The measurement's stamp: the controller answers it, and the joint state carries it.
+        let mut measured_at = None;
+        let output = client.cycle_with(Duration::from_millis(5), |driver, out| {
+            let stamp = clock.now();
+            measured_at = Some(stamp);
+            if let Some(c) = controller.as_mut() {
+                c.respond(driver, out, stamp.as_secs_f64());
+            }
+        })?;
+        // Newest torque command wins; a bad one is refused and counted, the previous one stays.
+        // A command must answer a joint state of the present KRC session, within the watchdog's age
+        // by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
+        while let Some(Ok(Some((cmd, _)))) = commands.as_ref().map(|c| c.take()) {
+            command_watch.seen(start.elapsed().as_secs_f64());
+            let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
+            let age = clock.now().as_secs_f64() - cmd.header.stamp.as_secs_f64();
+            match client.driver.set_remote_command(&cmd.effort, session, age) {
+                Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
+                Err(e) if Instant::now() >= next_refusal_log => {
+                    ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
+                    next_refusal_log = Instant::now() + Duration::from_secs(1);
+                }
+                Err(_) => {}
+            }
+        }
+        if let Some(out) = output {
+            last_seen = Instant::now();
+            let stamp = measured_at.unwrap_or_else(|| clock.now());
+            if let Some(poses) = &poses {
+                poses.put(ToolPose { pose: out.tool_pose, measured: last_seen });
+            }
+            let commanded = out.state == InterfaceState::Command && !out.holding;
+            if commanded {
+                stale_at_first_command.get_or_insert(client.driver.counters.stale_cycles);
+            }
+            // The torque of a composed controller answered this very measurement.
+            if controller.is_some() && commanded {
+                command_stamp = Some(stamp.as_secs_f64());
+            }
+            if let Some(t) = command_stamp.filter(|_| commanded) {
+                command_age.record(clock.now().as_secs_f64() - t);
+            }
+            if let Some(c) = controller.as_mut() {
+                publish_errors += c.publish(stamp);
+            }
+            let m = out.messages(&names, stamp);
+            // The KRC is answered already; a middleware error is counted, never the end of the driver.
+            let sent = [
+                joint_states.publish(m.joint_state).is_ok(),
+                ee_pose.publish(m.ee_pose).is_ok(),
+                ee_twist.publish(m.ee_twist).is_ok(),
+                tf.publish(m.tf).is_ok(),
+            ];
+            publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
+            last = Some(out);
+        } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
+            ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));
+            break;
+        }
+        // Commands are due while the KRC commands; silence beyond dead_after is reported, never an exit.
+        let now = start.elapsed().as_secs_f64();
+        let krc_commands = last.as_ref().is_some_and(|o| o.state == InterfaceState::Command)
+            && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
+        if !krc_commands || controller.is_some() {
+            command_watch.not_due(now);
+        }
+        match (command_watch.dead(now), &commands_dead) {
+            (Some(d), None) => {
+                ros::log(&node, LogLevel::Error, &format!("{d}; holding the arm while the KRC commands"));
+                commands_dead = Some(d);
+            }
+            (Some(d), Some(_)) => commands_dead = Some(d),
+            (None, Some(_)) => {
+                ros::log(&node, LogLevel::Info, "torque commands flow again (or the KRC stopped commanding)");
+                commands_dead = None;
+            }
+            (None, None) => {}
+        }
+        if Instant::now() >= next_diagnostics {
+            let refusals = client.driver.counters.refusals_since(&counted);
+            if refusals.all_refused() && !all_refused_logged {
+                ros::log(&node, LogLevel::Error, &format!("{refusals} in the last second: the KRC is not answered"));
+            }
+            all_refused_logged = refusals.all_refused();
+            counted = client.driver.counters;
+            let dead = commands_dead.as_ref();
+            let status = diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now());
+            publish_errors += u64::from(diag.publish(status).is_err());
+            next_diagnostics += Duration::from_secs(1);
+        }
+    }
+    let refusals = client.driver.counters.refusals_since(&counted);
+    let dead = commands_dead.as_ref();
+    diag.publish(diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now()))?;
+    // The exit report: tests and `launch-scripts/sim.sh` read these lines.
+    eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
+    eprintln!(
+        "lwr_driver: reply latency {}; within 200 us: {:.4} %",
+        client.reply_latency.summary(1e6, "us"),
+        client.reply_latency.fraction_within(200e-6) * 100.0
+    );
+    eprintln!("lwr_driver: send call {}", client.send_duration.summary(1e6, "us"));
+    let stale = client.driver.counters.stale_cycles;
+    let after_start = stale_at_first_command.map_or(0, |s| stale - s);
+    eprintln!(
+        "lwr_driver: command age {}; stale cycles {stale}, {after_start} after the first command",
+        command_age.summary(1e3, "ms")
+    );
+    if let Some(c) = &controller {
+        eprintln!("deformation_controller: exit: {}", c.control.counters);
+    }
+    eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
+    Ok(())
+}
