@@ -14,7 +14,7 @@ use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_wire::fri::InterfaceState;
 
-use super::{DriverCounters, DriverOutput, LwrDriver, Params, Refusals};
+use super::{DriverCounters, DriverError, DriverOutput, LwrDriver, Params, Refusals};
 use crate::deformation_controller::InProcessController;
 use crate::handover::{Latest, ToolPose};
 use crate::liveness::{DeadStream, StreamWatch};
@@ -152,10 +152,15 @@ pub fn run(
         // A command must answer a joint state of the present KRC session, within the watchdog's age
         // by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
         while let Some(Ok(Some((cmd, _)))) = commands.as_ref().map(|c| c.take()) {
-            command_watch.seen(start.elapsed().as_secs_f64());
             let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
             let age = clock.now().as_secs_f64() - cmd.header.stamp.as_secs_f64();
-            match client.driver.set_remote_command(&cmd.effort, session, age) {
+            let taken = client.driver.set_remote_command(&cmd.effort, session, age);
+            // A live controller answers the present session in time (a hold request included); a backlog
+            // delivered after a stall, or another session's commands, are no sign of life.
+            if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..))) {
+                command_watch.seen(start.elapsed().as_secs_f64());
+            }
+            match taken {
                 Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
                 Err(e) if Instant::now() >= next_refusal_log => {
                     ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
