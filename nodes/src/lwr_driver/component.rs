@@ -141,6 +141,7 @@ pub fn run(
         }
         // The measurement's stamp: the controller answers it, and the joint state carries it.
         let mut measured_at = None;
+        let mut sign_of_life = false;
         let output = client.cycle_with(Duration::from_millis(5), |driver, out| {
             let stamp = clock.now();
             measured_at = Some(stamp);
@@ -159,6 +160,7 @@ pub fn run(
             // delivered after a stall, or another session's commands, are no sign of life.
             if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..))) {
                 command_watch.seen(start.elapsed().as_secs_f64());
+                sign_of_life = true;
             }
             match taken {
                 Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
@@ -216,11 +218,13 @@ pub fn run(
                 commands_dead = Some(d);
             }
             (Some(d), Some(_)) => commands_dead = Some(d),
-            (None, Some(_)) => {
-                ros::log(&node, LogLevel::Info, "torque commands flow again (or the KRC stopped commanding)");
+            // Only commands end the report: a KRC that pauses commanding (a new session after the
+            // stall) does not bring the controller back, and its next silence is the same outage.
+            (None, Some(_)) if sign_of_life => {
+                ros::log(&node, LogLevel::Info, "torque commands flow again");
                 commands_dead = None;
             }
-            (None, None) => {}
+            (None, _) => {}
         }
         if Instant::now() >= next_diagnostics {
             let refusals = client.driver.counters.refusals_since(&counted);
