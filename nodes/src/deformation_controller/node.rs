@@ -4,7 +4,9 @@
 //! reading `now` [s]; the node decides what is ticked, with which force, and what the driver is told.
 //!
 //! - Only a joint state newer than the newest one ticked is ticked (a replayed recording, or a backlog
-//!   after a stall, never drives the arm); the controller runs on the joint states' stamps.
+//!   after a stall, never drives the arm); the controller runs on the joint states' stamps. A stamp
+//!   from the far future (a stranger's) silences the node until it is passed: the driver's watchdog
+//!   holds the arm meanwhile and reports the silence.
 //! - A force reading counts while it is at most `stale_after` old by `now`; without one no command is
 //!   sent (the driver's watchdog holds). A reading that is not finite, or not newer by its stamp, is
 //!   dropped.
@@ -153,7 +155,7 @@ impl ControllerNode {
     /// A force reading of the sensor in its own frame (/ft_sensor/wrench: tared, the hand's weight
     /// removed), stamped `stamp` by the sensor node, arrived at `now`.
     pub fn on_force(&mut self, stamp: f64, force_in_sensor: Vector3<f64>, now: f64) {
-        if force_in_sensor.iter().all(|v| v.is_finite()) && stamp > self.newest_force_stamp {
+        if force_in_sensor.iter().all(|v| v.is_finite()) && stamp.is_finite() && stamp > self.newest_force_stamp {
             self.newest_force_stamp = stamp;
             self.force = Some((force_in_sensor, now));
         } else if stamp != self.newest_force_stamp {
@@ -209,7 +211,8 @@ impl ControllerNode {
     pub fn on_joint_state(&mut self, js: &JointSample, now: f64) -> Step {
         let nothing =
             |why, state| Step { reply: Reply::Nothing(why), state, force_world: Vector3::zeros(), restarted: false };
-        if !(js.stamp > self.newest_joint_state_stamp) {
+        // A stamp that is no number (or infinite) would end the order for good: it is not newer.
+        if !(js.stamp.is_finite() && js.stamp > self.newest_joint_state_stamp) {
             self.counters.not_newer += 1;
             return nothing(Silence::NotNewer, ControllerState::default());
         }
@@ -299,5 +302,141 @@ impl Notices {
             lines.push((LogLevel::Info, what.to_string()));
         }
         lines
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use softcontact_sim::DEFAULT_Q;
+
+    fn node() -> ControllerNode {
+        ControllerNode::from_params(&Params::default()).unwrap()
+    }
+
+    fn sample(stamp: f64, session: u32) -> JointSample {
+        JointSample { stamp, session: Some(session), commanding: true, q: DEFAULT_Q, dq: [0.0; 7] }
+    }
+
+    /// Every torque the node sends is finite and within the URDF's effort limits.
+    fn assert_safe(node: &ControllerNode, step: &Step) {
+        if let Reply::Torque(tau) = step.reply {
+            let limits = &node.law.config().limits.joint_torque;
+            for (i, t) in tau.iter().enumerate() {
+                assert!(t.is_finite() && t.abs() <= limits[i], "joint {i}: {t} N·m (limit {})", limits[i]);
+            }
+        }
+    }
+
+    /// Free space for 0.2 s: the node ticks, answering every joint state with a torque.
+    fn run_free(node: &mut ControllerNode, from: f64, session: u32) -> f64 {
+        let mut t = from;
+        for _ in 0..200 {
+            t += 1e-3;
+            node.on_force(t, Vector3::zeros(), t);
+            let step = node.on_joint_state(&sample(t, session), t);
+            assert!(matches!(step.reply, Reply::Torque(_)), "{:?}", step.reply);
+            assert_safe(node, &step);
+        }
+        t
+    }
+
+    #[test]
+    fn force_readings_that_are_no_numbers_are_dropped_and_send_nothing() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        for (i, bad) in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY].into_iter().enumerate() {
+            // The last good reading is 0.2 s old by now: beyond stale_after, so nothing is fresh.
+            let later = t + 0.2 + i as f64 * 1e-3;
+            node.on_force(later, Vector3::new(0.0, 0.0, bad), later);
+            let step = node.on_joint_state(&sample(later, 1), later);
+            assert_eq!(step.reply, Reply::Nothing(Silence::NoFreshForce), "a force of {bad}");
+        }
+        assert_eq!(node.counters.readings_dropped, 3);
+        // A force stamped with no number is dropped too, and does not end the readings' order.
+        node.on_force(f64::NAN, Vector3::zeros(), t + 0.21);
+        node.on_force(f64::INFINITY, Vector3::zeros(), t + 0.21);
+        node.on_force(t + 0.21, Vector3::zeros(), t + 0.21);
+        let step = node.on_joint_state(&sample(t + 0.21, 1), t + 0.21);
+        assert!(matches!(step.reply, Reply::Torque(_)), "{:?}", step.reply);
+    }
+
+    #[test]
+    fn an_absurd_force_backs_the_hand_off_within_the_torque_limits() {
+        // 1e300 N is finite: it passes the force limit at once, and the law backs off (or holds).
+        for absurd in [1e300, -1e300, 1e6] {
+            let mut node = node();
+            let mut t = run_free(&mut node, 10.0, 1);
+            let n = node.geometry().normal();
+            let mut backed_off = false;
+            for _ in 0..500 {
+                t += 1e-3;
+                // The sensor reads the surface pushing back along the normal, in its own frame.
+                let tool = node_pose_rotation(&mut node);
+                let sensor = node.geometry().sensor_rotation(&tool);
+                node.on_force(t, sensor.inverse() * (-n * absurd), t);
+                let step = node.on_joint_state(&sample(t, 1), t);
+                assert_safe(&node, &step);
+                backed_off |= step.state.force_limited || matches!(step.reply, Reply::Hold(_));
+            }
+            if absurd > 0.0 {
+                assert!(backed_off, "a force of {absurd} N along the normal: no back-off");
+            }
+        }
+    }
+
+    /// The tool's rotation at the start posture (the sample's q).
+    fn node_pose_rotation(node: &mut ControllerNode) -> nalgebra::UnitQuaternion<f64> {
+        let (model, data, tool) = &mut node.kinematics;
+        model.forward_kinematics(data, &DEFAULT_Q);
+        model.frame_pose(data, *tool).rotation
+    }
+
+    #[test]
+    fn replayed_and_non_finite_stamps_are_not_ticked() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        let ticks = node.counters.ticks;
+        // A replay of the last 0.1 s, stamps that are no numbers, the same stamp again.
+        for stamp in [t - 0.1, t - 1e-3, t, f64::NAN, f64::NEG_INFINITY, f64::INFINITY] {
+            node.on_force(t + 1e-4, Vector3::zeros(), t + 1e-4);
+            let step = node.on_joint_state(&sample(stamp, 1), t + 1e-4);
+            assert_eq!(step.reply, Reply::Nothing(Silence::NotNewer), "stamp {stamp}");
+        }
+        assert_eq!(node.counters.ticks, ticks);
+        // The stream goes on where it was (infinity did not end the order).
+        run_free(&mut node, t, 1);
+    }
+
+    #[test]
+    fn a_stamp_from_the_far_future_silences_the_node_and_never_moves_the_arm() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        node.on_force(t + 1e-3, Vector3::zeros(), t + 1e-3);
+        let step = node.on_joint_state(&sample(1e300, 1), t + 1e-3);
+        assert_safe(&node, &step);
+        // The driver's own joint states after it are not newer: no torque, the driver's watchdog holds.
+        for i in 2..100 {
+            let now = t + i as f64 * 1e-3;
+            node.on_force(now, Vector3::zeros(), now);
+            assert_eq!(node.on_joint_state(&sample(now, 1), now).reply, Reply::Nothing(Silence::NotNewer));
+        }
+    }
+
+    #[test]
+    fn a_new_session_restarts_the_controller_where_the_hand_is() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        node.on_force(t + 1e-3, Vector3::zeros(), t + 1e-3);
+        let step = node.on_joint_state(&sample(t + 1e-3, 2), t + 1e-3);
+        assert!(step.restarted && matches!(step.reply, Reply::Torque(_)));
+        // Monitor mode: a restart, nothing is sent; commanding again starts afresh.
+        let monitor = JointSample { commanding: false, ..sample(t + 2e-3, 2) };
+        let step = node.on_joint_state(&monitor, t + 2e-3);
+        assert!(step.restarted && step.reply == Reply::Nothing(Silence::NotCommanding), "{step:?}");
+        node.on_force(t + 3e-3, Vector3::zeros(), t + 3e-3);
+        let step = node.on_joint_state(&sample(t + 3e-3, 2), t + 3e-3);
+        assert!(!step.restarted && matches!(step.reply, Reply::Torque(_)), "{step:?}");
+        assert_eq!(node.counters.restarts, 2);
     }
 }
