@@ -60,6 +60,12 @@ fn the_demo_reproduces_seed_001_and_beats_its_numbers() {
             assert!((command - ratio * max_force).abs() < 1e-9, "{name}: command {i} is {ratio} of the maximum");
             let error = c["error"].as_f64().unwrap();
             assert!((error - (c["reached"].as_f64().unwrap() - command).abs()).abs() < 1e-9);
+            // Graded on the simulator's true force, the sensor's reading beside it (a drifting sensor:
+            // the two part by at most its drift since the last tare).
+            let measured = c["reached_measured"].as_f64().unwrap();
+            assert!((c["error_measured"].as_f64().unwrap() - (measured - command).abs()).abs() < 1e-9);
+            assert!((measured - c["reached"].as_f64().unwrap()).abs() < 1.0, "{name}: sensor and truth part");
+            assert_eq!(c["model"], "identified");
             worst[cycle - 1] = worst[cycle - 1].max(error / command);
         }
         eprintln!("{name}: largest relative error per cycle {worst:.4?}");

@@ -121,6 +121,15 @@ pub fn wrench(w: &[f64; 6], stamp: Time) -> WrenchStamped {
     }
 }
 
+/// /sim_arm/contact_wrench: the simulator's true contact force on the hand, world axes (the contact
+/// acts at the tool point: no torque about it).
+pub fn contact_wrench(force: &nalgebra::Vector3<f64>, stamp: Time) -> WrenchStamped {
+    WrenchStamped {
+        header: header("world", stamp),
+        wrench: Wrench { force: vector([force.x, force.y, force.z]), torque: vector([0.0; 3]) },
+    }
+}
+
 /// /lwr/joint_torque_command, stamped with the joint state it answers.
 pub fn torque_command(joint_names: &[String], tau: &[f64; 7], answered: &Header) -> JointState {
     JointState {

@@ -64,15 +64,31 @@ impl Plan {
     };
 }
 
-/// One control command and what was reached.
+/// Which model a command went through (design.md section 6: a command's `model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelUse {
+    /// The model in use: the identified one in cycle 1, the online estimate after.
+    Identified,
+    /// Cycle 1 again, with the model the discrepancy workflow augmented.
+    Augmented,
+}
+
+/// One control command and what was reached, graded on the simulator's true contact force.
 #[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
 pub struct CommandResult {
     pub cycle: usize,
     pub ratio: f64,
     pub command: f64,
-    /// Normal force at the end of the move [N].
+    /// The true normal contact force at the end of the move (the simulator's) [N].
     pub reached: f64,
+    /// The same as the F/T sensor read it (tared, gravity compensated) [N].
+    pub reached_measured: f64,
+    /// |reached − command| [N].
     pub error: f64,
+    /// |reached_measured − command| [N].
+    pub error_measured: f64,
+    pub model: ModelUse,
     /// The stiffness of the model the command went through.
     pub model_stiffness: f64,
 }
@@ -85,10 +101,21 @@ impl CommandResult {
         (cycle, ratio, ratio * max_force)
     }
 
-    /// Command `i`'s result, with the error as seed 001 measures it: |actual − command|.
-    pub fn new(i: usize, max_force: f64, reached: f64, model_stiffness: f64) -> Self {
+    /// Command `i`'s result, with the error as seed 001 measures it: |actual − command|, on the true
+    /// force `reached` and on the sensor's `reached_measured`.
+    pub fn new(i: usize, max_force: f64, reached: f64, reached_measured: f64, model_stiffness: f64) -> Self {
         let (cycle, ratio, command) = Self::planned(i, max_force);
-        Self { cycle, ratio, command, reached, error: (reached - command).abs(), model_stiffness }
+        Self {
+            cycle,
+            ratio,
+            command,
+            reached,
+            reached_measured,
+            error: (reached - command).abs(),
+            error_measured: (reached_measured - command).abs(),
+            model: ModelUse::Identified,
+            model_stiffness,
+        }
     }
 }
 
@@ -331,7 +358,7 @@ pub fn run_surface(
         r.observer.force_command(r.last.time, command, plan.move_duration)?;
         command_times.push(r.last.time);
         let cycles = (plan.move_duration / CYCLE).round() as usize;
-        let mut end = Vec::with_capacity(10);
+        let (mut end, mut end_true) = (Vec::with_capacity(10), Vec::with_capacity(10));
         for j in 0..cycles {
             let t = r.tick()?;
             if k.is_multiple_of(10) {
@@ -343,11 +370,12 @@ pub fn run_surface(
             k += 1;
             if j + 10 >= cycles {
                 end.push(t.controller.f);
+                end_true.push(r.cell.sim.contact().normal_force);
             }
         }
         // The force at the end of the move (the last 10 ms, one sample of seed 001's 100 Hz).
-        let reached = end.iter().sum::<f64>() / end.len() as f64;
-        commands.push(CommandResult::new(i, max_force, reached, stiffness));
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+        commands.push(CommandResult::new(i, max_force, mean(&end_true), mean(&end), stiffness));
     }
     Ok(SurfaceRun {
         spec: spec.clone(),

@@ -4,15 +4,21 @@
 //! robot: it records the run with `softcontact record`, pushes the surface at 1 Hz with force commands
 //! (the graph's controller takes force commands only, so identification is force-driven here, not the
 //! position-driven sine of the in-process run), reads the estimator's model and fitness table, then
-//! sends the force commands and reads the force at the end of each move from the controller's state.
+//! sends the force commands and reads the force at the end of each move: the simulator's true contact
+//! force (/sim_arm/contact_wrench) for the grade, the sensor's reading (the controller's state) beside it.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use std::collections::VecDeque;
+
 use anyhow::Context;
+use nalgebra::Vector3;
+use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
-use softcontact_nodes::ros;
+use softcontact_nodes::geometry::ContactGeometry;
+use softcontact_nodes::{deformation_controller, ros};
 
 use super::experiment::{CommandResult, Plan, SurfaceSpec};
 use super::report::{Fitness, Identified, Report, SurfaceReport};
@@ -91,9 +97,16 @@ impl Drop for Recorder {
 struct Heard {
     state: Option<ControllerState>,
     model: Option<ContactModel>,
-    /// The last few normal forces of the controller's 100 Hz state.
+    /// The last few normal forces of the controller's 100 Hz state (the sensor's reading).
     recent: Vec<f64>,
+    /// The last 10 ms of the simulator's true normal force (/sim_arm/contact_wrench, 1 kHz).
+    recent_true: std::collections::VecDeque<f64>,
     max_force: f64,
+}
+
+fn mean<'a>(v: impl ExactSizeIterator<Item = &'a f64>) -> f64 {
+    let n = v.len().max(1) as f64;
+    v.sum::<f64>() / n
 }
 
 /// Inside the namespace, with the graph up: the experiments on one surface.
@@ -106,14 +119,26 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
     let mut node = ros::node("softcontact_demo")?;
     let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
     let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+    let truth = ros::subscription::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
     let commands =
         ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
-    let mut heard = Heard { state: None, model: None, recent: Vec::new(), max_force: 0.0 };
+    // The true normal force along the controller's normal (its default: the graph's parameters).
+    let geometry = ContactGeometry::lwr4(Vector3::from(deformation_controller::Params::default().normal))
+        .context("the controller's normal")?;
+    let mut heard =
+        Heard { state: None, model: None, recent: Vec::new(), recent_true: VecDeque::new(), max_force: 0.0 };
     let listen = |heard: &mut Heard, seconds: f64| -> anyhow::Result<()> {
         let until = Instant::now() + Duration::from_secs_f64(seconds);
         loop {
             while let Ok(Some((m, _))) = models.take() {
                 heard.model = Some(m);
+            }
+            while let Ok(Some((w, _))) = truth.take() {
+                let f = w.wrench.force;
+                heard.recent_true.push_back(geometry.normal_force(&Vector3::new(f.x, f.y, f.z)));
+                if heard.recent_true.len() > 10 {
+                    heard.recent_true.pop_front();
+                }
             }
             while let Ok(Some((s, _))) = states.take() {
                 heard.max_force = heard.max_force.max(s.f);
@@ -159,9 +184,10 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
         let stiffness = heard.model.as_ref().map_or(f64::NAN, |m| m.stiffness);
         commands.publish(ForceCommand { force: command, duration: plan.move_duration })?;
         listen(&mut heard, plan.move_duration)?;
-        let reached = heard.recent.iter().sum::<f64>() / heard.recent.len().max(1) as f64;
-        eprintln!("{}: command {command:.1} N, reached {reached:.1} N", spec.name);
-        results.push(CommandResult::new(i, max_force, reached, stiffness));
+        anyhow::ensure!(!heard.recent_true.is_empty(), "no true contact force from /sim_arm/contact_wrench");
+        let (reached, measured) = (mean(heard.recent_true.iter()), mean(heard.recent.iter()));
+        eprintln!("{}: command {command:.2} N, reached {reached:.2} N (the sensor read {measured:.2} N)", spec.name);
+        results.push(CommandResult::new(i, max_force, reached, measured, stiffness));
     }
     anyhow::ensure!(recorder.stop()?, "the recorder did not stop cleanly");
 

@@ -1,13 +1,16 @@
 //! `sim_arm`: the simulated LWR IV, KRC, soft surface and Net F/T box behind the robot's and the
 //! sensor's own UDP protocols, paced in real time (or in lockstep with the driver, publishing /clock).
-//! Point the driver nodes at it as at the hardware.
+//! Point the driver nodes at it as at the hardware. It publishes what only a simulator knows: the true
+//! contact wrench on the hand (/sim_arm/contact_wrench, world, 1 kHz), and /clock in lockstep.
 
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use clap::Parser;
 use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::rosgraph_msgs::Clock;
+use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros;
 use softcontact_nodes::sim_arm::{Pacing, Params, SimArmConfig, SimArmServer, SurfaceKind};
@@ -56,19 +59,20 @@ fn main() -> anyhow::Result<()> {
             seed: p.seed,
         },
     )?;
-    // The hardware it stands in for has no ROS side: a DDS participant only to publish /clock.
-    let clock = if p.lockstep {
-        let mut node = ros::node_with_parameters("sim_arm", declared)?;
-        Some((ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?, node))
-    } else {
-        None
-    };
+    // The hardware it stands in for has no ROS side: a DDS participant only for what a simulator alone
+    // knows — its time (/clock, in lockstep) and the true contact wrench, to grade runs on.
+    let mut node = ros::node_with_parameters("sim_arm", declared)?;
+    let clock = if p.lockstep { Some(ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?) } else { None };
+    let contact_wrench = ros::publisher::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
     eprintln!("sim_arm: ready: FRI from {} to {}, RDT at {}", server.fri_addr()?, p.fri_remote, server.rdt_addr()?);
     let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());
     let stats = server.run(|sim| {
-        if let Some((publisher, _)) = &clock {
-            let _ = publisher.publish(Clock { clock: Time::from_secs_f64(sim.time()) });
+        // Stamped on the nodes' clock: the simulated time in lockstep, the system's in real time.
+        let stamp = if clock.is_some() { Time::from_secs_f64(sim.time()) } else { Time::now() };
+        if let Some(publisher) = &clock {
+            let _ = publisher.publish(Clock { clock: stamp });
         }
+        let _ = contact_wrench.publish(messages::contact_wrench(&sim.contact().force, stamp));
         !stop.load(Ordering::Relaxed) && cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n)
     })?;
     eprintln!("sim_arm: exit: {stats:?}; peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
