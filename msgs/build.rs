@@ -110,8 +110,26 @@ fn definitions() -> std::collections::BTreeMap<String, String> {
     texts
 }
 
+/// The Rust struct of one message definition (its leading comment lines are its doc).
+fn rust_struct(out: &mut String, name: &str, text: &str) {
+    let doc: Vec<&str> =
+        text.lines().take_while(|l| l.starts_with('#')).map(|l| l.trim_start_matches('#').trim()).collect();
+    writeln!(out, "/// {}\n#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]\npub struct {name} {{", doc.join(" ")).unwrap();
+    for line in text.lines() {
+        let (field, comment) = line.split_once('#').unwrap_or((line, ""));
+        let mut parts = field.split_whitespace();
+        let (Some(ty), Some(field_name)) = (parts.next(), parts.next()) else { continue };
+        if !comment.trim().is_empty() {
+            writeln!(out, "    /// {}", comment.trim()).unwrap();
+        }
+        writeln!(out, "    pub {field_name}: {},", rust_type(ty)).unwrap();
+    }
+    writeln!(out, "}}\nimpl ros2_client::Message for {name} {{}}").unwrap();
+}
+
 fn main() {
     println!("cargo:rerun-if-changed=msg");
+    println!("cargo:rerun-if-changed=action");
     println!("cargo:rerun-if-changed=std");
     let texts = definitions();
     let mut table = String::from(
@@ -128,20 +146,21 @@ fn main() {
     let mut out = String::new();
     for path in files.iter().filter(|p| p.extension().is_some_and(|e| e == "msg")) {
         let name = path.file_stem().unwrap().to_str().unwrap();
+        rust_struct(&mut out, name, &std::fs::read_to_string(path).unwrap());
+        writeln!(out, "impl crate::RosType for {name} {{\n    const PACKAGE: &'static str = \"softcontact_msgs\";\n    const NAME: &'static str = \"{name}\";\n}}\n").unwrap();
+    }
+    // Actions: action/<Name>.action, goal, result and feedback separated by lines of `---`, as the
+    // types <Name>Goal, <Name>Result and <Name>Feedback (rosidl: <Name>_Goal, …).
+    let mut actions: Vec<_> = std::fs::read_dir("action").expect("action/").map(|e| e.expect("entry").path()).collect();
+    actions.sort();
+    for path in actions.iter().filter(|p| p.extension().is_some_and(|e| e == "action")) {
+        let name = path.file_stem().unwrap().to_str().unwrap();
         let text = std::fs::read_to_string(path).unwrap();
-        let doc: Vec<&str> =
-            text.lines().take_while(|l| l.starts_with('#')).map(|l| l.trim_start_matches('#').trim()).collect();
-        writeln!(out, "/// {}\n#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]\npub struct {name} {{", doc.join(" ")).unwrap();
-        for line in text.lines() {
-            let (field, comment) = line.split_once('#').unwrap_or((line, ""));
-            let mut parts = field.split_whitespace();
-            let (Some(ty), Some(field_name)) = (parts.next(), parts.next()) else { continue };
-            if !comment.trim().is_empty() {
-                writeln!(out, "    /// {}", comment.trim()).unwrap();
-            }
-            writeln!(out, "    pub {field_name}: {},", rust_type(ty)).unwrap();
+        let parts: Vec<String> = text.split("\n---\n").map(str::to_string).collect();
+        assert_eq!(parts.len(), 3, "{}: goal, result and feedback", path.display());
+        for (part, suffix) in parts.iter().zip(["Goal", "Result", "Feedback"]) {
+            rust_struct(&mut out, &format!("{name}{suffix}"), part);
         }
-        writeln!(out, "}}\nimpl ros2_client::Message for {name} {{}}\nimpl crate::RosType for {name} {{\n    const PACKAGE: &'static str = \"softcontact_msgs\";\n    const NAME: &'static str = \"{name}\";\n}}\n").unwrap();
     }
     std::fs::write(std::path::Path::new(&std::env::var("OUT_DIR").unwrap()).join("softcontact_msgs.rs"), out).unwrap();
 }

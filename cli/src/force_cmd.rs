@@ -1,9 +1,13 @@
-//! `softcontact force`: send one force command to the running deformation controller over DDS and
-//! report the force reached at the end of the move (seed 001 reads the force there).
+//! `softcontact force`: send one force command to the running deformation controller as a goal of its
+//! action /deformation_controller/press, and report the result: the force reached at the end of the
+//! move (seed 001 reads the force there) and its error.
 
 use std::time::{Duration, Instant};
 
-use softcontact_msgs::softcontact_msgs::{ControllerState, ForceCommand};
+use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalStatusEnum};
+use ros2_client::{ActionTypeName, Name};
+use softcontact_msgs::softcontact_msgs::{ControllerState, PressForceFeedback, PressForceGoal, PressForceResult};
+use softcontact_nodes::deformation_controller::PRESS_ACTION;
 use softcontact_nodes::ros;
 
 #[derive(Debug, clap::Args)]
@@ -19,6 +23,12 @@ pub struct ForceArgs {
     /// Send the command and return once the controller has taken it.
     #[arg(long)]
     pub no_wait: bool,
+    /// Print the action's feedback (phase, force, deformation) as the move goes.
+    #[arg(long)]
+    pub verbose: bool,
+    /// Service mapping of the controller's middleware: cyclone, enhanced (Fast DDS) or basic.
+    #[arg(long, default_value = "cyclone")]
+    pub service_mapping: String,
 }
 
 pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
@@ -26,67 +36,92 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.duration.is_finite() && args.duration > 0.0, "the duration must be positive");
     let mut node = ros::node("softcontact_force")?;
     let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
-    let commands =
-        ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
-    let next_state = |timeout: Duration| -> Option<ControllerState> {
-        let end = Instant::now() + timeout;
-        while Instant::now() < end {
-            if let Ok(Some((s, _))) = states.take() {
-                return Some(s);
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        None
-    };
-    let first = next_state(Duration::from_secs(10)).ok_or_else(|| {
+    let press = press_client(&mut node, &args.service_mapping)?;
+    let first = (0..1000).find_map(|_| {
+        std::thread::sleep(Duration::from_millis(10));
+        states.take().ok().flatten().map(|(s, _)| s)
+    });
+    let first = first.ok_or_else(|| {
         anyhow::anyhow!(
             "no /deformation_controller/state in 10 s: is the controller running (ROS_DOMAIN_ID {})?",
             node.domain_id()
         )
     })?;
     anyhow::ensure!(first.in_contact, "the controller has no contact yet: force commands wait for the onset");
-    // Discovery runs both ways: give the controller's reader time to match this writer, and resend if
-    // the command was not taken (a reliable writer drops samples for readers it has not matched yet).
+    // Discovery runs both ways: give the action server's readers time to match these writers, and send
+    // the goal again if it went unanswered (a request to a reader not matched yet is lost).
     std::thread::sleep(Duration::from_millis(300));
-    let command = ForceCommand { force: args.force, duration: args.duration };
-    let mut accepted = None;
+    let goal = PressForceGoal { force: args.force, duration: args.duration };
+    let mut sent = None;
     'send: for _ in 0..3 {
-        commands.publish(command.clone())?;
+        let (request, goal_id) =
+            press.send_goal(goal.clone()).map_err(|e| anyhow::anyhow!("sending the goal: {e:?}"))?;
         let end = Instant::now() + Duration::from_secs(1);
         while Instant::now() < end {
-            match next_state(Duration::from_millis(100)) {
-                Some(s) if (s.f_cmd - args.force).abs() < 1e-9 => {
-                    accepted = Some(Instant::now());
-                    break 'send;
-                }
-                _ => {}
+            if let Ok(Some(response)) = press.receive_goal_response(request) {
+                sent = Some((response.accepted, goal_id));
+                break 'send;
             }
+            std::thread::sleep(Duration::from_millis(2));
         }
     }
-    let accepted = accepted.ok_or_else(|| {
-        anyhow::anyhow!("the controller did not take {} N (out of its limits? see its log or /rosout)", args.force)
-    })?;
+    let (accepted, goal_id) =
+        sent.ok_or_else(|| anyhow::anyhow!("no answer from {PRESS_ACTION} (--service-mapping of the controller?)"))?;
+    anyhow::ensure!(
+        accepted,
+        "the controller refused {} N over {} s (out of its limits? see its log or /rosout)",
+        args.force,
+        args.duration
+    );
     println!("force command {:.2} N over {:.2} s taken", args.force, args.duration);
     if args.no_wait {
         return Ok(());
     }
-    // The force over the last 50 ms of the move.
-    let end = accepted + Duration::from_secs_f64(args.duration);
-    let mut at_end = Vec::new();
-    while Instant::now() < end + Duration::from_millis(20) {
-        if let Some(s) = next_state(Duration::from_millis(100))
-            && Instant::now() + Duration::from_millis(50) >= end
-        {
-            anyhow::ensure!(!s.contact_lost, "contact lost during the move");
-            at_end.push(s.f);
+    // The result comes at the end of the move; asked for once more if the first request went astray.
+    let mut outcome = None;
+    'result: for _ in 0..2 {
+        let request = press.request_result(goal_id).map_err(|e| anyhow::anyhow!("asking for the result: {e:?}"))?;
+        let end = Instant::now() + Duration::from_secs_f64(args.duration + 3.0);
+        while Instant::now() < end {
+            while let Ok(Some(f)) = press.receive_feedback(goal_id) {
+                if args.verbose {
+                    println!("  {}: {:.2} N, deformation {:.2} mm", f.phase, f.force, f.deformation * 1e3);
+                }
+            }
+            if let Ok(Some(r)) = press.receive_result(request) {
+                outcome = Some(r);
+                break 'result;
+            }
+            std::thread::sleep(Duration::from_millis(5));
         }
     }
-    anyhow::ensure!(!at_end.is_empty(), "no controller state at the end of the move");
-    let reached = at_end.iter().sum::<f64>() / at_end.len() as f64;
-    let error = (reached - args.force) / args.force.max(1e-9);
-    println!("reached {reached:.2} N for {:.2} N ({:+.2} %)", args.force, error * 100.0);
+    let (status, result) = outcome.ok_or_else(|| anyhow::anyhow!("no result from {PRESS_ACTION}"))?;
+    anyhow::ensure!(status == GoalStatusEnum::Succeeded, "the press ended {status:?}: {}", result.message);
+    let error = result.error / args.force.max(1e-9);
+    println!("reached {:.2} N for {:.2} N ({:+.2} %)", result.force, args.force, error * 100.0);
     if let Some(tolerance) = args.tolerance {
         anyhow::ensure!(error.abs() <= tolerance, "off by {:.2} %, beyond ±{:.2} %", error * 100.0, tolerance * 100.0);
     }
     Ok(())
+}
+
+/// The client of the controller's force action, with the QoS of ROS 2 actions.
+fn press_client(
+    node: &mut ros2_client::Node,
+    mapping: &str,
+) -> anyhow::Result<ActionClient<PressForceGoal, PressForceResult, PressForceFeedback>> {
+    let (ns, base) = PRESS_ACTION.rsplit_once('/').expect("a namespaced name");
+    let qos = ActionClientQosPolicies {
+        goal_service: ros::reliable_qos(),
+        result_service: ros::reliable_qos(),
+        cancel_service: ros::reliable_qos(),
+        feedback_subscription: ros::reliable_qos(),
+        status_subscription: ros::latched_qos(),
+    };
+    Ok(node.create_action_client(
+        ros::service_mapping(mapping)?,
+        &Name::new(ns, base)?,
+        &ActionTypeName::new("softcontact_msgs", "PressForce"),
+        qos,
+    )?)
 }

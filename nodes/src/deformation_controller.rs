@@ -26,9 +26,11 @@ use softcontact_control::{
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 
 pub mod component;
+pub mod interface;
 mod node;
 pub use component::InProcessController;
-pub use node::{ControllerNode, JointSample, NodeCounters, Notices, Reply, Silence, Step};
+pub use interface::{ControllerInterface, PRESS_ACTION};
+pub use node::{ControllerNode, JointSample, NodeCounters, Notices, Press, PressProgress, Reply, Silence, Step};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerConfig {
@@ -366,6 +368,12 @@ impl DeformationController {
 
     pub fn config(&self) -> &ControllerConfig {
         &self.config
+    }
+
+    /// The controller's own clock [s]: it advances with each tick (by the joint states' stamps) and
+    /// starts again at a restart; moves are planned on it.
+    pub fn time(&self) -> f64 {
+        self.time
     }
 
     pub fn contact_model(&self) -> &ContactModel {
@@ -799,6 +807,8 @@ pub struct Params {
     /// /lwr/joint_states silent this long [s] after they flowed (they are due at 1 kHz): the driver
     /// or the middleware is dead, and the node exits with an error (the launch script stops the graph).
     pub dead_after: f64,
+    /// Service mapping of the peers' middleware for the force action: cyclone, enhanced or basic.
+    pub service_mapping: String,
     /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
@@ -834,6 +844,7 @@ impl Default for Params {
             state_rate: 100.0,
             stale_after: 0.05,
             dead_after: 2.0,
+            service_mapping: "cyclone".into(),
             use_sim_time: false,
         }
     }
@@ -915,6 +926,7 @@ impl crate::params::NodeParams for Params {
         within("stale_after", self.stale_after, 0.0, 1.0)?;
         within("restart_after", self.restart_after, self.stale_after, 10.0)?;
         crate::liveness::validate_dead_after(self.dead_after)?;
+        crate::ros::service_mapping(&self.service_mapping).map_err(|e| e.to_string())?;
         if self.dead_after <= self.restart_after {
             return Err(format!("dead_after ({}) must exceed restart_after ({})", self.dead_after, self.restart_after));
         }

@@ -62,7 +62,8 @@ fn main() -> anyhow::Result<()> {
     // The hardware it stands in for has no ROS side: a DDS participant only for what a simulator alone
     // knows — its time (/clock, in lockstep) and the true contact wrench, to grade runs on.
     let mut node = ros::node_with_parameters("sim_arm", declared)?;
-    let clock = if p.lockstep { Some(ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?) } else { None };
+    let clock =
+        if p.lockstep { Some(ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?) } else { None };
     let contact_wrench = ros::publisher::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
     eprintln!("sim_arm: ready: FRI from {} to {}, RDT at {}", server.fri_addr()?, p.fri_remote, server.rdt_addr()?);
     let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());

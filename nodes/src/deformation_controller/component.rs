@@ -1,43 +1,30 @@
 //! The deformation controller as a component of the driver's process (`lwr_control`): it answers each
 //! FRI measurement on the FRI thread, between the driver reading it and answering it, with the F/T
-//! node's newest force handed over in memory — no DDS and no allocation on that path. Its topics are
-//! the node's own: it takes /deformation_controller/force_command and /contact_estimator/model, and
-//! publishes /lwr/joint_torque_command (for monitoring and recording: the driver does not listen to it
-//! here) and /deformation_controller/state, after the answer has gone.
+//! node's newest force handed over in memory — no DDS and no allocation on that path. Its topics and
+//! action are the node's own ([`ControllerInterface`]); /lwr/joint_torque_command is published for
+//! monitoring and recording (the driver does not listen to it here), after the answer has gone.
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use ros2_client::{Node, ParameterValue, Publisher, Subscription};
-use softcontact_dynamics::lwr4;
+use ros2_client::ParameterValue;
 use softcontact_msgs::builtin_interfaces::Time;
-use softcontact_msgs::sensor_msgs::JointState;
-use softcontact_msgs::softcontact_msgs::{ControllerState as StateMsg, ForceCommand};
 use softcontact_msgs::std_msgs::Header;
 use softcontact_wire::fri::InterfaceState;
 
-use super::{ControlError, ControllerNode, JointSample, Notices, Params, Reply, Silence, Step};
-use crate::contact_estimator::{ModelMsg, model_from_msg};
+use super::{ControllerInterface, ControllerNode, JointSample, Params, Reply, Step};
 use crate::handover::{ForceReading, Latest};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
-use crate::messages::{self, DriverSession};
-use crate::ros::{self, LogLevel};
+use crate::messages::DriverSession;
+use crate::ros::LogLevel;
 
 pub struct InProcessController {
     pub control: ControllerNode,
-    node: Node,
+    topics: ControllerInterface,
     forces: Arc<Latest<ForceReading>>,
-    commands: Subscription<ForceCommand>,
-    models: Subscription<ModelMsg>,
-    torque_pub: Publisher<JointState>,
-    state_pub: Publisher<StateMsg>,
-    names: Vec<String>,
-    state_every: u64,
     start: Instant,
     /// The step of the newest measurement and the joint state it answered (stamp, session).
     last: Option<(Step, f64, DriverSession)>,
-    notices: Notices,
-    next_stale_log: Instant,
 }
 
 impl InProcessController {
@@ -49,58 +36,19 @@ impl InProcessController {
         forces: Arc<Latest<ForceReading>>,
     ) -> anyhow::Result<Self> {
         let control = ControllerNode::from_params(p)?;
-        let mut node = ros::node_with_parameters("deformation_controller", declared)?;
-        let commands =
-            ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
-        let models = ros::subscription::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
-        let torque_pub = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
-        let state_pub = ros::publisher::<StateMsg>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
-        ros::log(&node, LogLevel::Info, &format!("ready: in process, model update {:?}", p.model_update));
-        Ok(Self {
-            control,
-            node,
-            forces,
-            commands,
-            models,
-            torque_pub,
-            state_pub,
-            names: lwr4::model().joints.iter().map(|j| j.name.clone()).collect(),
-            state_every: ((1000.0 / p.state_rate).round() as u64).max(1),
-            start: Instant::now(),
-            last: None,
-            notices: Notices::default(),
-            next_stale_log: Instant::now(),
-        })
+        let topics = ControllerInterface::new(p, declared)?;
+        topics.log(LogLevel::Info, &format!("ready: in process, model update {:?}", p.model_update));
+        Ok(Self { control, topics, forces, start: Instant::now(), last: None })
     }
 
     fn seconds(&self, t: Instant) -> f64 {
         t.saturating_duration_since(self.start).as_secs_f64()
     }
 
-    /// Models and force commands that arrived (between cycles, never between a measurement and its
-    /// answer).
+    /// Models, force commands and goals that arrived (between cycles, never between a measurement and
+    /// its answer).
     pub fn take_inputs(&mut self) {
-        while let Ok(Some((m, _))) = self.models.take() {
-            let outcome = model_from_msg(&m).map_err(ControlError::from).and_then(|(m, s)| self.control.on_model(m, s));
-            if let Err(e) = outcome {
-                ros::log(&self.node, LogLevel::Warn, &format!("model refused: {e}"));
-            }
-        }
-        while let Ok(Some((c, _))) = self.commands.take() {
-            let (model_refused, commanded) = self.control.on_force_command(c.force, c.duration);
-            if let Some(e) = model_refused {
-                ros::log(&self.node, LogLevel::Warn, &format!("model refused: {e}"));
-            }
-            match commanded {
-                Ok(()) => {
-                    let m = self.control.law.contact_model();
-                    let what = format!("{:?} k {:.0} λ {:.1}", m.kind, m.stiffness, m.damping);
-                    let line = format!("force command {:.2} N over {:.2} s ({what})", c.force, c.duration);
-                    ros::log(&self.node, LogLevel::Info, &line);
-                }
-                Err(e) => ros::log(&self.node, LogLevel::Error, &format!("force command {} N refused: {e}", c.force)),
-            }
-        }
+        self.topics.take_inputs(&mut self.control);
     }
 
     /// The answer to the measurement `out`, stamped `stamp` on the driver's clock, handed to `driver`:
@@ -123,37 +71,11 @@ impl InProcessController {
         self.last = Some((step, stamp, session));
     }
 
-    /// After the answer went: the torque command and the state on their topics, and what is worth a
-    /// log line.
+    /// After the answer went: the torque command and the state on their topics, the press's progress,
+    /// and what is worth a log line.
     pub fn publish(&mut self, stamp: Time) -> u64 {
         let Some((step, _, session)) = self.last.take() else { return 0 };
         let header = Header { stamp, frame_id: session.to_frame_id() };
-        let mut errors = 0;
-        match &step.reply {
-            Reply::Torque(tau) => {
-                errors +=
-                    u64::from(self.torque_pub.publish(messages::torque_command(&self.names, tau, &header)).is_err());
-                if self.control.counters.ticks.is_multiple_of(self.state_every) {
-                    errors += u64::from(self.state_pub.publish(step.state.to_msg(stamp)).is_err());
-                }
-            }
-            Reply::Hold(e) => {
-                ros::log(&self.node, LogLevel::Error, &format!("tick failed, the driver holds: {e}"));
-                errors += u64::from(self.torque_pub.publish(messages::hold_request(&self.names, &header)).is_err());
-            }
-            Reply::Nothing(Silence::NoFreshForce) if session.commanding && Instant::now() >= self.next_stale_log => {
-                ros::log(&self.node, LogLevel::Warn, "no fresh force reading: the driver holds");
-                self.next_stale_log = Instant::now() + std::time::Duration::from_secs(1);
-            }
-            Reply::Nothing(_) => {}
-        }
-        if step.restarted {
-            let why = "new KRC session, KRC not commanding, or measurements interrupted: approaching again";
-            ros::log(&self.node, LogLevel::Warn, why);
-        }
-        for (level, line) in self.notices.changes(&self.control, &step) {
-            ros::log(&self.node, level, &line);
-        }
-        errors
+        self.topics.publish(&self.control, &step, &header, session.commanding)
     }
 }

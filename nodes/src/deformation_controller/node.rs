@@ -258,6 +258,89 @@ impl ControllerNode {
     }
 }
 
+/// A force command followed to the end of its move: what the force action (PressForce) reports. The
+/// move ends `duration` after the command on the controller's own clock; the force reached is the mean
+/// measured normal force of the move's last 10 ticks (seed 001 reads the force at the end of the move).
+/// The press is aborted when the controller restarts, loses contact, passes its force limit or fails a
+/// tick: the arm then does what the controller's rules say, and the user is told why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Press {
+    pub force: f64,
+    pub duration: f64,
+    /// The controller's time when the command was taken [s].
+    started: f64,
+    /// The normal forces of the last ticks, newest at `next - 1`.
+    last_forces: [f64; PRESS_AVERAGE],
+    ticked: usize,
+}
+
+/// Ticks averaged for the force reached (10 ms at 1 kHz).
+const PRESS_AVERAGE: usize = 10;
+
+/// Where a press is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PressProgress {
+    /// Taken, not ticked since (no fresh force: the driver holds meanwhile).
+    Waiting,
+    /// The move goes on: the measured normal force [N] and deformation [m].
+    Moving { force: f64, deformation: f64 },
+    /// The move ended: the force reached [N] (its error is `force − Press::force`).
+    Done { force: f64 },
+    /// It cannot end as commanded.
+    Aborted(String),
+}
+
+impl PressProgress {
+    /// The feedback's phase.
+    pub fn phase(&self) -> &'static str {
+        match self {
+            Self::Waiting => "waiting",
+            Self::Moving { .. } => "moving",
+            Self::Done { .. } => "done",
+            Self::Aborted(_) => "aborted",
+        }
+    }
+}
+
+impl Press {
+    /// A press the node took at the controller's time `law_time` (after `on_force_command` succeeded).
+    pub fn new(force: f64, duration: f64, law_time: f64) -> Self {
+        Self { force, duration, started: law_time, last_forces: [0.0; PRESS_AVERAGE], ticked: 0 }
+    }
+
+    /// The press after `step`, the controller's time being `law_time` after it. Allocates nothing unless
+    /// aborted.
+    pub fn follow(&mut self, step: &Step, law_time: f64) -> PressProgress {
+        if step.restarted {
+            return PressProgress::Aborted("the controller restarted (new KRC session, monitor mode or a gap)".into());
+        }
+        match &step.reply {
+            Reply::Hold(e) => return PressProgress::Aborted(format!("a tick failed and the driver held: {e}")),
+            Reply::Nothing(Silence::NotCommanding) => {
+                return PressProgress::Aborted("the KRC stopped commanding".into());
+            }
+            Reply::Nothing(_) if self.ticked == 0 => return PressProgress::Waiting,
+            Reply::Nothing(_) => {}
+            Reply::Torque(_) => {
+                if step.state.contact_lost {
+                    return PressProgress::Aborted("contact lost during the move".into());
+                }
+                if step.state.force_limited {
+                    return PressProgress::Aborted("the force limit was passed: the controller backed off".into());
+                }
+                self.last_forces[self.ticked % PRESS_AVERAGE] = step.state.f;
+                self.ticked += 1;
+            }
+        }
+        // The end by the controller's clock (a restart would have aborted first: it only moves on).
+        if law_time >= self.started + self.duration - 1e-9 {
+            let n = self.ticked.min(PRESS_AVERAGE);
+            return PressProgress::Done { force: self.last_forces[..n].iter().sum::<f64>() / n as f64 };
+        }
+        PressProgress::Moving { force: step.state.f, deformation: step.state.z }
+    }
+}
+
 impl std::fmt::Display for NodeCounters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
@@ -421,6 +504,85 @@ mod tests {
             node.on_force(now, Vector3::zeros(), now);
             assert_eq!(node.on_joint_state(&sample(now, 1), now).reply, Reply::Nothing(Silence::NotNewer));
         }
+    }
+
+    /// A node on the simulated sponge, in contact and holding (the cell's own node).
+    fn pressing_cell() -> crate::cell::Cell {
+        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+        let law =
+            DeformationController::new(super::super::ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge())
+                .unwrap();
+        let mut cell =
+            crate::cell::Cell::new(config, law, ContactEstimatorNode::new(EstimatorConfig::default()).unwrap())
+                .unwrap();
+        cell.start(5000).unwrap();
+        while !cell.cycle().unwrap().unwrap().controller.in_contact {}
+        for _ in 0..500 {
+            cell.cycle().unwrap();
+        }
+        cell
+    }
+
+    #[test]
+    fn a_press_ends_with_the_move_and_reports_the_force_reached() {
+        let mut cell = pressing_cell();
+        let (refused, taken) = cell.controller.on_force_command(60.0, 0.5);
+        assert!(refused.is_none() && taken.is_ok());
+        let mut press = Press::new(60.0, 0.5, cell.controller.law.time());
+        let mut moving = 0;
+        let (done_at, reached) = loop {
+            let tick = cell.cycle().unwrap().unwrap();
+            // The cell's step, as the node made it.
+            let step = Step {
+                reply: tick.torque.map_or(Reply::Nothing(Silence::NoFreshForce), Reply::Torque),
+                state: tick.controller,
+                force_world: tick.force_world,
+                restarted: false,
+            };
+            match press.follow(&step, cell.controller.law.time()) {
+                PressProgress::Moving { force, .. } => {
+                    assert_eq!(force, tick.controller.f);
+                    moving += 1;
+                }
+                PressProgress::Done { force } => break (cell.controller.law.time() - press.started, force),
+                other => panic!("{other:?}"),
+            }
+        };
+        assert!((done_at - 0.5).abs() < 1.5e-3, "done {done_at} s after the command");
+        assert!((moving as f64 - 500.0).abs() <= 2.0, "{moving} ticks moving");
+        // The true force of the simulated sponge at the end agrees with the sensor's (tared) reading.
+        let truth = cell.sim.contact().normal_force;
+        assert!((reached - truth).abs() < 0.05 * 60.0, "reached {reached} N, the surface pushes {truth} N");
+    }
+
+    #[test]
+    fn a_press_is_aborted_by_a_restart_a_failed_tick_or_a_lost_contact() {
+        let base = Step {
+            reply: Reply::Torque([0.0; 7]),
+            state: ControllerState::default(),
+            force_world: Vector3::zeros(),
+            restarted: false,
+        };
+        let fresh = || Press::new(10.0, 1.0, 0.0);
+        let cases = [
+            Step { restarted: true, ..base.clone() },
+            Step { reply: Reply::Hold(ControlError::NonFinite("the measured force")), ..base.clone() },
+            Step { reply: Reply::Nothing(Silence::NotCommanding), ..base.clone() },
+            Step { state: ControllerState { contact_lost: true, ..Default::default() }, ..base.clone() },
+            Step { state: ControllerState { force_limited: true, ..Default::default() }, ..base.clone() },
+        ];
+        for step in cases {
+            assert!(matches!(fresh().follow(&step, 0.5), PressProgress::Aborted(_)), "{step:?}");
+        }
+        // No fresh force before the first tick: waiting, and the move's end is not reached without ticks.
+        let mut press = fresh();
+        let silent = Step { reply: Reply::Nothing(Silence::NoFreshForce), ..base.clone() };
+        assert_eq!(press.follow(&silent, 0.0), PressProgress::Waiting);
+        assert_eq!(press.follow(&silent, 2.0), PressProgress::Waiting);
+        let with = |f| Step { state: ControllerState { f, ..Default::default() }, ..base.clone() };
+        assert!(matches!(press.follow(&with(4.0), 0.9), PressProgress::Moving { force: 4.0, .. }));
+        assert_eq!(press.follow(&with(6.0), 1.0), PressProgress::Done { force: 5.0 });
     }
 
     #[test]

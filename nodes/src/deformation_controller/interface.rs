@@ -1,0 +1,276 @@
+//! The deformation controller's ROS side, one copy for every process that hosts it (its own, and the
+//! composed `lwr_control`): what it takes — models, force commands on a topic, and the force action
+//! `/deformation_controller/press` (softcontact_msgs/action/PressForce: goal force and move duration;
+//! feedback force, deformation and phase; result the force reached and its error) — and what it
+//! publishes after each answer: /lwr/joint_torque_command, /deformation_controller/state and its log.
+//! The node policy stays in [`ControllerNode`] and [`Press`]; this only wires them to the middleware.
+//!
+//! One press at a time: a new goal or force command supersedes the one under way (the move goes on
+//! from the present reference, as a new command mid-move does), which is aborted. A cancel request is
+//! rejected — stopping a move midway is a new goal, so that the hand never stops with a jolt.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use ros2_client::action::{
+    ActionServer, ActionServerQosPolicies, CancelGoalResponse, GetResultResponse, GoalId, GoalInfo, GoalStatusEnum,
+    SendGoalResponse,
+};
+use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
+use ros2_client::{ActionTypeName, Name, Node, ParameterValue, Publisher, RmwRequestId, Subscription};
+use softcontact_dynamics::lwr4;
+use softcontact_msgs::sensor_msgs::JointState;
+use softcontact_msgs::softcontact_msgs::{
+    ControllerState as StateMsg, ForceCommand, PressForceFeedback, PressForceGoal, PressForceResult,
+};
+use softcontact_msgs::std_msgs::Header;
+
+use super::{ControlError, ControllerNode, Notices, Params, Press, PressProgress, Reply, Silence, Step};
+use crate::contact_estimator::{ModelMsg, model_from_msg};
+use crate::messages;
+use crate::ros::{self, LogLevel};
+
+/// The action's name.
+pub const PRESS_ACTION: &str = "/deformation_controller/press";
+/// Results kept for late result requests, and result requests kept waiting (the oldest go first).
+const KEPT_RESULTS: usize = 16;
+const WAITING_REQUESTS: usize = 16;
+
+type PressServer = ActionServer<PressForceGoal, PressForceResult, PressForceFeedback>;
+
+/// The action's server and types, with the QoS of ROS 2 actions (services reliable, status latched).
+pub fn press_server(node: &mut Node, mapping: &str) -> anyhow::Result<PressServer> {
+    let (ns, base) = PRESS_ACTION.rsplit_once('/').expect("a namespaced name");
+    let qos = ActionServerQosPolicies {
+        goal_service: ros::reliable_qos(),
+        result_service: ros::reliable_qos(),
+        cancel_service: ros::reliable_qos(),
+        feedback_publisher: ros::reliable_qos(),
+        status_publisher: ros::latched_qos(),
+    };
+    Ok(node.create_action_server(
+        ros::service_mapping(mapping)?,
+        &Name::new(ns, base)?,
+        &ActionTypeName::new("softcontact_msgs", "PressForce"),
+        qos,
+    )?)
+}
+
+/// The press under way.
+struct Goal {
+    info: GoalInfo,
+    press: Press,
+}
+
+pub struct ControllerInterface {
+    pub node: Node,
+    commands: Subscription<ForceCommand>,
+    models: Subscription<ModelMsg>,
+    server: PressServer,
+    goal: Option<Goal>,
+    ended: VecDeque<(GoalId, GoalStatusEnum, PressForceResult)>,
+    waiting: VecDeque<(RmwRequestId, GoalId)>,
+    torque_pub: Publisher<JointState>,
+    state_pub: Publisher<StateMsg>,
+    names: Vec<String>,
+    state_every: u64,
+    notices: Notices,
+    next_stale_log: Instant,
+}
+
+impl ControllerInterface {
+    /// The node "deformation_controller", serving its `declared` parameters, with its topics and action.
+    pub fn new(p: &Params, declared: Vec<(String, ParameterValue)>) -> anyhow::Result<Self> {
+        let mut node = ros::node_with_parameters("deformation_controller", declared)?;
+        let commands =
+            ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
+        let models = ros::subscription::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+        let server = press_server(&mut node, &p.service_mapping)?;
+        let torque_pub = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
+        let state_pub = ros::publisher::<StateMsg>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
+        Ok(Self {
+            node,
+            commands,
+            models,
+            server,
+            goal: None,
+            ended: VecDeque::new(),
+            waiting: VecDeque::new(),
+            torque_pub,
+            state_pub,
+            names: lwr4::model().joints.iter().map(|j| j.name.clone()).collect(),
+            state_every: ((1000.0 / p.state_rate).round() as u64).max(1),
+            notices: Notices::default(),
+            next_stale_log: Instant::now(),
+        })
+    }
+
+    pub fn log(&self, level: LogLevel, line: &str) {
+        ros::log(&self.node, level, line);
+    }
+
+    /// Models, force commands, goals, cancel and result requests that arrived (between ticks).
+    pub fn take_inputs(&mut self, control: &mut ControllerNode) {
+        while let Ok(Some((m, _))) = self.models.take() {
+            let outcome = model_from_msg(&m).map_err(ControlError::from).and_then(|(m, s)| control.on_model(m, s));
+            if let Err(e) = outcome {
+                self.log(LogLevel::Warn, &format!("model refused: {e}"));
+            }
+        }
+        while let Ok(Some((c, _))) = self.commands.take() {
+            if self.command(control, c.force, c.duration) {
+                self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "superseded by a force command");
+            }
+        }
+        while let Ok(Some((id, request))) = self.server.receive_goal() {
+            let (force, duration) = (request.goal.force, request.goal.duration);
+            let accepted = self.command(control, force, duration);
+            let stamp = ros2_client::builtin_interfaces::Time::now();
+            if accepted {
+                self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "superseded by a newer goal");
+                let press = Press::new(force, duration, control.law.time());
+                self.goal = Some(Goal { info: GoalInfo { goal_id: request.goal_id, stamp }, press });
+            } else {
+                let result = PressForceResult { force: f64::NAN, error: f64::NAN, message: "refused".into() };
+                self.remember(request.goal_id, GoalStatusEnum::Aborted, result);
+            }
+            let _ = self.server.send_goal_response(id, SendGoalResponse { accepted, stamp });
+            self.publish_statuses();
+        }
+        while let Ok(Some((id, _))) = self.server.receive_cancel_request() {
+            let rejected =
+                CancelGoalResponse { return_code: CancelGoalResponseEnum::Rejected, goals_canceling: vec![] };
+            let _ = self.server.send_cancel_response(id, rejected);
+        }
+        while let Ok(Some((id, request))) = self.server.receive_result_request() {
+            match self.ended.iter().find(|(g, _, _)| *g == request.goal_id) {
+                Some((_, status, result)) => {
+                    let _ = self.server.send_result(id, GetResultResponse { status: *status, result: result.clone() });
+                }
+                None if self.goal.as_ref().is_some_and(|g| g.info.goal_id == request.goal_id) => {
+                    if self.waiting.len() == WAITING_REQUESTS {
+                        self.waiting.pop_front();
+                    }
+                    self.waiting.push_back((id, request.goal_id));
+                }
+                None => {
+                    let unknown = PressForceResult { force: f64::NAN, error: f64::NAN, message: "unknown goal".into() };
+                    let response = GetResultResponse { status: GoalStatusEnum::Unknown, result: unknown };
+                    let _ = self.server.send_result(id, response);
+                }
+            }
+        }
+    }
+
+    /// A force command from the topic or a goal; whether the controller took it (logged either way).
+    fn command(&mut self, control: &mut ControllerNode, force: f64, duration: f64) -> bool {
+        let (model_refused, commanded) = control.on_force_command(force, duration);
+        if let Some(e) = model_refused {
+            self.log(LogLevel::Warn, &format!("model refused: {e}"));
+        }
+        match commanded {
+            Ok(()) => {
+                let m = control.law.contact_model();
+                let what = format!("{:?} k {:.0} λ {:.1}", m.kind, m.stiffness, m.damping);
+                self.log(LogLevel::Info, &format!("force command {force:.2} N over {duration:.2} s ({what})"));
+                true
+            }
+            Err(e) => {
+                self.log(LogLevel::Error, &format!("force command {force} N refused: {e}"));
+                false
+            }
+        }
+    }
+
+    fn remember(&mut self, goal: GoalId, status: GoalStatusEnum, result: PressForceResult) {
+        if self.ended.len() == KEPT_RESULTS {
+            self.ended.pop_front();
+        }
+        self.ended.push_back((goal, status, result));
+    }
+
+    /// Ends the press under way (if any) with `status`, answering the requests that wait for it.
+    fn end_goal(&mut self, status: GoalStatusEnum, force: f64, message: &str) {
+        let Some(goal) = self.goal.take() else { return };
+        let result = PressForceResult { force, error: force - goal.press.force, message: message.into() };
+        if status != GoalStatusEnum::Succeeded {
+            self.log(LogLevel::Warn, &format!("press of {:.2} N aborted: {message}", goal.press.force));
+        }
+        let id = goal.info.goal_id;
+        for (request, _) in self.waiting.iter().filter(|(_, g)| *g == id) {
+            let _ = self.server.send_result(*request, GetResultResponse { status, result: result.clone() });
+        }
+        self.waiting.retain(|(_, g)| *g != id);
+        self.remember(id, status, result);
+        self.publish_statuses();
+    }
+
+    /// The status of the press under way and of those that ended (latched: a late client reads it).
+    fn publish_statuses(&self) {
+        let mut status_list: Vec<GoalStatus> = self
+            .ended
+            .iter()
+            .map(|(id, status, _)| GoalStatus {
+                goal_info: GoalInfo { goal_id: *id, stamp: ros2_client::builtin_interfaces::Time::ZERO },
+                status: *status,
+            })
+            .collect();
+        if let Some(g) = &self.goal {
+            status_list.push(GoalStatus { goal_info: g.info.clone(), status: GoalStatusEnum::Executing });
+        }
+        let _ = self.server.send_goal_statuses(GoalStatusArray { status_list });
+    }
+
+    /// After the answer to a joint state went: the torque command and the state on their topics, the
+    /// press's progress, and what is worth a log line. `header` is the answered joint state's (stamp and
+    /// session); `commanding` whether the KRC commands. Returns the publishing errors.
+    pub fn publish(&mut self, control: &ControllerNode, step: &Step, header: &Header, commanding: bool) -> u64 {
+        let mut errors = 0;
+        match &step.reply {
+            Reply::Torque(tau) => {
+                errors +=
+                    u64::from(self.torque_pub.publish(messages::torque_command(&self.names, tau, header)).is_err());
+                if control.counters.ticks.is_multiple_of(self.state_every) {
+                    errors += u64::from(self.state_pub.publish(step.state.to_msg(header.stamp)).is_err());
+                }
+            }
+            Reply::Hold(e) => {
+                // An empty command: the driver holds at once, rather than repeat an older torque.
+                self.log(LogLevel::Error, &format!("tick failed, the driver is asked to hold: {e}"));
+                errors += u64::from(self.torque_pub.publish(messages::hold_request(&self.names, header)).is_err());
+            }
+            Reply::Nothing(Silence::NoFreshForce) if commanding && Instant::now() >= self.next_stale_log => {
+                self.log(LogLevel::Warn, "no fresh force reading: sending no command (the driver holds)");
+                self.next_stale_log = Instant::now() + Duration::from_secs(1);
+            }
+            Reply::Nothing(_) => {}
+        }
+        if step.restarted {
+            let why = "new KRC session, KRC not commanding, or joint states interrupted: approaching again";
+            self.log(LogLevel::Warn, why);
+        }
+        for (level, line) in self.notices.changes(control, step) {
+            self.log(level, &line);
+        }
+        if matches!(step.reply, Reply::Nothing(Silence::NotNewer)) {
+            return errors;
+        }
+        if let Some(goal) = self.goal.as_mut() {
+            match goal.press.follow(step, control.law.time()) {
+                PressProgress::Done { force } => self.end_goal(GoalStatusEnum::Succeeded, force, ""),
+                PressProgress::Aborted(why) => self.end_goal(GoalStatusEnum::Aborted, f64::NAN, &why),
+                progress if control.counters.ticks.is_multiple_of(self.state_every) => {
+                    let (force, deformation) = match progress {
+                        PressProgress::Moving { force, deformation } => (force, deformation),
+                        _ => (f64::NAN, f64::NAN),
+                    };
+                    let phase = progress.phase().to_string();
+                    let feedback = PressForceFeedback { force, deformation, phase };
+                    errors += u64::from(self.server.send_feedback(goal.info.goal_id, feedback).is_err());
+                }
+                _ => {}
+            }
+        }
+        errors
+    }
+}
