@@ -13,7 +13,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use ros2_client::{Name, ServiceTypeName};
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::ros;
 
 const INSIDE: &str = "SOFTCONTACT_GRAPH_CLIENT";
@@ -320,4 +322,52 @@ fn client() {
         .expect("python3 runs");
     eprint!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success(), "the Cyclone DDS peer decoded both topics");
+
+    // Retreat and re-tare (/deformation_controller/retare): the hand lifts off, the F/T node tares with it
+    // free and still, the controller finds the surface again, and a force is reached as before.
+    let retare = node
+        .create_client::<TriggerRequest, TriggerResponse>(
+            ros::service_mapping("cyclone").unwrap(),
+            &Name::new("/deformation_controller", "retare").unwrap(),
+            &ServiceTypeName::new("std_srvs", "Trigger"),
+            ros::reliable_qos(),
+            ros::reliable_qos(),
+        )
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500)); // discovery
+    let request = retare.send_request(TriggerRequest::default()).unwrap();
+    let start = Instant::now();
+    let mut least_force = f64::INFINITY;
+    let response = loop {
+        drain(&mut latest_model, &mut latest_state);
+        least_force = least_force.min(latest_state.as_ref().unwrap().f);
+        if let Ok(Some((id, r))) = retare.receive_response()
+            && id == request
+        {
+            break r;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no answer to the re-tare in 10 s");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    eprintln!("retare: {} after {:.1} s: {}", response.success, start.elapsed().as_secs_f64(), response.message);
+    assert!(response.success, "re-tared: {}", response.message);
+    assert!(least_force < 1.0, "the hand was free: {least_force} N at least");
+    let (mut approached, start) = (false, Instant::now());
+    loop {
+        drain(&mut latest_model, &mut latest_state);
+        let in_contact = latest_state.as_ref().unwrap().in_contact;
+        approached |= !in_contact;
+        if approached && in_contact {
+            break;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no contact again in 10 s");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .args(["force", &last.to_string(), "--duration", "2", "--tolerance", "0.05"])
+        .output()
+        .unwrap();
+    eprint!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "{last} N not reached within 5 % after the re-tare");
 }

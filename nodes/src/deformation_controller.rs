@@ -30,7 +30,9 @@ pub mod interface;
 mod node;
 pub use component::InProcessController;
 pub use interface::{ControllerInterface, PRESS_ACTION};
-pub use node::{ControllerNode, JointSample, NodeCounters, Notices, Press, PressProgress, Reply, Silence, Step};
+pub use node::{
+    ControllerNode, JointSample, NodeCounters, Notices, Press, PressProgress, RETARE_LIFT, Reply, Retare, Silence, Step,
+};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerConfig {
@@ -106,6 +108,8 @@ pub enum ControlError {
     Dynamics(#[from] softcontact_dynamics::Error),
     #[error("no contact yet: force commands wait for the onset")]
     NoContact,
+    #[error("retreating to re-tare the sensor: commands wait until the hand is back on the surface")]
+    Retaring,
     #[error("move duration must be positive")]
     Duration,
     #[error("the contact normal must not be zero")]
@@ -368,6 +372,11 @@ impl DeformationController {
 
     pub fn config(&self) -> &ControllerConfig {
         &self.config
+    }
+
+    /// Where the undeformed surface is along n [m] (`None`: no contact found since the (re)start).
+    pub fn contact_level(&self) -> Option<f64> {
+        self.contact_level
     }
 
     /// The controller's own clock [s]: it advances with each tick (by the joint states' stamps) and

@@ -3,7 +3,8 @@
 //! network namespace with only loopback); this binary runs inside it as the client, like a user at the
 //! robot: it records the run with `softcontact record`, pushes the surface at 1 Hz with force commands
 //! (the graph's controller takes force commands only, so identification is force-driven here, not the
-//! position-driven sine of the in-process run), reads the estimator's model and fitness table, then
+//! position-driven sine of the in-process run), reads the estimator's model and fitness table, has the
+//! controller retreat and re-tare the sensor (/deformation_controller/retare), then
 //! sends the force commands and reads the force at the end of each move: the simulator's true contact
 //! force (/sim_arm/contact_wrench) for the grade, the sensor's reading (the controller's state) beside it.
 
@@ -15,8 +16,10 @@ use std::collections::VecDeque;
 
 use anyhow::Context;
 use nalgebra::Vector3;
+use ros2_client::{Name, ServiceTypeName};
 use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::geometry::ContactGeometry;
 use softcontact_nodes::{deformation_controller, ros};
 
@@ -120,6 +123,13 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
     let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
     let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
     let truth = ros::subscription::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
+    let retare = node.create_client::<TriggerRequest, TriggerResponse>(
+        ros::service_mapping("cyclone")?,
+        &Name::new("/deformation_controller", "retare")?,
+        &ServiceTypeName::new("std_srvs", "Trigger"),
+        ros::reliable_qos(),
+        ros::reliable_qos(),
+    )?;
     let commands =
         ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
     // The true normal force along the controller's normal (its default: the graph's parameters).
@@ -172,6 +182,27 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
     }
     listen(&mut heard, 1.1)?; // one more refit
     let model = heard.model.clone().context("the estimator published no model")?;
+    // As on the robot (and in-process): the sensor re-tared with the hand free before the control run.
+    let request = retare.send_request(TriggerRequest::default()).map_err(|e| anyhow::anyhow!("re-tare: {e:?}"))?;
+    let asked = Instant::now();
+    let response = loop {
+        if let Ok(Some((id, r))) = retare.receive_response()
+            && id == request
+        {
+            break r;
+        }
+        anyhow::ensure!(asked.elapsed() < Duration::from_secs(10), "no answer to the re-tare in 10 s");
+        listen(&mut heard, 0.01)?;
+    };
+    anyhow::ensure!(response.success, "re-tare: {}", response.message);
+    let mut approached = false;
+    while !(approached && heard.state.as_ref().is_some_and(|s| s.in_contact)) {
+        anyhow::ensure!(asked.elapsed() < Duration::from_secs(20), "no contact again after the re-tare");
+        approached |= heard.state.as_ref().is_some_and(|s| !s.in_contact);
+        listen(&mut heard, 0.01)?;
+    }
+    listen(&mut heard, 0.5)?;
+    eprintln!("{}: {}", spec.name, response.message);
     let max_force = heard.max_force;
     eprintln!(
         "{}: estimator chose {} (k {:.0}); maximum force {max_force:.1} N",

@@ -5,6 +5,11 @@
 //! publishes after each answer: /lwr/joint_torque_command, /deformation_controller/state and its log.
 //! The node policy stays in [`ControllerNode`] and [`Press`]; this only wires them to the middleware.
 //!
+//! The service /deformation_controller/retare (std_srvs/Trigger) retreats and re-tares: the node lifts
+//! the hand, the F/T node's /ft_sensor/bias is called once the hand is free and still (retried while it
+//! refuses, up to [`TARE_ATTEMPTS`]), and the controller approaches the surface again; the answer comes
+//! when the tare is taken (or given up).
+//!
 //! One press at a time: a new goal or force command supersedes the one under way (the move goes on
 //! from the present reference, as a new command mid-move does), which is aborted. A cancel request is
 //! rejected — stopping a move midway is a new goal, so that the hand never stops with a jolt.
@@ -17,15 +22,17 @@ use ros2_client::action::{
     SendGoalResponse,
 };
 use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
-use ros2_client::{ActionTypeName, Name, Node, ParameterValue, Publisher, RmwRequestId, Subscription};
+use ros2_client::service::{Client, Server};
+use ros2_client::{ActionTypeName, Name, Node, ParameterValue, Publisher, RmwRequestId, ServiceTypeName, Subscription};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{
     ControllerState as StateMsg, ForceCommand, PressForceFeedback, PressForceGoal, PressForceResult,
 };
 use softcontact_msgs::std_msgs::Header;
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
-use super::{ControlError, ControllerNode, Notices, Params, Press, PressProgress, Reply, Silence, Step};
+use super::{ControlError, ControllerNode, Notices, Params, Press, PressProgress, Reply, Retare, Silence, Step};
 use crate::contact_estimator::{ModelMsg, model_from_msg};
 use crate::messages;
 use crate::ros::{self, LogLevel};
@@ -35,6 +42,11 @@ pub const PRESS_ACTION: &str = "/deformation_controller/press";
 /// Results kept for late result requests, and result requests kept waiting (the oldest go first).
 const KEPT_RESULTS: usize = 16;
 const WAITING_REQUESTS: usize = 16;
+
+/// Calls of /ft_sensor/bias before a re-tare is given up, their spacing and how long one may take.
+pub const TARE_ATTEMPTS: u32 = 5;
+const TARE_RETRY: Duration = Duration::from_millis(200);
+const TARE_TIMEOUT: Duration = Duration::from_secs(2);
 
 type PressServer = ActionServer<PressForceGoal, PressForceResult, PressForceFeedback>;
 
@@ -62,8 +74,20 @@ struct Goal {
     press: Press,
 }
 
+/// A retreat to re-tare under way: the user's request, and the call of /ft_sensor/bias in flight.
+struct RetareCall {
+    request: RmwRequestId,
+    call: Option<(RmwRequestId, Instant)>,
+    attempts: u32,
+    next_try: Instant,
+    refusal: String,
+}
+
 pub struct ControllerInterface {
     pub node: Node,
+    retare_server: Server<TriggerRequest, TriggerResponse>,
+    bias_client: Client<TriggerRequest, TriggerResponse>,
+    retare: Option<RetareCall>,
     commands: Subscription<ForceCommand>,
     models: Subscription<ModelMsg>,
     server: PressServer,
@@ -86,10 +110,23 @@ impl ControllerInterface {
             ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
         let models = ros::subscription::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
         let server = press_server(&mut node, &p.service_mapping)?;
+        let mapping = ros::service_mapping(&p.service_mapping)?;
+        let trigger = ServiceTypeName::new("std_srvs", "Trigger");
+        let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
+        let retare_name = Name::new("/deformation_controller", "retare")?;
+        let retare_server =
+            node.create_server::<TriggerRequest, TriggerResponse>(mapping, &retare_name, &trigger, q1, q2)?;
+        let bias_name = Name::new("/ft_sensor", "bias")?;
+        let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
+        let bias_client =
+            node.create_client::<TriggerRequest, TriggerResponse>(mapping, &bias_name, &trigger, q1, q2)?;
         let torque_pub = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
         let state_pub = ros::publisher::<StateMsg>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
         Ok(Self {
             node,
+            retare_server,
+            bias_client,
+            retare: None,
             commands,
             models,
             server,
@@ -142,6 +179,7 @@ impl ControllerInterface {
                 CancelGoalResponse { return_code: CancelGoalResponseEnum::Rejected, goals_canceling: vec![] };
             let _ = self.server.send_cancel_response(id, rejected);
         }
+        self.follow_retare(control);
         while let Ok(Some((id, request))) = self.server.receive_result_request() {
             match self.ended.iter().find(|(g, _, _)| *g == request.goal_id) {
                 Some((_, status, result)) => {
@@ -159,6 +197,81 @@ impl ControllerInterface {
                     let _ = self.server.send_result(id, response);
                 }
             }
+        }
+    }
+
+    /// Retare requests, and the tare of the one under way once the hand is free and still.
+    fn follow_retare(&mut self, control: &mut ControllerNode) {
+        while let Ok(Some((id, _))) = self.retare_server.receive_request() {
+            let refused = match (&self.retare, control.request_retare()) {
+                (Some(_), _) => Some("a retreat to re-tare is under way".to_string()),
+                (None, Err(e)) => Some(e.to_string()),
+                (None, Ok(())) => None,
+            };
+            match refused {
+                Some(why) => {
+                    let _ = self.retare_server.send_response(id, TriggerResponse { success: false, message: why });
+                }
+                None => {
+                    self.log(LogLevel::Info, "retreating to re-tare the sensor");
+                    let now = Instant::now();
+                    self.retare = Some(RetareCall {
+                        request: id,
+                        call: None,
+                        attempts: 0,
+                        next_try: now,
+                        refusal: String::new(),
+                    });
+                }
+            }
+        }
+        let Some(r) = self.retare.as_mut() else { return };
+        let answer = match (control.retare(), r.call) {
+            // The controller restarted meanwhile: the retreat has nothing left to do.
+            (None, None) => Some((false, "interrupted: the controller restarted".to_string())),
+            (Some(Retare::Taring), None) if Instant::now() >= r.next_try => {
+                if let Ok(call) = self.bias_client.send_request(TriggerRequest::default()) {
+                    r.call = Some((call, Instant::now()));
+                    r.attempts += 1;
+                }
+                None
+            }
+            (_, Some((call, sent))) => {
+                let response = match self.bias_client.receive_response() {
+                    Ok(Some((id, response))) if id == call => Some(response),
+                    _ if sent.elapsed() > TARE_TIMEOUT => {
+                        Some(TriggerResponse { success: false, message: "/ft_sensor/bias did not answer".into() })
+                    }
+                    _ => None,
+                };
+                match response {
+                    Some(t) if t.success => {
+                        control.on_tared(true);
+                        Some((true, format!("re-tared ({}): approaching the surface again", t.message)))
+                    }
+                    Some(t) => {
+                        r.call = None;
+                        r.refusal = t.message;
+                        r.next_try = Instant::now() + TARE_RETRY;
+                        (r.attempts >= TARE_ATTEMPTS).then(|| {
+                            control.on_tared(false);
+                            let why = format!(
+                                "the F/T node refused {} times ({}): approaching again with the old zero",
+                                r.attempts, r.refusal
+                            );
+                            (false, why)
+                        })
+                    }
+                    None => None,
+                }
+            }
+            _ => None,
+        };
+        if let Some((success, message)) = answer {
+            let request = r.request;
+            self.retare = None;
+            self.log(if success { LogLevel::Info } else { LogLevel::Warn }, &message);
+            let _ = self.retare_server.send_response(request, TriggerResponse { success, message });
         }
     }
 

@@ -15,6 +15,9 @@
 //! - A tick that fails asks the driver to hold at once, never for an older torque.
 //! - Models: adopted at the next force command (seed 001), or on arrival with the standing command
 //!   re-planned (`model_update: continuous`). An implausible one is refused and the present one kept.
+//! - Retreat and re-tare (a drifting sensor's zero is only known with the hand free): the hand lifts
+//!   [`RETARE_LIFT`] off the surface and settles, the host has the F/T node tare, and the controller
+//!   restarts — it approaches again and finds the onset with the fresh zero. Commands wait meanwhile.
 
 use nalgebra::Vector3;
 use softcontact_contact::ContactModel;
@@ -96,6 +99,21 @@ struct Policy {
     retarget_duration: f64,
 }
 
+/// How far the hand lifts off the surface to re-tare [m], over how long [s], and how long it then
+/// settles before the tare [s] (the surface's fast relaxation and the arm's motion die out).
+pub const RETARE_LIFT: f64 = 0.01;
+const RETARE_LIFT_TIME: f64 = 1.0;
+const RETARE_SETTLE: f64 = 0.5;
+
+/// Where a retreat to re-tare is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Retare {
+    /// Lifting and settling until the controller's time `until` [s].
+    Lifting { until: f64 },
+    /// Free and still: the F/T node is to tare now.
+    Taring,
+}
+
 pub struct ControllerNode {
     /// The control law.
     pub law: DeformationController,
@@ -111,6 +129,7 @@ pub struct ControllerNode {
     last_session: Option<u32>,
     ticks_in_session: u64,
     pending_model: Option<(ContactModel, Vector3<f64>)>,
+    retare: Option<Retare>,
     pub counters: NodeCounters,
 }
 
@@ -138,6 +157,7 @@ impl ControllerNode {
             last_session: None,
             ticks_in_session: 0,
             pending_model: None,
+            retare: None,
             counters: NodeCounters::default(),
         })
     }
@@ -191,12 +211,40 @@ impl ControllerNode {
     /// 001: once per command cycle); if it is refused the command goes on with the present model, and
     /// the refusal is returned beside the command's own result.
     pub fn on_force_command(&mut self, force: f64, duration: f64) -> (Option<ControlError>, Result<(), ControlError>) {
+        if self.retare.is_some() {
+            return (None, Err(ControlError::Retaring));
+        }
         let refused = self.pending_model.take().and_then(|(m, surface)| {
             let adopted = self.law.adopt_estimate(m, &surface, None);
             self.count_adoption(adopted.is_ok());
             adopted.err()
         });
         (refused, self.law.command_force(force, duration))
+    }
+
+    /// Retreat and re-tare: lifts the hand off the surface it holds. Needs contact (the hand still on
+    /// the way down is moving, and a tare refuses motion).
+    pub fn request_retare(&mut self) -> Result<(), ControlError> {
+        if self.retare.is_some() {
+            return Err(ControlError::Retaring);
+        }
+        let lift = -RETARE_LIFT.min(self.law.config().limits.max_lift);
+        self.law.command_deformation(lift, RETARE_LIFT_TIME)?;
+        self.retare = Some(Retare::Lifting { until: self.law.time() + RETARE_LIFT_TIME + RETARE_SETTLE });
+        Ok(())
+    }
+
+    /// Where a retreat to re-tare is (`None`: none under way).
+    pub fn retare(&self) -> Option<Retare> {
+        self.retare
+    }
+
+    /// The F/T node tared (or refused, `tared` false): the controller restarts, to find the surface
+    /// again with the sensor's zero as it now is.
+    pub fn on_tared(&mut self, _tared: bool) {
+        if self.retare.take().is_some() {
+            self.law.restart();
+        }
     }
 
     fn count_adoption(&mut self, adopted: bool) {
@@ -224,6 +272,8 @@ impl ControllerNode {
         if restarted {
             self.counters.restarts += 1;
             self.ticks_in_session = 0;
+            // The contact is forgotten: a retreat under way has nothing left to do.
+            self.retare = None;
         }
         self.last_session = js.session;
         if !self.law.follow_session(js.session, js.commanding, silence) {
@@ -247,6 +297,11 @@ impl ControllerNode {
             Ok((tau, state)) => {
                 self.counters.ticks += 1;
                 self.ticks_in_session += 1;
+                if let Some(Retare::Lifting { until }) = self.retare
+                    && self.law.time() >= until
+                {
+                    self.retare = Some(Retare::Taring);
+                }
                 (Reply::Torque(tau), state)
             }
             Err(e) => {
@@ -583,6 +638,61 @@ mod tests {
         let with = |f| Step { state: ControllerState { f, ..Default::default() }, ..base.clone() };
         assert!(matches!(press.follow(&with(4.0), 0.9), PressProgress::Moving { force: 4.0, .. }));
         assert_eq!(press.follow(&with(6.0), 1.0), PressProgress::Done { force: 5.0 });
+    }
+
+    #[test]
+    fn a_retreat_to_re_tare_lifts_the_hand_free_tares_and_finds_the_surface_again() {
+        let mut cell = pressing_cell();
+        cell.controller.on_force_command(50.0, 1.0).1.unwrap();
+        for _ in 0..1500 {
+            cell.cycle().unwrap();
+        }
+        let contact = cell.controller.law.contact_level().unwrap();
+        cell.controller.request_retare().unwrap();
+        // Commands wait, and a second request is refused.
+        assert_eq!(cell.controller.on_force_command(30.0, 1.0).1, Err(ControlError::Retaring));
+        assert_eq!(cell.controller.request_retare(), Err(ControlError::Retaring));
+        let mut lifting = 0;
+        while cell.controller.retare() != Some(Retare::Taring) {
+            cell.cycle().unwrap();
+            lifting += 1;
+            assert!(lifting < 3000, "still lifting after 3 s");
+        }
+        // Free (the simulated surface pushes nothing) and still, 1.5 s after the request.
+        assert!((lifting as f64 - 1500.0).abs() < 5.0, "{lifting} ticks lifting and settling");
+        assert_eq!(cell.sim.contact().normal_force, 0.0, "the hand is off the surface");
+        // Still enough for the F/T node's checked tare (which refuses a moving hand).
+        assert!(cell.sim.dq().iter().all(|v| v.abs() < 5e-3), "the arm is still: {:?}", cell.sim.dq());
+        cell.tare().unwrap();
+        cell.controller.on_tared(true);
+        assert_eq!(cell.controller.retare(), None);
+        let mut approach = 0;
+        while !cell.cycle().unwrap().unwrap().controller.in_contact {
+            approach += 1;
+            assert!(approach < 5000, "no contact again");
+        }
+        // The surface found again where it was (the onset's threshold deep, at most).
+        let again = cell.controller.law.contact_level().unwrap();
+        assert!((again - contact).abs() < 2e-3, "surface at {again} m, was at {contact} m");
+        for _ in 0..200 {
+            cell.cycle().unwrap();
+        }
+        assert!(cell.controller.on_force_command(30.0, 1.0).1.is_ok());
+    }
+
+    #[test]
+    fn a_retreat_needs_contact_and_a_restart_ends_it() {
+        let mut node = node();
+        run_free(&mut node, 10.0, 1);
+        assert_eq!(node.request_retare(), Err(ControlError::NoContact));
+        let mut cell = pressing_cell();
+        cell.controller.request_retare().unwrap();
+        // A new session restarts the node: the retreat is over (its host answers "interrupted").
+        let t = cell.sim.time();
+        cell.controller.on_force(t + 1.0, Vector3::zeros(), t + 1.0);
+        let step = cell.controller.on_joint_state(&sample(t + 1.0, 99), t + 1.0);
+        assert!(step.restarted);
+        assert_eq!(cell.controller.retare(), None);
     }
 
     #[test]
