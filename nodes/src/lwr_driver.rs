@@ -211,6 +211,10 @@ pub struct DriverOutput {
     pub sequence: u16,
     /// The KRC session this measurement belongs to (published with the joint state).
     pub session: u32,
+    /// The KRC's own clock (FRI `intf.timestamp`) [s], to the sample time: the simulated KRC keeps the
+    /// simulated time on it, the loop's clock in lockstep (`use_sim_time`), where /clock can lag the
+    /// datagram. FRI sends it as f32: whole cycles stay exact for about 2 hours (2^13 s at 1 ms).
+    pub krc_time: f64,
 }
 
 /// A measurement read by [`LwrDriver::measure`], waiting for [`LwrDriver::answer`].
@@ -439,6 +443,7 @@ impl LwrDriver {
             holding: false,
             sequence: seq,
             session: self.session,
+            krc_time: (m.intf.timestamp as f64 / self.sample_time).round() * self.sample_time,
         };
         Ok(Measured { m, output })
     }

@@ -143,7 +143,9 @@ pub fn run(
         let mut measured_at = None;
         let mut sign_of_life = false;
         let output = client.cycle_with(Duration::from_millis(5), |driver, out| {
-            let stamp = clock.now();
+            // In lockstep the KRC's own clock is the loop's: /clock may not have caught up with the
+            // datagram, and a repeated stamp would leave the measurement unanswered.
+            let stamp = if p.use_sim_time { Time::from_secs_f64(out.krc_time) } else { clock.now() };
             measured_at = Some(stamp);
             if let Some(c) = controller.as_mut() {
                 c.respond(driver, out, stamp.as_secs_f64());
