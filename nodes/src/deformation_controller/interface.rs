@@ -214,6 +214,7 @@ impl ControllerInterface {
                 }
                 None => {
                     self.log(LogLevel::Info, "retreating to re-tare the sensor");
+                    self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "a retreat to re-tare began");
                     let now = Instant::now();
                     self.retare = Some(RetareCall {
                         request: id,
