@@ -70,6 +70,17 @@ pub struct ContactEstimatorNode {
     contact: Option<(f64, Vector3<f64>)>,
     window: WindowEstimator,
     next_sample: f64,
+    refits: Option<RefitSchedule>,
+}
+
+/// When the node refits on its own: every `period` [s] of reading time, once the window is at least
+/// `min_window_fill` full (`Params::refit_period`, `min_window_fill`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefitSchedule {
+    pub period: f64,
+    pub min_window_fill: f64,
+    /// The reading time from which the next refit is due [s].
+    pub next: f64,
 }
 
 impl ContactEstimatorNode {
@@ -86,9 +97,29 @@ impl ContactEstimatorNode {
             window: WindowEstimator::new(config.window, config.fit)?,
             contact: None,
             next_sample: 0.0,
+            refits: None,
             normal,
             config,
         })
+    }
+
+    /// Refits on the schedule of `p` from reading time `from` on (the graph's node and the demo's cell
+    /// alike); without it the node refits only when asked ([`Self::refit`]).
+    pub fn with_refits(mut self, p: &Params, from: f64) -> Self {
+        self.refits =
+            Some(RefitSchedule { period: p.refit_period, min_window_fill: p.min_window_fill.max(1e-9), next: from });
+        self
+    }
+
+    /// The refit due at reading time `t` on the schedule, if one is: the model, or why it failed.
+    pub fn refit_if_due(&mut self, t: f64) -> Option<Result<ModelOut, ContactError>> {
+        let fill = self.window_fill();
+        let schedule = self.refits.as_mut()?;
+        if !(t >= schedule.next && fill >= schedule.min_window_fill) {
+            return None;
+        }
+        schedule.next = t + schedule.period;
+        Some(self.refit())
     }
 
     /// One reading at time t [s]: tool position and velocity in the world, normal force f = −F·n.
@@ -379,5 +410,44 @@ impl ForcePairing {
             force,
             sensor_rotation,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hand pressing a Kelvin-Voigt surface (k 2000 N/m) at 1 Hz, read at 1 kHz.
+    fn reading(t: f64) -> (Vector3<f64>, Vector3<f64>, f64) {
+        let z = 0.004 + 0.002 * (std::f64::consts::TAU * t).sin();
+        let zdot = 0.002 * std::f64::consts::TAU * (std::f64::consts::TAU * t).cos();
+        let n = Vector3::new(0.0, 0.0, -1.0);
+        (n * (0.3 + z), n * zdot, 2000.0 * z + 5.0 * zdot)
+    }
+
+    #[test]
+    fn refits_come_on_the_schedule_once_the_window_is_full_enough() {
+        let p = Params { window: 200, refit_period: 0.5, min_window_fill: 0.5, ..Params::default() };
+        let mut node = ContactEstimatorNode::new(p.estimator_config()).unwrap().with_refits(&p, 0.0);
+        let mut due = Vec::new();
+        for i in 0..4000 {
+            let t = i as f64 * 1e-3;
+            let (position, velocity, f) = reading(t);
+            node.update(t, &position, &velocity, f).unwrap();
+            if let Some(model) = node.refit_if_due(t) {
+                assert!(node.window_fill() >= 0.5, "refit at fill {}", node.window_fill());
+                due.push((t, model.is_ok()));
+            }
+        }
+        // 100 samples (10 ms apart) fill half the window: the first refit after 1 s of contact, then every 0.5 s.
+        assert!(due.len() >= 5, "{due:?}");
+        assert!((due[0].0 - 1.0).abs() < 0.05, "first refit at {} s", due[0].0);
+        for w in due.windows(2) {
+            assert!((w[1].0 - w[0].0 - 0.5).abs() < 1.5e-3, "refits {} s apart", w[1].0 - w[0].0);
+        }
+        assert!(due.iter().all(|(_, ok)| *ok), "{due:?}");
+        // Without a schedule the node refits only when asked.
+        let mut quiet = ContactEstimatorNode::new(p.estimator_config()).unwrap();
+        assert!(quiet.refit_if_due(10.0).is_none());
     }
 }

@@ -108,7 +108,7 @@ pub enum ControlError {
     Dynamics(#[from] softcontact_dynamics::Error),
     #[error("no contact yet: force commands wait for the onset")]
     NoContact,
-    #[error("retreating to re-tare the sensor: commands wait until the hand is back on the surface")]
+    #[error("retreating to re-tare the sensor: commands are refused until the hand is back on the surface")]
     Retaring,
     #[error("move duration must be positive")]
     Duration,

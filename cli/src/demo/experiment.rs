@@ -184,12 +184,10 @@ const RETREAT: f64 = -0.01;
 const SWAY: f64 = 0.008;
 const TILT: f64 = 0.35;
 
-/// The cell driven tick by tick, the estimator refitted on the node's schedule.
+/// The cell driven tick by tick, the estimator refitting on the node's own schedule (when it has one).
 struct Runner<'a, O: Observer> {
     cell: Cell,
     observer: &'a mut O,
-    params: contact_estimator::Params,
-    next_refit: f64,
     newest: Option<ModelOut>,
     last: Tick,
 }
@@ -199,9 +197,8 @@ impl<O: Observer> Runner<'_, O> {
         let tick = self.cell.cycle()?.context("the KRC left command mode")?;
         anyhow::ensure!(!tick.controller.contact_lost, "contact lost at t = {:.3} s", tick.time);
         self.observer.tick(&tick)?;
-        if tick.time >= self.next_refit && self.cell.estimator.window_fill() >= self.params.min_window_fill {
-            self.next_refit = tick.time + self.params.refit_period;
-            let model = self.cell.estimator.refit()?;
+        if let Some(model) = self.cell.estimator.refit_if_due(tick.time) {
+            let model = model?;
             self.observer.model(tick.time, &model)?;
             self.newest = Some(model);
         }
@@ -241,8 +238,7 @@ fn start<'a, O: Observer>(
         DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), controller_model)?;
     let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(estimator)?)?;
     let last = cell.start(5000)?;
-    let params = contact_estimator::Params::default();
-    Ok(Runner { cell, observer, params, next_refit: f64::INFINITY, newest: None, last })
+    Ok(Runner { cell, observer, newest: None, last })
 }
 
 /// One long hold, as when a surface identified earlier is pressed again: the sensor tared out of contact
@@ -330,8 +326,7 @@ pub fn run_surface(
     if plan.start_pressed.is_none() {
         r.cell.tare()?;
     }
-    r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?;
-    r.next_refit = r.last.time;
+    r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?.with_refits(&params, r.last.time);
     r.newest = None;
     r.cell.controller.law.adopt_estimate(identified.model.clone(), &identified.contact_position, None)?;
     r.cell.controller.law.command_deformation(0.005, 2.0)?;

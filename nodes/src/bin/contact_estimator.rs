@@ -34,7 +34,7 @@ fn main() -> anyhow::Result<()> {
     ros::init_logging("contact_estimator");
     let (p, declared) = params::load::<Params>("contact_estimator", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
-    let mut estimator = ContactEstimatorNode::new(p.estimator_config())?;
+    let mut estimator = ContactEstimatorNode::new(p.estimator_config())?.with_refits(&p, f64::NEG_INFINITY);
     let normal = Vector3::from(p.normal).normalize();
     let mut node = ros::node_with_parameters("contact_estimator", declared)?;
     let mut wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
@@ -56,7 +56,7 @@ fn main() -> anyhow::Result<()> {
         &format!("ready: window {} × {} s, domain {}", p.window, p.sample_period, node.domain_id()),
     );
 
-    let (mut next_state, mut next_refit) = (f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let mut next_state = f64::NEG_INFINITY;
     let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
     let mut was_in_contact = false;
     let mut wrench_watch = StreamWatch::new("/ft_sensor/wrench", 1000.0, p.dead_after);
@@ -99,18 +99,16 @@ fn main() -> anyhow::Result<()> {
                 next_state = t + 1.0 / p.state_rate;
                 state_pub.publish(out.to_msg(w.header.stamp))?;
             }
-            if t >= next_refit && estimator.window_fill() >= p.min_window_fill.max(1e-9) {
-                next_refit = t + p.refit_period;
-                match estimator.refit() {
-                    Ok(m) => {
-                        refits += 1;
-                        model_pub.publish(m.to_msg(Header { stamp: clock.now(), frame_id: "world".into() }))?;
-                    }
-                    Err(e) => {
-                        refit_failures += 1;
-                        ros::log(&node, LogLevel::Warn, &format!("refit failed: {e}"));
-                    }
+            match estimator.refit_if_due(t) {
+                Some(Ok(m)) => {
+                    refits += 1;
+                    model_pub.publish(m.to_msg(Header { stamp: clock.now(), frame_id: "world".into() }))?;
                 }
+                Some(Err(e)) => {
+                    refit_failures += 1;
+                    ros::log(&node, LogLevel::Warn, &format!("refit failed: {e}"));
+                }
+                None => {}
             }
         }
         // Judged after everything that arrived was read.

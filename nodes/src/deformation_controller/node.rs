@@ -11,13 +11,15 @@
 //!   sent (the driver's watchdog holds). A reading that is not finite, or not newer by its stamp, is
 //!   dropped.
 //! - A new KRC session, a KRC that does not command, or joint states interrupted longer than
-//!   `restart_after` restart the controller: the contact is forgotten and the hand approaches again.
+//!   `restart_after` by their stamps restart the controller: the contact is forgotten and the hand
+//!   approaches again.
 //! - A tick that fails asks the driver to hold at once, never for an older torque.
 //! - Models: adopted at the next force command (seed 001), or on arrival with the standing command
 //!   re-planned (`model_update: continuous`). An implausible one is refused and the present one kept.
 //! - Retreat and re-tare (a drifting sensor's zero is only known with the hand free): the hand lifts
 //!   [`RETARE_LIFT`] off the surface and settles, the host has the F/T node tare, and the controller
-//!   restarts — it approaches again and finds the onset with the fresh zero. Commands wait meanwhile.
+//!   restarts — it approaches again and finds the onset with the fresh zero. Commands are refused
+//!   meanwhile.
 
 use nalgebra::Vector3;
 use softcontact_contact::ContactModel;
@@ -124,8 +126,7 @@ pub struct ControllerNode {
     force: Option<(Vector3<f64>, f64)>,
     newest_force_stamp: f64,
     newest_joint_state_stamp: f64,
-    /// When the last joint state arrived (`now`), and its session.
-    last_joint_state: Option<f64>,
+    /// The session of the newest joint state.
     last_session: Option<u32>,
     ticks_in_session: u64,
     pending_model: Option<(ContactModel, Vector3<f64>)>,
@@ -153,7 +154,6 @@ impl ControllerNode {
             force: None,
             newest_force_stamp: f64::NEG_INFINITY,
             newest_joint_state_stamp: f64::NEG_INFINITY,
-            last_joint_state: None,
             last_session: None,
             ticks_in_session: 0,
             pending_model: None,
@@ -264,9 +264,11 @@ impl ControllerNode {
             self.counters.not_newer += 1;
             return nothing(Silence::NotNewer, ControllerState::default());
         }
-        self.newest_joint_state_stamp = js.stamp;
-        let silence = self.last_joint_state.map_or(0.0, |t| now - t);
-        self.last_joint_state = Some(now);
+        // Interruptions by the joint states' own clock, the loop's: in lockstep the simulated time, where
+        // a host starved for a while is no interruption of the arm (restarting while pressing hard on
+        // every such stall threw the hand about).
+        let previous = std::mem::replace(&mut self.newest_joint_state_stamp, js.stamp);
+        let silence = if previous.is_finite() { js.stamp - previous } else { 0.0 };
         let restarted = self.ticks_in_session > 0
             && (!(silence <= self.policy.restart_after) || js.session != self.last_session || !js.commanding);
         if restarted {
@@ -400,7 +402,7 @@ impl std::fmt::Display for NodeCounters {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "{} commands sent, {} joint states without a fresh force, {} failed, {} models adopted, {} refused, \
+            "{} commands sent, {} joint states without a fresh force, {} failed, {} models adopted, {} models refused, \
              {} restarts, {} joint states not newer than the last, {} force readings dropped",
             self.ticks,
             self.no_fresh_force,
@@ -693,6 +695,21 @@ mod tests {
         let step = cell.controller.on_joint_state(&sample(t + 1.0, 99), t + 1.0);
         assert!(step.restarted);
         assert_eq!(cell.controller.retare(), None);
+    }
+
+    #[test]
+    fn interruptions_count_on_the_joint_states_clock_not_the_hosts() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        // The host starved for 1 s while the loop's (simulated) clock moved one cycle: no restart.
+        let late = t + 1.0;
+        node.on_force(t + 1e-3, Vector3::zeros(), late);
+        let step = node.on_joint_state(&sample(t + 1e-3, 1), late);
+        assert!(!step.restarted && matches!(step.reply, Reply::Torque(_)), "{step:?}");
+        // The joint states themselves interrupted beyond restart_after: a restart.
+        let gap = t + 1e-3 + Params::default().restart_after + 0.01;
+        node.on_force(gap, Vector3::zeros(), late + 1e-3);
+        assert!(node.on_joint_state(&sample(gap, 1), late + 1e-3).restarted);
     }
 
     #[test]
