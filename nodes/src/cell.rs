@@ -138,6 +138,7 @@ impl Cell {
         }
         let commanding = out.state == InterfaceState::Command;
         let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
+        self.controller.on_external_torque(time, &out.external_torque);
         let step = self.controller.on_joint_state(&joint_state, time);
         if !commanding {
             self.write(measured)?;

@@ -120,6 +120,13 @@ pub enum ControlError {
     TimeNotAdvancing { time: f64, last: f64 },
     #[error("implausible contact model refused: {0}")]
     ImplausibleModel(String),
+    /// The F/T sensor and the arm's joint torque sensors disagree on the contact force.
+    #[error(
+        "the F/T sensor reads {sensor:.1?} N on the hand, the arm's joint torques say {arm:.1?} N: holding \
+         until the KRC starts a new session (check the sensor's counts per unit and frame, its tare, and the \
+         tool load $LOAD of the KRC)"
+    )]
+    ForceDisagreement { sensor: [f64; 3], arm: [f64; 3] },
     /// A move across the surface or a tilt beyond its limit (see [`MAX_LATERAL`], [`MAX_TILT`]).
     #[error("{what} of {value} is beyond the limit of {limit}")]
     Across { what: &'static str, value: f64, limit: f64 },
@@ -813,6 +820,12 @@ pub struct Params {
     pub state_rate: f64,
     /// No command is sent while the force reading is older than this [s]: the driver then holds.
     pub stale_after: f64,
+    /// The F/T sensor checked against the arm's joint torque sensors (see [`ForceCheck`]): they may
+    /// disagree on the contact force by `force_check_tolerance` [N] plus `force_check_relative` of the
+    /// smaller; the disagreement beyond, summed over time, holds the arm at `force_check_impulse` [N·s].
+    pub force_check_tolerance: f64,
+    pub force_check_relative: f64,
+    pub force_check_impulse: f64,
     /// /lwr/joint_states silent this long [s] after they flowed (they are due at 1 kHz): the driver
     /// or the middleware is dead, and the node exits with an error (the launch script stops the graph).
     pub dead_after: f64,
@@ -852,6 +865,9 @@ impl Default for Params {
                 .expect("a valid model"),
             state_rate: 100.0,
             stale_after: 0.05,
+            force_check_tolerance: 20.0,
+            force_check_relative: 0.25,
+            force_check_impulse: 0.5,
             dead_after: 2.0,
             service_mapping: "cyclone".into(),
             use_sim_time: false,
@@ -934,6 +950,10 @@ impl crate::params::NodeParams for Params {
         within("state_rate", self.state_rate, 0.0, 1000.0)?;
         within("stale_after", self.stale_after, 0.0, 1.0)?;
         within("restart_after", self.restart_after, self.stale_after, 10.0)?;
+        // The check is never off: the KRC's estimate is good to a few newtons with the tool load set.
+        within("force_check_tolerance", self.force_check_tolerance, 1.0, 100.0)?;
+        within("force_check_relative", self.force_check_relative, 0.0, 1.0)?;
+        within("force_check_impulse", self.force_check_impulse, 0.0, 5.0)?;
         crate::liveness::validate_dead_after(self.dead_after)?;
         crate::ros::service_mapping(&self.service_mapping).map_err(|e| e.to_string())?;
         if self.dead_after <= self.restart_after {

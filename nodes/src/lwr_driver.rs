@@ -200,6 +200,9 @@ pub struct DriverOutput {
     pub dq: [f64; 7],
     /// Measured joint torques [N·m].
     pub effort: [f64; 7],
+    /// The KRC's estimate of the external joint torques (FRI estExtJntTrq: measured less its model's)
+    /// [N·m]: the arm's own, independent view of the contact force.
+    pub external_torque: [f64; 7],
     pub tool_pose: Isometry3<f64>,
     /// Twist of the tool origin, world axes (linear, angular).
     pub tool_twist: Vector6<f64>,
@@ -436,6 +439,7 @@ impl LwrDriver {
             q,
             dq,
             effort: std::array::from_fn(|i| m.data.msr_jnt_trq[i] as f64),
+            external_torque: std::array::from_fn(|i| m.data.est_ext_jnt_trq[i] as f64),
             tool_pose,
             tool_twist,
             state: m.intf.state,

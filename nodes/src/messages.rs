@@ -53,6 +53,8 @@ pub fn tool_to_sensor_static(stamp: Time) -> TFMessage {
 /// The LWR driver's 1 kHz topics for one measurement.
 pub struct DriverMessages {
     pub joint_state: JointState,
+    /// /lwr/external_torque: the KRC's external torque estimate in `effort`, stamped as the joint state.
+    pub external_torque: JointState,
     pub ee_pose: PoseStamped,
     pub ee_twist: TwistStamped,
     pub tf: TFMessage,
@@ -99,6 +101,13 @@ impl DriverOutput {
                 position: self.q.to_vec(),
                 velocity: self.dq.to_vec(),
                 effort: self.effort.to_vec(),
+            },
+            external_torque: JointState {
+                header: header(&session.to_frame_id(), stamp),
+                name: joint_names.to_vec(),
+                position: vec![],
+                velocity: vec![],
+                effort: self.external_torque.to_vec(),
             },
             ee_pose: PoseStamped {
                 header: h.clone(),

@@ -138,6 +138,7 @@ fn the_controller_node_does_not_allocate() {
     let mut step = |q: &[f64; 7], i: usize| {
         let t = 50.0 + i as f64 * 1e-3;
         node.on_force(t, Vector3::new(0.1, -0.2, 0.3), t);
+        node.on_external_torque(t, &[0.1, -0.3, 0.0, 0.2, 0.0, 0.05, 0.0]);
         let js = JointSample { stamp: t, session: Some(1), commanding: true, q: *q, dq };
         node.on_joint_state(&js, t)
     };

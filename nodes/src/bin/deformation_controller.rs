@@ -38,6 +38,8 @@ fn main() -> anyhow::Result<()> {
     let mut topics = ControllerInterface::new(&p, declared)?;
     let mut joint_states = ros::subscription::<JointState>(&mut topics.node, "/lwr/joint_states", ros::sensor_qos())?;
     let wrenches = ros::subscription::<WrenchStamped>(&mut topics.node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    // The KRC's external torque estimate, to check the force with (published before each joint state).
+    let external = ros::subscription::<JointState>(&mut topics.node, "/lwr/external_torque", ros::sensor_qos())?;
     let mut poll = Poll::new()?;
     poll.registry().register(&mut joint_states, Token(0), Interest::READABLE)?;
     let mut events = Events::with_capacity(8);
@@ -53,6 +55,11 @@ fn main() -> anyhow::Result<()> {
         topics.take_inputs(&mut control);
         while let Ok(Some((w, _))) = wrenches.take() {
             control.on_force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force), now());
+        }
+        while let Ok(Some((e, _))) = external.take() {
+            if let Ok(torque) = <[f64; 7]>::try_from(&e.effort[..]) {
+                control.on_external_torque(e.header.stamp.as_secs_f64(), &torque);
+            }
         }
         // Of a backlog, only the newest joint state is answered (older ones would be stale anyway).
         let mut newest: Option<JointState> = None;

@@ -62,6 +62,7 @@ impl InProcessController {
         let session = DriverSession { session: out.session, commanding: out.state == InterfaceState::Command };
         let sample =
             JointSample { stamp, session: Some(session.session), commanding: session.commanding, q: out.q, dq: out.dq };
+        self.control.on_external_torque(stamp, &out.external_torque);
         let step = self.control.on_joint_state(&sample, self.seconds(Instant::now()));
         match &step.reply {
             // A torque the driver refuses (not 7 finite values) clears its command: it holds.

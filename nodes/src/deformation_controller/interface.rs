@@ -100,6 +100,8 @@ pub struct ControllerInterface {
     state_every: u64,
     notices: Notices,
     next_stale_log: Instant,
+    /// A hold that lasts (a tripped force check) is logged once a second, not each tick.
+    next_hold_log: Instant,
 }
 
 impl ControllerInterface {
@@ -139,6 +141,7 @@ impl ControllerInterface {
             state_every: ((1000.0 / p.state_rate).round() as u64).max(1),
             notices: Notices::default(),
             next_stale_log: Instant::now(),
+            next_hold_log: Instant::now(),
         })
     }
 
@@ -350,11 +353,20 @@ impl ControllerInterface {
             }
             Reply::Hold(e) => {
                 // An empty command: the driver holds at once, rather than repeat an older torque.
-                self.log(LogLevel::Error, &format!("tick failed, the driver is asked to hold: {e}"));
+                if Instant::now() >= self.next_hold_log {
+                    self.log(LogLevel::Error, &format!("tick failed, the driver is asked to hold: {e}"));
+                    self.next_hold_log = Instant::now() + Duration::from_secs(1);
+                }
                 errors += u64::from(self.torque_pub.publish(messages::hold_request(&self.names, header)).is_err());
             }
-            Reply::Nothing(Silence::NoFreshForce) if commanding && Instant::now() >= self.next_stale_log => {
-                self.log(LogLevel::Warn, "no fresh force reading: sending no command (the driver holds)");
+            Reply::Nothing(why @ (Silence::NoFreshForce | Silence::NoArmForce))
+                if commanding && Instant::now() >= self.next_stale_log =>
+            {
+                let what = match why {
+                    Silence::NoFreshForce => "no fresh force reading",
+                    _ => "no external torque estimate of the KRC (/lwr/external_torque) to check the force with",
+                };
+                self.log(LogLevel::Warn, &format!("{what}: sending no command (the driver holds)"));
                 self.next_stale_log = Instant::now() + Duration::from_secs(1);
             }
             Reply::Nothing(_) => {}

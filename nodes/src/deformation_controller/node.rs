@@ -16,14 +16,16 @@
 //! - A tick that fails asks the driver to hold at once, never for an older torque.
 //! - Models: adopted at the next force command (seed 001), or on arrival with the standing command
 //!   re-planned (`model_update: continuous`). An implausible one is refused and the present one kept.
+//! - The F/T sensor is checked against the arm's joint torque sensors ([`ForceCheck`]): when they
+//!   disagree on the contact force, every tick holds until the KRC starts a new session.
 //! - Retreat and re-tare (a drifting sensor's zero is only known with the hand free): the hand lifts
 //!   [`RETARE_LIFT`] off the surface and settles, the host has the F/T node tare, and the controller
 //!   restarts — it approaches again and finds the onset with the fresh zero. Commands are refused
 //!   meanwhile.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Matrix6xX, Vector3};
 use softcontact_contact::ContactModel;
-use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 
 use super::{ControlError, ControllerState, DeformationController, ModelUpdate, Params};
 use crate::geometry::ContactGeometry;
@@ -39,6 +41,85 @@ pub struct JointSample {
     pub commanding: bool,
     pub q: [f64; 7],
     pub dq: [f64; 7],
+}
+
+/// The F/T sensor checked against the arm's own joint torque sensors. The KRC estimates the external
+/// joint torques τ_ext (FRI estExtJntTrq: measured less its model's); the contact force at the tool point
+/// they imply is f̂ = argmin ‖J_vᵀ f − τ_ext‖ = (J_v J_vᵀ)⁻¹ J_v τ_ext, with J_v the tool's linear
+/// Jacobian in world axes (7 torques, 3 unknowns). The joint torques, not the KRC's own estExtTcpFT,
+/// whose task frame and axis order depend on the KRL program's settings.
+///
+/// Sensor and arm agree within `tolerance + relative · min(|f|, |f̂|)`. The disagreement beyond that,
+/// summed over the joint states' clock (and drained while they agree), trips the check at `impulse`
+/// N·s — 10 ms at 50 N beyond, 100 ms at 5 N: a sensor that reads too much drives the law's force
+/// feed-forward into a runaway that doubles the force every 20 ms, and that cannot wait for a fixed
+/// persistence. The check catches a mis-scaled or frozen sensor, a wrong sensor
+/// frame, a tare taken under load or a wrong tool load on the KRC — the controller no longer knows the
+/// force it applies, and pressing on would be blind. Tripped, the node holds the arm until the KRC
+/// starts a new session (the operator restarts the FRI program).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ForceCheck {
+    /// [N]
+    pub tolerance: f64,
+    pub relative: f64,
+    /// [N·s]
+    pub impulse: f64,
+    /// The disagreement beyond the allowance, summed over time (and drained while they agree), and the
+    /// joint-state stamp it was last updated at.
+    excess: f64,
+    last: Option<f64>,
+    /// The forces (sensor, arm) that tripped the check.
+    tripped: Option<([f64; 3], [f64; 3])>,
+}
+
+impl ForceCheck {
+    pub fn new(tolerance: f64, relative: f64, impulse: f64) -> Self {
+        Self { tolerance, relative, impulse, excess: 0.0, last: None, tripped: None }
+    }
+
+    /// The arm's view of the contact force (world axes) from the tool's Jacobian (6 × 7, world axes,
+    /// linear rows first) and the external joint torques; `None` near a singularity, where the torques
+    /// do not determine a force (nor any non-finite input).
+    pub fn arm_force(jacobian: &Matrix6xX<f64>, external: &[f64; 7]) -> Option<Vector3<f64>> {
+        // J_v J_vᵀ and J_v τ column by column (fixed sizes: nothing is allocated on the FRI thread).
+        let (mut normal, mut projected) = (Matrix3::zeros(), Vector3::zeros());
+        for (j, tau) in external.iter().enumerate() {
+            let column = jacobian.fixed_view::<3, 1>(0, j);
+            normal += column * column.transpose();
+            projected += column * *tau;
+        }
+        // The arm's least singular direction: below 1 mm of tool motion per 0.1 rad of joints the
+        // torques say little of a force along it.
+        let f = normal.cholesky().filter(|_| normal.symmetric_eigenvalues().min() > 1e-4)?.solve(&projected);
+        f.iter().all(|v| v.is_finite()).then_some(f)
+    }
+
+    /// The sensor's and the arm's contact force at `time` [s]: `Err` once the check has tripped.
+    pub fn compare(&mut self, time: f64, sensor: &Vector3<f64>, arm: &Vector3<f64>) -> Result<(), ControlError> {
+        if self.tripped.is_none() {
+            let dt = self.last.map_or(0.0, |last| (time - last).clamp(0.0, 0.1));
+            self.last = Some(time);
+            // The smaller force scales the allowance: a sensor that reads too much must not widen its own.
+            let allowed = self.tolerance + self.relative * sensor.norm().min(arm.norm());
+            let beyond = (sensor - arm).norm() - allowed;
+            // (A non-finite force trips at once.)
+            self.excess = if beyond.is_finite() { (self.excess + beyond * dt).max(0.0) } else { f64::INFINITY };
+            if !(self.excess <= self.impulse) {
+                self.tripped = Some(((*sensor).into(), (*arm).into()));
+            }
+        }
+        self.error().map_or(Ok(()), Err)
+    }
+
+    /// Why the check holds the arm (`None`: it does not).
+    pub fn error(&self) -> Option<ControlError> {
+        self.tripped.map(|(sensor, arm)| ControlError::ForceDisagreement { sensor, arm })
+    }
+
+    /// A new KRC session: the operator has seen the hold.
+    pub fn reset(&mut self) {
+        *self = Self::new(self.tolerance, self.relative, self.impulse);
+    }
 }
 
 /// What the driver is told for one joint state.
@@ -61,6 +142,9 @@ pub enum Silence {
     NotCommanding,
     /// No force reading at most `stale_after` old.
     NoFreshForce,
+    /// No external torque estimate of the KRC within `stale_after` of the joint state: the force
+    /// cannot be checked.
+    NoArmForce,
 }
 
 /// One joint state handled.
@@ -90,6 +174,10 @@ pub struct NodeCounters {
     pub not_newer: u64,
     /// Force readings dropped (not finite, or not newer).
     pub readings_dropped: u64,
+    /// Joint states without the KRC's external torque estimate.
+    pub no_arm_force: u64,
+    /// Times the force check tripped.
+    pub force_check_trips: u64,
 }
 
 /// The policy's own settings (the rest of [`Params`] configures the law).
@@ -126,6 +214,10 @@ pub struct ControllerNode {
     force: Option<(Vector3<f64>, f64)>,
     newest_force_stamp: f64,
     newest_joint_state_stamp: f64,
+    /// The KRC's newest external torque estimate and its stamp.
+    external_torque: Option<(f64, [f64; 7])>,
+    force_check: ForceCheck,
+    jacobian: Matrix6xX<f64>,
     /// The session of the newest joint state.
     last_session: Option<u32>,
     ticks_in_session: u64,
@@ -141,6 +233,7 @@ impl ControllerNode {
         let model = lwr4::model();
         let tool = model.frame_id(lwr4::TOOL_FRAME)?;
         let data = model.data();
+        let jacobian = Matrix6xX::zeros(model.dof());
         Ok(Self {
             law,
             policy: Policy {
@@ -154,6 +247,13 @@ impl ControllerNode {
             force: None,
             newest_force_stamp: f64::NEG_INFINITY,
             newest_joint_state_stamp: f64::NEG_INFINITY,
+            external_torque: None,
+            force_check: ForceCheck::new(
+                params.force_check_tolerance,
+                params.force_check_relative,
+                params.force_check_impulse,
+            ),
+            jacobian,
             last_session: None,
             ticks_in_session: 0,
             pending_model: None,
@@ -182,6 +282,20 @@ impl ControllerNode {
             // (The same reading again, as a host that polls its newest one may hand it over, is no news.)
             self.counters.readings_dropped += 1;
         }
+    }
+
+    /// The KRC's external joint torque estimate (FRI estExtJntTrq) of the joint state stamped `stamp`
+    /// (/lwr/external_torque). Not finite, or not newer: dropped.
+    pub fn on_external_torque(&mut self, stamp: f64, torque: &[f64; 7]) {
+        let newer = self.external_torque.is_none_or(|(newest, _)| stamp > newest);
+        if stamp.is_finite() && newer && torque.iter().all(|v| v.is_finite()) {
+            self.external_torque = Some((stamp, *torque));
+        }
+    }
+
+    /// Why the force check holds the arm (`None`: it does not).
+    pub fn force_check(&self) -> Option<ControlError> {
+        self.force_check.error()
     }
 
     /// Forgets the force reading: until the next one arrives no command is sent (the sensor node stopped
@@ -271,6 +385,9 @@ impl ControllerNode {
         let silence = if previous.is_finite() { js.stamp - previous } else { 0.0 };
         let restarted = self.ticks_in_session > 0
             && (!(silence <= self.policy.restart_after) || js.session != self.last_session || !js.commanding);
+        if js.session != self.last_session {
+            self.force_check.reset();
+        }
         if restarted {
             self.counters.restarts += 1;
             self.ticks_in_session = 0;
@@ -295,6 +412,38 @@ impl ControllerNode {
             Vector3::repeat(f64::NAN)
         };
         let f = self.geometry.normal_force(&force_world);
+        // The sensor against the arm's joint torques, on every tick that has both.
+        let arm_torque = self.external_torque.filter(|(at, _)| (js.stamp - at).abs() <= self.policy.stale_after);
+        let Some((_, arm_torque)) = arm_torque else {
+            self.counters.no_arm_force += 1;
+            return Step { restarted, ..nothing(Silence::NoArmForce, ControllerState { f, ..Default::default() }) };
+        };
+        let checked = if force_world.iter().all(|v| v.is_finite()) {
+            model.frame_jacobian(data, *tool, Axes::World, &mut self.jacobian);
+            // Near a singularity the torques say nothing of the force: no comparison, no disagreement.
+            match ForceCheck::arm_force(&self.jacobian, &arm_torque) {
+                Some(arm) => {
+                    let tripped_before = self.force_check.error().is_some();
+                    let checked = self.force_check.compare(js.stamp, &force_world, &arm);
+                    if checked.is_err() && !tripped_before {
+                        self.counters.force_check_trips += 1;
+                    }
+                    checked
+                }
+                None => self.force_check.error().map_or(Ok(()), Err),
+            }
+        } else {
+            Ok(())
+        };
+        if let Err(e) = checked {
+            self.counters.failed += 1;
+            return Step {
+                reply: Reply::Hold(e),
+                state: ControllerState { f, ..Default::default() },
+                force_world,
+                restarted,
+            };
+        }
         let (reply, state) = match self.law.tick(js.stamp, &js.q, &js.dq, f, &force_world) {
             Ok((tau, state)) => {
                 self.counters.ticks += 1;
@@ -403,7 +552,8 @@ impl std::fmt::Display for NodeCounters {
         write!(
             f,
             "{} commands sent, {} joint states without a fresh force, {} failed, {} models adopted, {} models refused, \
-             {} restarts, {} joint states not newer than the last, {} force readings dropped",
+             {} restarts, {} joint states not newer than the last, {} force readings dropped, {} joint states \
+             without the arm's torque estimate, {} force check trips",
             self.ticks,
             self.no_fresh_force,
             self.failed,
@@ -411,7 +561,9 @@ impl std::fmt::Display for NodeCounters {
             self.models_refused,
             self.restarts,
             self.not_newer,
-            self.readings_dropped
+            self.readings_dropped,
+            self.no_arm_force,
+            self.force_check_trips
         )
     }
 }
@@ -450,6 +602,24 @@ mod tests {
     use super::*;
     use softcontact_sim::DEFAULT_Q;
 
+    /// A force reading of the sensor at `stamp`, and the external torques the KRC estimates for that
+    /// contact force at the start posture (J_vᵀ f): sensor and arm agree.
+    fn feed(node: &mut ControllerNode, stamp: f64, force_in_sensor: Vector3<f64>, now: f64) {
+        node.on_force(stamp, force_in_sensor, now);
+        let tau = arm_torque(node, &force_in_sensor);
+        node.on_external_torque(stamp, &tau);
+    }
+
+    fn arm_torque(node: &mut ControllerNode, force_in_sensor: &Vector3<f64>) -> [f64; 7] {
+        let tool = node_pose_rotation(node);
+        let world = node.geometry().world_force(&tool, force_in_sensor);
+        let (model, data, frame) = &mut node.kinematics;
+        let mut jacobian = Matrix6xX::zeros(7);
+        model.frame_jacobian(data, *frame, Axes::World, &mut jacobian);
+        let tau = jacobian.fixed_rows::<3>(0).transpose() * world;
+        std::array::from_fn(|i| if tau[i].is_finite() { tau[i] } else { 0.0 })
+    }
+
     fn node() -> ControllerNode {
         ControllerNode::from_params(&Params::default()).unwrap()
     }
@@ -473,7 +643,7 @@ mod tests {
         let mut t = from;
         for _ in 0..200 {
             t += 1e-3;
-            node.on_force(t, Vector3::zeros(), t);
+            feed(node, t, Vector3::zeros(), t);
             let step = node.on_joint_state(&sample(t, session), t);
             assert!(matches!(step.reply, Reply::Torque(_)), "{:?}", step.reply);
             assert_safe(node, &step);
@@ -488,15 +658,15 @@ mod tests {
         for (i, bad) in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY].into_iter().enumerate() {
             // The last good reading is 0.2 s old by now: beyond stale_after, so nothing is fresh.
             let later = t + 0.2 + i as f64 * 1e-3;
-            node.on_force(later, Vector3::new(0.0, 0.0, bad), later);
+            feed(&mut node, later, Vector3::new(0.0, 0.0, bad), later);
             let step = node.on_joint_state(&sample(later, 1), later);
             assert_eq!(step.reply, Reply::Nothing(Silence::NoFreshForce), "a force of {bad}");
         }
         assert_eq!(node.counters.readings_dropped, 3);
         // A force stamped with no number is dropped too, and does not end the readings' order.
-        node.on_force(f64::NAN, Vector3::zeros(), t + 0.21);
-        node.on_force(f64::INFINITY, Vector3::zeros(), t + 0.21);
-        node.on_force(t + 0.21, Vector3::zeros(), t + 0.21);
+        feed(&mut node, f64::NAN, Vector3::zeros(), t + 0.21);
+        feed(&mut node, f64::INFINITY, Vector3::zeros(), t + 0.21);
+        feed(&mut node, t + 0.21, Vector3::zeros(), t + 0.21);
         let step = node.on_joint_state(&sample(t + 0.21, 1), t + 0.21);
         assert!(matches!(step.reply, Reply::Torque(_)), "{:?}", step.reply);
     }
@@ -514,7 +684,7 @@ mod tests {
                 // The sensor reads the surface pushing back along the normal, in its own frame.
                 let tool = node_pose_rotation(&mut node);
                 let sensor = node.geometry().sensor_rotation(&tool);
-                node.on_force(t, sensor.inverse() * (-n * absurd), t);
+                feed(&mut node, t, sensor.inverse() * (-n * absurd), t);
                 let step = node.on_joint_state(&sample(t, 1), t);
                 assert_safe(&node, &step);
                 backed_off |= step.state.force_limited || matches!(step.reply, Reply::Hold(_));
@@ -539,7 +709,7 @@ mod tests {
         let ticks = node.counters.ticks;
         // A replay of the last 0.1 s, stamps that are no numbers, the same stamp again.
         for stamp in [t - 0.1, t - 1e-3, t, f64::NAN, f64::NEG_INFINITY, f64::INFINITY] {
-            node.on_force(t + 1e-4, Vector3::zeros(), t + 1e-4);
+            feed(&mut node, t + 1e-4, Vector3::zeros(), t + 1e-4);
             let step = node.on_joint_state(&sample(stamp, 1), t + 1e-4);
             assert_eq!(step.reply, Reply::Nothing(Silence::NotNewer), "stamp {stamp}");
         }
@@ -552,13 +722,13 @@ mod tests {
     fn a_stamp_from_the_far_future_silences_the_node_and_never_moves_the_arm() {
         let mut node = node();
         let t = run_free(&mut node, 10.0, 1);
-        node.on_force(t + 1e-3, Vector3::zeros(), t + 1e-3);
+        feed(&mut node, t + 1e-3, Vector3::zeros(), t + 1e-3);
         let step = node.on_joint_state(&sample(1e300, 1), t + 1e-3);
         assert_safe(&node, &step);
         // The driver's own joint states after it are not newer: no torque, the driver's watchdog holds.
         for i in 2..100 {
             let now = t + i as f64 * 1e-3;
-            node.on_force(now, Vector3::zeros(), now);
+            feed(&mut node, now, Vector3::zeros(), now);
             assert_eq!(node.on_joint_state(&sample(now, 1), now).reply, Reply::Nothing(Silence::NotNewer));
         }
     }
@@ -691,7 +861,7 @@ mod tests {
         cell.controller.request_retare().unwrap();
         // A new session restarts the node: the retreat is over (its host answers "interrupted").
         let t = cell.sim.time();
-        cell.controller.on_force(t + 1.0, Vector3::zeros(), t + 1.0);
+        feed(&mut cell.controller, t + 1.0, Vector3::zeros(), t + 1.0);
         let step = cell.controller.on_joint_state(&sample(t + 1.0, 99), t + 1.0);
         assert!(step.restarted);
         assert_eq!(cell.controller.retare(), None);
@@ -703,27 +873,193 @@ mod tests {
         let t = run_free(&mut node, 10.0, 1);
         // The host starved for 1 s while the loop's (simulated) clock moved one cycle: no restart.
         let late = t + 1.0;
-        node.on_force(t + 1e-3, Vector3::zeros(), late);
+        feed(&mut node, t + 1e-3, Vector3::zeros(), late);
         let step = node.on_joint_state(&sample(t + 1e-3, 1), late);
         assert!(!step.restarted && matches!(step.reply, Reply::Torque(_)), "{step:?}");
         // The joint states themselves interrupted beyond restart_after: a restart.
         let gap = t + 1e-3 + Params::default().restart_after + 0.01;
-        node.on_force(gap, Vector3::zeros(), late + 1e-3);
+        feed(&mut node, gap, Vector3::zeros(), late + 1e-3);
         assert!(node.on_joint_state(&sample(gap, 1), late + 1e-3).restarted);
+    }
+
+    #[test]
+    fn the_arm_force_is_the_force_whose_joint_torques_the_krc_reports() {
+        let model = lwr4::model();
+        let mut data = model.data();
+        let tool = model.frame_id(lwr4::TOOL_FRAME).unwrap();
+        let mut jacobian = Matrix6xX::zeros(7);
+        let force = Vector3::new(12.0, -30.0, 150.0);
+        for q in [DEFAULT_Q, [0.3, 0.8, -0.4, -1.2, 0.5, 0.9, -0.7]] {
+            model.forward_kinematics(&mut data, &q);
+            model.frame_jacobian(&data, tool, Axes::World, &mut jacobian);
+            let tau = jacobian.fixed_rows::<3>(0).transpose() * force;
+            let arm = ForceCheck::arm_force(&jacobian, &std::array::from_fn(|i| tau[i])).unwrap();
+            assert!((arm - force).norm() < 1e-6, "{arm} for {force}");
+        }
+        // Stretched out straight up no joint moves the tool along the arm: no force is determined.
+        model.forward_kinematics(&mut data, &[0.0; 7]);
+        model.frame_jacobian(&data, tool, Axes::World, &mut jacobian);
+        assert_eq!(ForceCheck::arm_force(&jacobian, &[1.0; 7]), None);
+        assert_eq!(ForceCheck::arm_force(&jacobian, &[f64::NAN; 7]), None);
+    }
+
+    /// The sensor reads `sensor` [N] along the normal (pushing the hand back) while the KRC's joint
+    /// torques say `arm` [N], for `ticks` joint states from `t`.
+    fn disagree(node: &mut ControllerNode, t: f64, sensor: f64, arm: f64, ticks: usize) -> Vec<Step> {
+        let n = node.geometry().normal();
+        let tool = node_pose_rotation(node);
+        let to_sensor = node.geometry().sensor_rotation(&tool).inverse();
+        (1..=ticks)
+            .map(|i| {
+                let now = t + i as f64 * 1e-3;
+                node.on_force(now, to_sensor * (-n * sensor), now);
+                let tau = arm_torque(node, &(to_sensor * (-n * arm)));
+                node.on_external_torque(now, &tau);
+                node.on_joint_state(&sample(now, 1), now)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn sensor_and_arm_that_disagree_on_the_force_hold_the_arm_until_a_new_session() {
+        let impulse = Params::default().force_check_impulse;
+        // (sensor, arm, beyond the allowance of 20 N + 25 % of the smaller) [N]: a sensor that reads
+        // nothing, one that reads double (half the counts per unit), and a frozen one; each held once the
+        // disagreement beyond the allowance sums to `impulse`.
+        for (sensor, arm, beyond) in [(0.0, 35.0, 15.0), (200.0, 100.0, 55.0), (60.0, 0.0, 40.0)] {
+            let mut node = node();
+            let t = run_free(&mut node, 10.0, 1);
+            let steps = disagree(&mut node, t, sensor, arm, 300);
+            let first_hold = steps.iter().position(|s| matches!(s.reply, Reply::Hold(_))).expect("held") as f64;
+            // (The first comparison has no time step.)
+            assert!((first_hold * 1e-3 - impulse / beyond).abs() <= 1.5e-3, "held after {first_hold} ms");
+            assert!(
+                steps[first_hold as usize..]
+                    .iter()
+                    .all(|s| matches!(s.reply, Reply::Hold(ControlError::ForceDisagreement { .. })))
+            );
+            // Agreeing again does not end the hold: the operator restarts the KRC's session.
+            let t = t + 0.3;
+            let again = disagree(&mut node, t, 10.0, 10.0, 50);
+            assert!(again.iter().all(|s| matches!(s.reply, Reply::Hold(_))));
+            assert_eq!(node.counters.force_check_trips, 1);
+            assert!(node.force_check().is_some());
+            let now = t + 0.06;
+            feed(&mut node, now, Vector3::zeros(), now);
+            let step = node.on_joint_state(&sample(now, 2), now);
+            assert!(matches!(step.reply, Reply::Torque(_)), "a new session: {step:?}");
+            assert!(node.force_check().is_none());
+        }
+        // Within the allowance, and brief disagreements drained by agreement between them, never hold.
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        let agreeing = disagree(&mut node, t, 100.0, 140.0, 300);
+        agreeing.iter().for_each(|s| assert_safe(&node, s));
+        let mut t = t + 0.3;
+        for _ in 0..5 {
+            // 10 N beyond for 40 ms (0.4 N·s), then 30 ms agreeing (20 N within: 0.6 N·s drained).
+            disagree(&mut node, t, 0.0, 30.0, 40).iter().for_each(|s| assert_safe(&node, s));
+            t += 0.04;
+            disagree(&mut node, t, 0.0, 0.0, 30);
+            t += 0.03;
+        }
+        assert_eq!(node.counters.force_check_trips, 0);
+        assert!(node.force_check().is_none());
+    }
+
+    #[test]
+    fn without_the_krcs_torque_estimate_no_torque_is_sent() {
+        let mut node = node();
+        let t = run_free(&mut node, 10.0, 1);
+        // The estimate stops (its topic died): once it is stale_after old, nothing is sent.
+        let stale = Params::default().stale_after;
+        let mut silent = 0;
+        for i in 1..200 {
+            let now = t + i as f64 * 1e-3;
+            node.on_force(now, Vector3::zeros(), now);
+            let step = node.on_joint_state(&sample(now, 1), now);
+            silent += usize::from(step.reply == Reply::Nothing(Silence::NoArmForce));
+        }
+        assert!((silent as f64 - (0.199 - stale) * 1e3).abs() <= 2.0, "{silent} joint states silent");
+        // A stranger's estimate stamped far in the future is no estimate of these joint states.
+        node.on_external_torque(1e300, &[0.0; 7]);
+        let now = t + 0.2;
+        node.on_force(now, Vector3::zeros(), now);
+        assert_eq!(node.on_joint_state(&sample(now, 1), now).reply, Reply::Nothing(Silence::NoArmForce));
+    }
+
+    /// The adversary's case: an F/T node configured with 1000 times the sensor's counts per unit reads a
+    /// thousandth of the force, and the approach pushes on into the sponge the sensor does not see; the
+    /// arm's torques stop it. A sensor reading double is caught too. One reading half is not caught (the
+    /// law feeds the measured force forward, and with half of it the hand stops at 39 N: less than asked).
+    #[test]
+    fn a_mis_scaled_sensor_is_caught_by_the_arms_torques_on_the_simulated_sponge() {
+        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+        use crate::ft_sensor::{FtConfig, FtSensorNode};
+        // A force command of 100 N as the sensor reads it, once in contact.
+        let commanded = 100.0;
+        for (scale, caught) in [(1000.0, true), (0.5, true), (2.0, false)] {
+            let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+            let mut calibration = config.sensor.calibration;
+            calibration.counts_per_force *= scale;
+            let law = DeformationController::new(
+                super::super::ControllerConfig::lwr4(250.0, 0.06),
+                softcontact_sim::sponge(),
+            )
+            .unwrap();
+            let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+            let mut cell = crate::cell::Cell::new(config, law, estimator).unwrap();
+            cell.ft = FtSensorNode::new(FtConfig {
+                calibration,
+                tool: lwr4::tool_load(),
+                gravity: Vector3::new(0.0, 0.0, -9.81),
+                low_pass: None,
+                sample_rate: 1000.0,
+            })
+            .unwrap()
+            .with_tare_policy(crate::ft_sensor::Params::default().tare_policy());
+            cell.start(5000).unwrap();
+            let (mut most, mut pressing) = (0.0f64, false);
+            for _ in 0..15_000 {
+                let tick = cell.cycle().unwrap().unwrap();
+                most = most.max(cell.sim.contact().normal_force);
+                if tick.controller.in_contact && !pressing && cell.controller.force_check().is_none() {
+                    pressing = cell.controller.on_force_command(commanded, 1.0).1.is_ok();
+                }
+                if cell.controller.force_check().is_some() {
+                    break;
+                }
+            }
+            assert_eq!(cell.controller.force_check().is_some(), caught, "scale {scale}: {most} N at most");
+            if caught {
+                // Sensor f/s, arm f: |f/s − f| > tol + rel · max(f/s, f) trips by the f below; 10 % margin.
+                eprintln!("scale {scale}: held at {most} N");
+                // (Reading double, the law runs away — the force doubles every 20 ms — and it is held at 73 N.)
+                assert!(most < 80.0, "scale {scale}: {most} N on the sponge");
+                // Held, it stays put: a second later the sponge is pressed no harder.
+                for _ in 0..1000 {
+                    cell.cycle().unwrap();
+                }
+                let after = cell.sim.contact().normal_force;
+                assert!(after <= most + 1.0, "scale {scale}: {after} N a second after the hold ({most} N)");
+            } else {
+                assert!(pressing && most < 0.5 * commanded, "scale {scale}: {most} N on the sponge");
+            }
+        }
     }
 
     #[test]
     fn a_new_session_restarts_the_controller_where_the_hand_is() {
         let mut node = node();
         let t = run_free(&mut node, 10.0, 1);
-        node.on_force(t + 1e-3, Vector3::zeros(), t + 1e-3);
+        feed(&mut node, t + 1e-3, Vector3::zeros(), t + 1e-3);
         let step = node.on_joint_state(&sample(t + 1e-3, 2), t + 1e-3);
         assert!(step.restarted && matches!(step.reply, Reply::Torque(_)));
         // Monitor mode: a restart, nothing is sent; commanding again starts afresh.
         let monitor = JointSample { commanding: false, ..sample(t + 2e-3, 2) };
         let step = node.on_joint_state(&monitor, t + 2e-3);
         assert!(step.restarted && step.reply == Reply::Nothing(Silence::NotCommanding), "{step:?}");
-        node.on_force(t + 3e-3, Vector3::zeros(), t + 3e-3);
+        feed(&mut node, t + 3e-3, Vector3::zeros(), t + 3e-3);
         let step = node.on_joint_state(&sample(t + 3e-3, 2), t + 3e-3);
         assert!(!step.restarted && matches!(step.reply, Reply::Torque(_)), "{step:?}");
         assert_eq!(node.counters.restarts, 2);

@@ -97,6 +97,7 @@ pub fn run(
     let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;
     let joint_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos())?;
+    let external_torque = ros::publisher::<JointState>(&mut node, "/lwr/external_torque", ros::sensor_qos())?;
     let ee_pose = ros::publisher::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
     let ee_twist = ros::publisher::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
     let tf = ros::publisher::<TFMessage>(&mut node, "/tf", ros::sensor_qos())?;
@@ -195,7 +196,9 @@ pub fn run(
             }
             let m = out.messages(&names, stamp);
             // The KRC is answered already; a middleware error is counted, never the end of the driver.
+            // The external torque first: a controller of its own pairs it with the joint state by stamp.
             let sent = [
+                external_torque.publish(m.external_torque).is_ok(),
                 joint_states.publish(m.joint_state).is_ok(),
                 ee_pose.publish(m.ee_pose).is_ok(),
                 ee_twist.publish(m.ee_twist).is_ok(),
