@@ -745,7 +745,18 @@ impl DeformationController {
             self.tau0[i] =
                 self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i];
         }
-        let wrench = Vector6::new(contact_force.x, contact_force.y, contact_force.z, 0.0, 0.0, 0.0);
+        // The measured contact force is fed forward (seed 001, eq. 15) — but backing off from the force
+        // limit, only up to the model's force at the back-off's reference (at most max_force). A sensor
+        // that reads a few per cent high feeds forward more than the surface pushes back, which the soft
+        // deformation gains cannot hold: the force runs away to the limit, and with the reading fed
+        // forward in full the back-off could not pull the hand out (an adversarial run held 350 N, over
+        // the 300 N limit, with a sensor reading 10 % high).
+        let mut feed_forward = *contact_force;
+        let cap = state.f_predicted.clamp(0.0, self.config.limits.max_force);
+        if self.force_limited && normal_force > cap {
+            feed_forward += (normal_force - cap) * n;
+        }
+        let wrench = Vector6::new(feed_forward.x, feed_forward.y, feed_forward.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
         let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);

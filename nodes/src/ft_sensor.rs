@@ -502,6 +502,12 @@ impl FtSensorNode {
 /// forms such a run, and if the box's stream is lost the periodic start request restarts it anyway).
 pub const RESTART_RUN: usize = 50;
 
+/// The lowest low-pass cut-off the node accepts [Hz]. The controller feeds the force forward, and a
+/// 2nd-order Butterworth delays it by 0.225 / f_c: an adversarial run at 15 Hz (15 ms) made the hand
+/// slide 32 mm across the sponge under quick presses, at 5 Hz 73 mm with 892 overspeed cycles
+/// (`deformation_controller::node::tests::the_lowest_low_pass_the_sensor_accepts_keeps_the_hand_in_place`).
+pub const LOWEST_LOW_PASS: f64 = 100.0;
+
 /// The `ft_sensor` node's parameters (config/ft_sensor.yaml).
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -619,10 +625,9 @@ impl crate::params::NodeParams for Params {
         within("counts_per_torque", self.counts_per_torque, 1.0, 1e9, "counts per unit")?;
         // The Net F/T streams RDT at up to 7 kHz; below 100 Hz a force loop has nothing to run on.
         within("rate", self.rate, 100.0, 7000.0, "Hz (RDT)")?;
-        // A cut-off below 5 Hz delays the force by more than 45 ms (a 2nd-order Butterworth's delay
-        // is 0.225/f_c): the controller would push on a force long gone.
         if self.low_pass != 0.0 {
-            within("low_pass", self.low_pass, 5.0, 0.45 * self.rate, "Hz (0: none; at most 0.45 × rate)")?;
+            let range = format!("Hz (0: none; at least {LOWEST_LOW_PASS}, at most 0.45 × rate)");
+            within("low_pass", self.low_pass, LOWEST_LOW_PASS, 0.45 * self.rate, &range)?;
         }
         within("stale_after", self.stale_after, 2.0 / self.rate, 1.0, "s (at least two records)")?;
         if self.tare_after >= 0.0 {

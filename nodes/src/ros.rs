@@ -46,15 +46,26 @@ pub fn node_with_parameters(name: &str, parameters: Vec<(String, ParameterValue)
     let serve = !parameters.is_empty();
     // Declaring sets each value once through the validator: those are the only values it accepts.
     let start_values = parameters.clone();
-    let mut options = NodeOptions::new().enable_rosout(true).start_parameter_services(serve).parameter_validator(
-        Box::new(move |name, value| {
+    // The parameter services speak the peers' request mapping: the node's `service_mapping` parameter
+    // where it has one, else Cyclone DDS's (the default peers').
+    let mapping = parameters
+        .iter()
+        .find_map(|(n, v)| match (n.as_str(), v) {
+            ("service_mapping", ParameterValue::String(m)) => Some(m.as_str()),
+            _ => None,
+        })
+        .unwrap_or("cyclone");
+    let mut options = NodeOptions::new()
+        .enable_rosout(true)
+        .start_parameter_services(serve)
+        .parameter_service_mapping(service_mapping(mapping)?)
+        .parameter_validator(Box::new(move |name, value| {
             if start_values.iter().any(|(n, v)| n == name && v == value) {
                 Ok(())
             } else {
                 Err(format!("`{name}` is read at start-up: change the parameter file and restart"))
             }
-        }),
-    );
+        }));
     for (n, v) in parameters {
         options = options.declare_parameter(&n, v);
     }

@@ -988,37 +988,110 @@ mod tests {
         assert_eq!(node.on_joint_state(&sample(now, 1), now).reply, Reply::Nothing(Silence::NoArmForce));
     }
 
+    /// The simulated cell on the sponge (with its true model) whose F/T node is configured with `scale`
+    /// times the sensor's counts per unit: it reads the force divided by `scale`. Started, not in contact.
+    fn cell_with_misread_sensor(scale: f64) -> crate::cell::Cell {
+        cell_with_sensor(scale, None)
+    }
+
+    /// The same, with the F/T node's low-pass filter at `low_pass` [Hz].
+    fn cell_with_sensor(scale: f64, low_pass: Option<f64>) -> crate::cell::Cell {
+        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+        use crate::ft_sensor::{FtConfig, FtSensorNode};
+        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+        let mut calibration = config.sensor.calibration;
+        calibration.counts_per_force *= scale;
+        let law =
+            DeformationController::new(super::super::ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge())
+                .unwrap();
+        let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+        let mut cell = crate::cell::Cell::new(config, law, estimator).unwrap();
+        cell.ft = FtSensorNode::new(FtConfig {
+            calibration,
+            tool: lwr4::tool_load(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            low_pass,
+            sample_rate: 1000.0,
+        })
+        .unwrap()
+        .with_tare_policy(crate::ft_sensor::Params::default().tare_policy());
+        cell.start(5000).unwrap();
+        cell
+    }
+
+    /// The F/T node's low-pass filter delays the force the law feeds forward; too low a cut-off and the
+    /// hand slides across the surface under quick presses (an adversarial run: 32 mm at 15 Hz, 73 mm at
+    /// 5 Hz). At the lowest cut-off the node accepts the hand stays put.
+    #[test]
+    fn the_lowest_low_pass_the_sensor_accepts_keeps_the_hand_in_place() {
+        let lowest = crate::ft_sensor::LOWEST_LOW_PASS;
+        let mut slides = vec![];
+        for low_pass in [None, Some(lowest)] {
+            let mut cell = cell_with_sensor(1.0, low_pass);
+            let n = cell.controller.geometry().normal();
+            let (mut start, mut slide, mut commands) = (None, 0.0f64, [250.0, 30.0, 250.0, 20.0, 240.0].into_iter());
+            for i in 0..12_000 {
+                let tick = cell.cycle().unwrap().unwrap();
+                if !tick.controller.in_contact {
+                    continue;
+                }
+                let p = tick.driver.tool_pose.translation.vector;
+                let from = *start.get_or_insert(p);
+                slide = slide.max(((p - from) - (p - from).dot(&n) * n).norm());
+                if i % 800 == 0
+                    && let Some(f) = commands.next()
+                {
+                    cell.controller.on_force_command(f, 0.4).1.unwrap();
+                }
+            }
+            eprintln!("low pass {low_pass:?}: the hand slid {:.2} mm", slide * 1e3);
+            slides.push(slide);
+        }
+        assert!(slides[1] < 2e-3, "{:.1} mm at {lowest} Hz (none: {:.1} mm)", slides[1] * 1e3, slides[0] * 1e3);
+    }
+
+    /// The second adversary's case: a sensor reading 5 to 25 % high (within what the force check
+    /// allows) makes the law's force feed-forward run away at a command of 250 N. The force limit stops
+    /// it — the sensor reads high, so the true force stays under the limit — and the back-off pulls the
+    /// hand out (it held 310–350 N over the 300 N limit before).
+    #[test]
+    fn a_sensor_reading_high_is_stopped_by_the_force_limit_and_the_back_off_works() {
+        let limits = super::super::ControllerConfig::lwr4(250.0, 0.06).limits;
+        for reads in [1.05, 1.1, 1.25] {
+            let mut cell = cell_with_misread_sensor(1.0 / reads);
+            let (mut most, mut pressing, mut limited_at) = (0.0f64, false, None);
+            for i in 0..12_000 {
+                let tick = cell.cycle().unwrap().unwrap();
+                most = most.max(cell.sim.contact().normal_force);
+                if tick.controller.in_contact && !pressing {
+                    cell.controller.on_force_command(50.0, 1.0).1.unwrap();
+                    pressing = true;
+                }
+                if i == 6000 {
+                    assert!(cell.controller.on_force_command(250.0, 1.0).1.is_ok());
+                }
+                if tick.controller.force_limited {
+                    limited_at.get_or_insert(i);
+                }
+            }
+            let now = cell.sim.contact().normal_force;
+            eprintln!("reads {reads}: peak {most:.1} N, now {now:.1} N, force limited at {limited_at:?}");
+            assert!(most <= limits.force_limit, "reads {reads}: {most} N (limit {})", limits.force_limit);
+            assert!(now <= limits.max_force, "reads {reads}: {now} N after the back-off");
+            assert!(cell.controller.force_check().is_none());
+        }
+    }
+
     /// The adversary's case: an F/T node configured with 1000 times the sensor's counts per unit reads a
     /// thousandth of the force, and the approach pushes on into the sponge the sensor does not see; the
     /// arm's torques stop it. A sensor reading double is caught too. One reading half is not caught (the
     /// law feeds the measured force forward, and with half of it the hand stops at 39 N: less than asked).
     #[test]
     fn a_mis_scaled_sensor_is_caught_by_the_arms_torques_on_the_simulated_sponge() {
-        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
-        use crate::ft_sensor::{FtConfig, FtSensorNode};
         // A force command of 100 N as the sensor reads it, once in contact.
         let commanded = 100.0;
         for (scale, caught) in [(1000.0, true), (0.5, true), (2.0, false)] {
-            let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
-            let mut calibration = config.sensor.calibration;
-            calibration.counts_per_force *= scale;
-            let law = DeformationController::new(
-                super::super::ControllerConfig::lwr4(250.0, 0.06),
-                softcontact_sim::sponge(),
-            )
-            .unwrap();
-            let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
-            let mut cell = crate::cell::Cell::new(config, law, estimator).unwrap();
-            cell.ft = FtSensorNode::new(FtConfig {
-                calibration,
-                tool: lwr4::tool_load(),
-                gravity: Vector3::new(0.0, 0.0, -9.81),
-                low_pass: None,
-                sample_rate: 1000.0,
-            })
-            .unwrap()
-            .with_tare_policy(crate::ft_sensor::Params::default().tare_policy());
-            cell.start(5000).unwrap();
+            let mut cell = cell_with_misread_sensor(scale);
             let (mut most, mut pressing) = (0.0f64, false);
             for _ in 0..15_000 {
                 let tick = cell.cycle().unwrap().unwrap();
