@@ -201,8 +201,8 @@ fn parameters_are_served_by_the_standard_services() {
     let (list_name, list_type) = service("list_parameters", "ListParameters");
     let (get_name, get_type) = service("get_parameters", "GetParameters");
     let (set_name, set_type) = service("set_parameters", "SetParameters");
-    // ros2-client serves parameters with the Enhanced (Fast DDS) request/reply mapping.
-    let mapping = ros::service_mapping("enhanced").unwrap();
+    // The nodes serve parameters in the Cyclone DDS request mapping (their default peers'; vendor/ros2-client).
+    let mapping = ros::service_mapping("cyclone").unwrap();
     let qos = ros::reliable_qos;
     let list = node
         .create_client::<ListParametersRequest, ListParametersResponse>(mapping, &list_name, &list_type, qos(), qos())
