@@ -1,4 +1,5 @@
-"""A Cyclone DDS peer asks a node for its parameters, as `ros2 param list/get` over rmw_cyclonedds would.
+"""A Cyclone DDS peer asks a node for its parameters, as `ros2 param list/get/describe` over rmw_cyclonedds
+would.
 
 rmw_cyclonedds maps a service request to the topic rq/<node>/<service>Request and prefixes each
 request and reply with its own header — the client's id (8 bytes) and a sequence number (int64) —
@@ -6,7 +7,8 @@ which the server echoes in its reply. The node must answer in that mapping (ros2
 its parameter services with the Fast DDS mapping only: vendor/ros2-client/VENDORED.md).
 
 Usage: parameters_cyclonedds.py NODE NAME=VALUE...   (inside the graph's network namespace)
-Checks that list_parameters names every NAME, and get_parameters returns each VALUE (a float).
+Checks that list_parameters names every NAME, get_parameters returns each VALUE (a float), and
+describe_parameters gives each a description, read-only, and a floating-point range holding VALUE.
 """
 
 import os
@@ -79,6 +81,46 @@ class GetParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::GetP
     values: sequence[ParameterValue]
 
 
+@dataclass
+class DescribeParametersRequest(IdlStruct, typename="rcl_interfaces::srv::dds_::DescribeParameters_Request_"):
+    client: uint64
+    sequence_number: int64
+    names: sequence[str]
+
+
+@dataclass
+class FloatingPointRange(IdlStruct, typename="rcl_interfaces::msg::dds_::FloatingPointRange_"):
+    from_value: float64
+    to_value: float64
+    step: float64
+
+
+@dataclass
+class IntegerRange(IdlStruct, typename="rcl_interfaces::msg::dds_::IntegerRange_"):
+    from_value: int64
+    to_value: int64
+    step: uint64
+
+
+@dataclass
+class ParameterDescriptor(IdlStruct, typename="rcl_interfaces::msg::dds_::ParameterDescriptor_"):
+    name: str
+    type: uint8
+    description: str
+    additional_constraints: str
+    read_only: bool
+    dynamic_typing: bool
+    floating_point_range: sequence[FloatingPointRange]
+    integer_range: sequence[IntegerRange]
+
+
+@dataclass
+class DescribeParametersResponse(IdlStruct, typename="rcl_interfaces::srv::dds_::DescribeParameters_Response_"):
+    client: uint64
+    sequence_number: int64
+    descriptors: sequence[ParameterDescriptor]
+
+
 def call(dp, node, service, request_type, response_type, request, seconds=10.0):
     """One request in rmw_cyclonedds' mapping; the reply whose header echoes ours."""
     qos = Qos(Policy.Reliability.Reliable(1_000_000_000), Policy.History.KeepLast(10))
@@ -116,7 +158,20 @@ def main():
     for (name, want), got in zip(expected.items(), values):
         if got.type != 3 or abs(got.double_value - float(want)) > 1e-9:  # 3: PARAMETER_DOUBLE
             sys.exit(f"{node} {name}: type {got.type}, value {got.double_value}, expected {want}")
+    described = call(
+        dp, node, "describe_parameters", DescribeParametersRequest, DescribeParametersResponse,
+        DescribeParametersRequest(client=client, sequence_number=3, names=list(expected)),
+    ).descriptors
+    for (name, want), d in zip(expected.items(), described):
+        ranges = d.floating_point_range
+        if d.name != name or d.type != 3 or not d.read_only or not d.description or "missing" in d.description:
+            sys.exit(f"{node} {name}: descriptor {d}")
+        if len(ranges) != 1 or not ranges[0].from_value <= float(want) <= ranges[0].to_value:
+            sys.exit(f"{node} {name}: range {ranges} does not hold {want}")
     print(f"cyclone peer: {node} lists {len(listed)} parameters; {dict(zip(expected, [v.double_value for v in values]))}")
+    for d in described:
+        r = d.floating_point_range[0]
+        print(f"  {d.name}: {d.description} [{r.from_value}, {r.to_value}] {d.additional_constraints}")
 
 
 if __name__ == "__main__":

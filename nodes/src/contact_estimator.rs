@@ -194,36 +194,24 @@ impl ContactEstimatorNode {
     }
 }
 
-/// The `contact_estimator` node's parameters (config/contact_estimator.yaml).
+/// The `contact_estimator` node's parameters (config/contact_estimator.yaml). What each means and the values it takes are
+/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Contact direction n in the world.
     pub normal: [f64; 3],
-    /// Time between window samples [s] and samples in the window (seed 001: 10 ms, 1200).
     pub sample_period: f64,
     pub window: usize,
-    /// Onset: normal force threshold [N] and consecutive readings.
     pub onset_threshold: f64,
     pub onset_confirm: usize,
-    /// Cross-validation folds, and the excitation guard (largest relative standard error of an
-    /// identified parameter).
     pub folds: usize,
     pub max_relative_error: f64,
-    /// Where to search for the undeformed surface relative to the onset position, along n [m].
     pub offset_range: [f64; 2],
-    /// Seconds between refits (each published on /contact_estimator/model).
     pub refit_period: f64,
-    /// No model is published before the window is this full.
     pub min_window_fill: f64,
-    /// /contact_estimator/state rate [Hz].
     pub state_rate: f64,
-    /// A pose older than this when a force arrives is not paired with it [s].
     pub stale_after: f64,
-    /// /ft_sensor/wrench or /lwr/ee_pose silent this long [s] after they flowed (both are due at
-    /// 1 kHz): their publisher or the middleware is dead, and the node exits with an error.
     pub dead_after: f64,
-    /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
 
@@ -263,26 +251,71 @@ impl Params {
 }
 
 impl crate::params::NodeParams for Params {
-    fn validate(&self) -> Result<(), String> {
-        let positive = |name: &str, v: f64| {
-            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(format!("{name} must be positive, not {v}")) }
-        };
-        positive("refit_period", self.refit_period)?;
-        positive("state_rate", self.state_rate)?;
-        positive("stale_after", self.stale_after)?;
-        crate::liveness::validate_dead_after(self.dead_after)?;
-        if !(0.0..=1.0).contains(&self.min_window_fill) {
-            return Err(format!("min_window_fill must lie in [0, 1], not {}", self.min_window_fill));
-        }
+    fn declare(&self, d: &mut crate::params::Declarations) {
+        let normal_ok = Vector3::from(self.normal).norm().is_normal();
+        let nonzero = if normal_ok { Ok(()) } else { Err(format!("a zero direction {:?}", self.normal)) };
+        d.rule("normal", nonzero, "a non-zero direction", "contact direction n in the world");
+        d.above("sample_period", self.sample_period, (0.0, 1.0), "time between window samples (seed 001: 10 ms) [s]");
+        d.integer(
+            "window",
+            self.window as i64,
+            (10 * self.folds.max(1) as i64, 1_000_000),
+            "samples in the window (seed 001: 1200; at least 10 per fold)",
+        );
+        d.above("onset_threshold", self.onset_threshold, (0.0, 50.0), "normal force that marks the contact onset [N]");
+        d.integer(
+            "onset_confirm",
+            self.onset_confirm as i64,
+            (1, 100),
+            "consecutive readings above onset_threshold that confirm the onset",
+        );
+        d.integer("folds", self.folds as i64, (1, 100), "cross-validation folds of the model selection");
+        d.above(
+            "max_relative_error",
+            self.max_relative_error,
+            (0.0, 100.0),
+            "excitation guard: largest relative standard error of an identified parameter",
+        );
         let [lo, hi] = self.offset_range;
-        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-            return Err(format!("offset_range must be [low, high] with low < high, not {:?}", self.offset_range));
-        }
-        if self.window < 10 * self.folds.max(1) {
-            return Err(format!("window of {} samples is too short for {} folds", self.window, self.folds));
-        }
-        // The estimator checks the rest (normal, sample period, onset, folds) as it is built.
-        ContactEstimatorNode::new(self.estimator_config()).map(|_| ()).map_err(|e| e.to_string())
+        let ordered = if lo.is_finite() && hi.is_finite() && lo < hi {
+            Ok(())
+        } else {
+            Err(format!("{:?} is not [low, high]", self.offset_range))
+        };
+        d.rule(
+            "offset_range",
+            ordered,
+            "[low, high], low < high [m]",
+            "where to search for the undeformed surface relative to the onset position, along n [m]",
+        );
+        d.above(
+            "refit_period",
+            self.refit_period,
+            (0.0, 3600.0),
+            "time between refits, each published on /contact_estimator/model [s]",
+        );
+        d.within(
+            "min_window_fill",
+            self.min_window_fill,
+            (0.0, 1.0),
+            "no model is published before the window is this full",
+        );
+        d.above("state_rate", self.state_rate, (0.0, 1000.0), "/contact_estimator/state rate [Hz]");
+        d.above(
+            "stale_after",
+            self.stale_after,
+            (0.0, 10.0),
+            "a pose older than this when a force arrives is not paired with it [s]",
+        );
+        crate::liveness::declare_dead_after(
+            d,
+            self.dead_after,
+            0.0,
+            "/ft_sensor/wrench or /lwr/ee_pose silent this long after they flowed (both are due at 1 kHz): their publisher or the middleware is dead, and the node exits with an error [s]",
+        );
+        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
+        // The estimator checks its configuration as it is built.
+        d.together(ContactEstimatorNode::new(self.estimator_config()).map(|_| ()).map_err(|e| e.to_string()));
     }
 }
 

@@ -784,65 +784,41 @@ pub enum ModelUpdate {
     Continuous,
 }
 
-/// The `deformation_controller` node's parameters (config/deformation_controller.yaml).
+/// The `deformation_controller` node's parameters (config/deformation_controller.yaml). What each means and the values it takes are
+/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Contact direction n in the world (the way the hand moves to compress the surface).
     pub normal: [f64; 3],
-    /// Natural frequency of the critically damped deformation law [rad/s] (k_z = ω², k_ż = 2ω).
     pub deformation_frequency: f64,
-    /// PD gains across the surface and of the orientation [1/s², 1/s].
     pub lateral_gains: [f64; 2],
     pub orientation_gains: [f64; 2],
-    /// Null-space joint impedance holding the initial posture [N·m/rad], [N·m·s/rad].
     pub posture_stiffness: [f64; 7],
     pub posture_damping: [f64; 7],
-    /// Descent speed before contact [m/s].
     pub approach_speed: f64,
-    /// Farthest the approach goes without finding a surface [m]; then the hand holds.
     pub max_approach: f64,
-    /// Onset: normal force threshold [N] and consecutive readings.
     pub onset_threshold: f64,
     pub onset_confirm: usize,
-    /// Largest torque rate [N·m/s], force [N] and deformation [m] commanded; contact counts as lost
-    /// below `contact_lost_below` [N] while a force is commanded.
     pub torque_rate: f64,
     pub max_force: f64,
     pub max_deformation: f64,
     pub contact_lost_below: f64,
-    /// Measured normal force above which the controller backs off [N] (above max_force).
     pub force_limit: f64,
-    /// Largest lift above the surface [m], range of move durations [s] and fastest deformation rate
-    /// [m/s] a command may ask for.
     pub max_lift: f64,
     pub max_deformation_rate: f64,
     pub move_duration: [f64; 2],
-    /// Farthest an estimated surface may lie from the measured onset [m].
     pub max_surface_offset: f64,
-    /// Joint states interrupted this long [s] mean a new KRC session (or a moved arm): approach again.
     pub restart_after: f64,
     pub model_update: ModelUpdate,
-    /// Re-planning time of the continuous policy [s].
     pub retarget_duration: f64,
-    /// The model used until the estimator has one (a rough guess is enough to start identification).
     pub initial_model: ContactModel,
-    /// /deformation_controller/state rate [Hz].
     pub state_rate: f64,
-    /// No command is sent while the force reading is older than this [s]: the driver then holds.
     pub stale_after: f64,
-    /// The F/T sensor checked against the arm's joint torque sensors (see [`ForceCheck`]): they may
-    /// disagree on the contact force by `force_check_tolerance` [N] plus `force_check_relative` of the
-    /// smaller; the disagreement beyond, summed over time, holds the arm at `force_check_impulse` [N·s].
     pub force_check_tolerance: f64,
     pub force_check_relative: f64,
     pub force_check_impulse: f64,
-    /// /lwr/joint_states silent this long [s] after they flowed (they are due at 1 kHz): the driver
-    /// or the middleware is dead, and the node exits with an error (the launch script stops the graph).
     pub dead_after: f64,
-    /// Service mapping of the peers' middleware for the force action: cyclone, enhanced or basic.
     pub service_mapping: String,
-    /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
 
@@ -912,70 +888,137 @@ impl Params {
 
 impl crate::params::NodeParams for Params {
     /// Every number has a physical range: a value outside it refuses to start the node.
-    fn validate(&self) -> Result<(), String> {
-        let within = |name: &str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && v > lo && v <= hi {
-                Ok(())
-            } else {
-                Err(format!("{name} must lie in ({lo}, {hi}], not {v}"))
-            }
-        };
-        let all_within = |name: &str, v: &[f64], hi: f64| {
-            if v.iter().all(|x| x.is_finite() && (0.0..=hi).contains(x)) {
-                Ok(())
-            } else {
-                Err(format!("{name} must lie in [0, {hi}] for every entry, not {v:?}"))
-            }
-        };
-        if !Vector3::from(self.normal).norm().is_normal() {
-            return Err("normal must be a non-zero direction".into());
-        }
-        within("deformation_frequency", self.deformation_frequency, 0.0, 200.0)?;
-        all_within("lateral_gains", &self.lateral_gains, 1e4)?;
-        all_within("orientation_gains", &self.orientation_gains, 1e4)?;
-        all_within("posture_stiffness", &self.posture_stiffness, 1e3)?;
-        all_within("posture_damping", &self.posture_damping, 1e2)?;
-        within("approach_speed", self.approach_speed, 0.0, 0.05)?;
-        within("max_approach", self.max_approach, 0.0, 0.5)?;
-        within("onset_threshold", self.onset_threshold, 0.0, 50.0)?;
-        if !(1..=100).contains(&self.onset_confirm) {
-            return Err(format!("onset_confirm must lie in 1..=100, not {}", self.onset_confirm));
-        }
-        within("torque_rate", self.torque_rate, 0.0, 1e5)?;
-        within("max_force", self.max_force, 0.0, 500.0)?;
-        within("max_deformation", self.max_deformation, 0.0, 0.2)?;
-        within("contact_lost_below", self.contact_lost_below, 0.0, self.max_force / 4.0)?;
-        within("force_limit", self.force_limit, self.max_force, 2.0 * self.max_force)?;
-        within("max_lift", self.max_lift, 0.0, 0.2)?;
-        within("max_deformation_rate", self.max_deformation_rate, 0.0, 0.5)?;
+    fn declare(&self, d: &mut crate::params::Declarations) {
+        let normal_ok = Vector3::from(self.normal).norm().is_normal();
+        let nonzero = if normal_ok { Ok(()) } else { Err(format!("a zero direction {:?}", self.normal)) };
+        d.rule(
+            "normal",
+            nonzero,
+            "a non-zero direction",
+            "contact direction n in the world (the hand compresses the surface along it)",
+        );
+        d.above(
+            "deformation_frequency",
+            self.deformation_frequency,
+            (0.0, 200.0),
+            "natural frequency of the critically damped deformation law (k_z = ω², k_ż = 2ω) [rad/s]",
+        );
+        d.each("lateral_gains", &self.lateral_gains, (0.0, 1e4), "PD gains across the surface [1/s², 1/s]");
+        d.each(
+            "orientation_gains",
+            &self.orientation_gains,
+            (0.0, 1e4),
+            "PD gains of the hand's orientation [1/s², 1/s]",
+        );
+        d.each(
+            "posture_stiffness",
+            &self.posture_stiffness,
+            (0.0, 1e3),
+            "null-space joint impedance holding the initial posture [N·m/rad]",
+        );
+        d.each("posture_damping", &self.posture_damping, (0.0, 1e2), "null-space joint damping [N·m·s/rad]");
+        d.above("approach_speed", self.approach_speed, (0.0, 0.05), "descent speed before contact [m/s]");
+        d.above(
+            "max_approach",
+            self.max_approach,
+            (0.0, 0.5),
+            "farthest the approach goes without finding a surface; then the hand holds [m]",
+        );
+        d.above("onset_threshold", self.onset_threshold, (0.0, 50.0), "normal force that marks the contact onset [N]");
+        d.integer(
+            "onset_confirm",
+            self.onset_confirm as i64,
+            (1, 100),
+            "consecutive readings above onset_threshold that confirm the onset",
+        );
+        d.above("torque_rate", self.torque_rate, (0.0, 1e5), "largest torque rate commanded [N·m/s]");
+        d.above("max_force", self.max_force, (0.0, 500.0), "largest force a command may ask for [N]");
+        d.above("max_deformation", self.max_deformation, (0.0, 0.2), "largest deformation commanded [m]");
+        d.above("contact_lost_below", self.contact_lost_below, (0.0, self.max_force / 4.0), "while a force is commanded, contact counts as lost below this force: the hand holds [N] (at most max_force / 4)");
+        d.above(
+            "force_limit",
+            self.force_limit,
+            (self.max_force, 2.0 * self.max_force),
+            "measured normal force above which the controller backs off [N] (above max_force, at most twice it)",
+        );
+        d.above("max_lift", self.max_lift, (0.0, 0.2), "largest lift above the surface a command may ask for [m]");
+        d.above(
+            "max_deformation_rate",
+            self.max_deformation_rate,
+            (0.0, 0.5),
+            "fastest a move may compress or lift [m/s]",
+        );
         let [shortest, longest] = self.move_duration;
-        if !(shortest.is_finite() && longest.is_finite() && 0.01 <= shortest && shortest < longest && longest <= 3600.0)
-        {
-            return Err(format!(
-                "move_duration must be [shortest, longest] within [0.01, 3600] s, not {:?}",
-                self.move_duration
-            ));
-        }
-        within("retarget_duration", self.retarget_duration, shortest - f64::EPSILON, longest)?;
-        within("max_surface_offset", self.max_surface_offset, 0.0, 0.05)?;
-        within("state_rate", self.state_rate, 0.0, 1000.0)?;
-        within("stale_after", self.stale_after, 0.0, 1.0)?;
-        within("restart_after", self.restart_after, self.stale_after, 10.0)?;
+        let ordered =
+            shortest.is_finite() && longest.is_finite() && 0.01 <= shortest && shortest < longest && longest <= 3600.0;
+        let durations =
+            if ordered { Ok(()) } else { Err(format!("{:?} is not [shortest, longest]", self.move_duration)) };
+        d.rule(
+            "move_duration",
+            durations,
+            "[shortest, longest] within [0.01, 3600] s, shortest < longest",
+            "shortest and longest move a command may ask for [s]",
+        );
+        d.within(
+            "retarget_duration",
+            self.retarget_duration,
+            (shortest, longest),
+            "re-planning time of the continuous policy [s] (within move_duration)",
+        );
+        d.above(
+            "max_surface_offset",
+            self.max_surface_offset,
+            (0.0, 0.05),
+            "farthest an estimated surface may lie from the measured onset; a model placing it further is refused [m]",
+        );
+        d.above("state_rate", self.state_rate, (0.0, 1000.0), "/deformation_controller/state rate [Hz]");
+        d.above(
+            "stale_after",
+            self.stale_after,
+            (0.0, 1.0),
+            "no command is sent while the force reading is older than this: the driver then holds [s]",
+        );
+        d.above("restart_after", self.restart_after, (self.stale_after, 10.0), "joint states interrupted this long mean a new KRC session or a moved arm: approach again [s] (above stale_after)");
         // The check is never off: the KRC's estimate is good to a few newtons with the tool load set.
-        within("force_check_tolerance", self.force_check_tolerance, 1.0, 100.0)?;
-        within("force_check_relative", self.force_check_relative, 0.0, 1.0)?;
-        within("force_check_impulse", self.force_check_impulse, 0.0, 5.0)?;
-        crate::liveness::validate_dead_after(self.dead_after)?;
-        crate::ros::service_mapping(&self.service_mapping).map_err(|e| e.to_string())?;
-        if self.dead_after <= self.restart_after {
-            return Err(format!("dead_after ({}) must exceed restart_after ({})", self.dead_after, self.restart_after));
-        }
+        d.above("force_check_tolerance", self.force_check_tolerance, (1.0, 100.0), "the F/T sensor and the arm's joint torque sensors (the KRC's estExtJntTrq) may disagree on the contact force by this [N] ...");
+        d.above(
+            "force_check_relative",
+            self.force_check_relative,
+            (0.0, 1.0),
+            "... plus this share of the smaller force",
+        );
+        d.above(
+            "force_check_impulse",
+            self.force_check_impulse,
+            (0.0, 5.0),
+            "the disagreement beyond, summed over time, holds the arm at this impulse until a new KRC session [N·s]",
+        );
+        crate::liveness::declare_dead_after(
+            d,
+            self.dead_after,
+            self.restart_after,
+            "/lwr/joint_states silent this long after they flowed: the driver or the middleware is dead, exit with an error [s] (above restart_after)",
+        );
+        d.rule(
+            "service_mapping",
+            crate::ros::service_mapping(&self.service_mapping).map(|_| ()).map_err(|e| e.to_string()),
+            "cyclone, enhanced or basic",
+            "service mapping of the peers' middleware for the force action and the re-tare service",
+        );
+        d.any("model_update", "on_command (seed 001: the newest model is adopted at each force command) or continuous (each model on arrival, the standing command re-planned through it)");
         let e = self.initial_model.exponents;
-        if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
-            return Err(format!("initial_model: exponents outside {EXPONENT_RANGE:?}"));
-        }
-        self.initial_model.validate().map_err(|e| format!("initial_model: {e}"))?;
-        Ok(())
+        let model = if [e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
+            self.initial_model.validate().map_err(|e| e.to_string())
+        } else {
+            Err(format!("exponents outside {EXPONENT_RANGE:?}"))
+        };
+        d.rule(
+            "initial_model",
+            model,
+            "a valid contact model",
+            "the model used until the estimator has one (a rough guess is enough to start identification)",
+        );
+        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
     }
 }
 

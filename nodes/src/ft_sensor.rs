@@ -508,52 +508,29 @@ pub const RESTART_RUN: usize = 50;
 /// (`deformation_controller::node::tests::the_lowest_low_pass_the_sensor_accepts_keeps_the_hand_in_place`).
 pub const LOWEST_LOW_PASS: f64 = 100.0;
 
-/// The `ft_sensor` node's parameters (config/ft_sensor.yaml).
+/// The `ft_sensor` node's parameters (config/ft_sensor.yaml). What each means and the values it takes are
+/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// The Net F/T box's RDT address.
     pub sensor: std::net::SocketAddr,
-    /// Counts per force unit and per torque unit, and the units, as the box's netftapi2.xml gives them.
     pub counts_per_force: f64,
     pub counts_per_torque: f64,
     pub force_unit: String,
     pub torque_unit: String,
-    /// Low-pass cut-off [Hz]; 0 for none.
     pub low_pass: f64,
-    /// The box's RDT output rate [Hz].
     pub rate: f64,
-    /// Data older than this is stale [s].
     pub stale_after: f64,
-    /// Tare once, this long after the stream and the hand's orientation are both there [s]; negative:
-    /// never (then call /ft_sensor/bias). /ft_sensor/wrench is published only once tared. A start-up
-    /// tare refused by the checks below is retried until it passes.
     pub tare_after: f64,
-    /// The tare's checks look back this long [s] (at least 10 records).
     pub bias_window: f64,
-    /// A tare is refused when the force beyond the hand's weight, with the present tare, exceeds this
-    /// [N] (the hand is in contact or loaded).
     pub bias_max_force: f64,
-    /// The same for the node's first tare, when the sensor's own offset is unknown [N]: the reading
-    /// less the hand's weight is then the offset plus any contact. Set it above the box's unloaded
-    /// reading (check it once with the hand free); the simulated Gamma's offset is 0.9 N.
     pub bias_max_offset: f64,
-    /// A tare is refused when a force axis' standard deviation over the window exceeds this [N]
-    /// (a contact coming or going, vibration; the Gamma's noise is about 0.05 N).
     pub bias_max_spread: f64,
-    /// A tare is refused when the tool (/lwr/ee_pose) travelled more than this over the window [m],
     pub bias_max_motion: f64,
-    /// or turned more than this [rad].
     pub bias_max_rotation: f64,
-    /// Service mapping of the peers' middleware: cyclone, enhanced or basic.
     pub service_mapping: String,
-    /// Stop after this many seconds without a record (0: wait forever).
     pub exit_after_silence: f64,
-    /// /lwr/ee_pose silent this long [s] after it flowed: the hand's orientation is unknown, so
-    /// /ft_sensor/wrench (gravity-compensated with it) is withheld and /diagnostics says ERROR until
-    /// poses flow again; /ft_sensor/wrench_raw goes on.
     pub dead_after: f64,
-    /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
 
@@ -608,44 +585,97 @@ impl Params {
     }
 }
 
-/// `value` within [lo, hi] (NaN is not), else an error naming the parameter and its unit.
-fn within(name: &str, value: f64, lo: f64, hi: f64, unit: &str) -> Result<(), String> {
-    if value >= lo && value <= hi {
-        Ok(())
-    } else {
-        Err(format!("{name} must lie in [{lo}, {hi}] {unit}, not {value}"))
-    }
-}
-
 impl crate::params::NodeParams for Params {
-    fn validate(&self) -> Result<(), String> {
-        self.calibration()?;
+    fn declare(&self, d: &mut crate::params::Declarations) {
+        d.any("sensor", "the Net F/T box's RDT address");
         // The box's counts per unit (netftapi2.xml): 1 to 10⁹ covers every ATI calibration.
-        within("counts_per_force", self.counts_per_force, 1.0, 1e9, "counts per unit")?;
-        within("counts_per_torque", self.counts_per_torque, 1.0, 1e9, "counts per unit")?;
+        d.within(
+            "counts_per_force",
+            self.counts_per_force,
+            (1.0, 1e9),
+            "counts per force unit, as the box's netftapi2.xml gives them",
+        );
+        d.within(
+            "counts_per_torque",
+            self.counts_per_torque,
+            (1.0, 1e9),
+            "counts per torque unit, as netftapi2.xml gives them",
+        );
+        let units = self.calibration().map(|_| ());
+        d.rule(
+            "force_unit",
+            units.clone(),
+            "a force unit of the Net F/T (N, lbf, kgf, ...)",
+            "the force unit of the counts, as netftapi2.xml gives it",
+        );
+        d.rule(
+            "torque_unit",
+            units,
+            "a torque unit of the Net F/T (Nm, Nmm, lbf-in, ...)",
+            "the torque unit of the counts, as netftapi2.xml gives it",
+        );
         // The Net F/T streams RDT at up to 7 kHz; below 100 Hz a force loop has nothing to run on.
-        within("rate", self.rate, 100.0, 7000.0, "Hz (RDT)")?;
-        if self.low_pass != 0.0 {
-            let range = format!("Hz (0: none; at least {LOWEST_LOW_PASS}, at most 0.45 × rate)");
-            within("low_pass", self.low_pass, LOWEST_LOW_PASS, 0.45 * self.rate, &range)?;
-        }
-        within("stale_after", self.stale_after, 2.0 / self.rate, 1.0, "s (at least two records)")?;
-        if self.tare_after >= 0.0 {
-            within("tare_after", self.tare_after, 0.0, 60.0, "s (negative: never)")?;
-        } else if !self.tare_after.is_finite() {
-            return Err(format!("tare_after must be finite, not {}", self.tare_after));
-        }
-        within("exit_after_silence", self.exit_after_silence, 0.0, 86_400.0, "s (0: never)")?;
-        crate::liveness::validate_dead_after(self.dead_after)?;
-        within("bias_window", self.bias_window, 10.0 / self.rate, 2.0, "s (at least 10 records)")?;
-        within("bias_window", self.bias_window, 0.01, 2.0, "s")?;
-        within("bias_max_force", self.bias_max_force, 0.1, 20.0, "N")?;
-        within("bias_max_offset", self.bias_max_offset, self.bias_max_force, 50.0, "N (at least bias_max_force)")?;
-        within("bias_max_spread", self.bias_max_spread, 0.01, 2.0, "N")?;
-        within("bias_max_motion", self.bias_max_motion, 1e-5, 0.01, "m")?;
-        within("bias_max_rotation", self.bias_max_rotation, 1e-4, 0.1, "rad")?;
-        crate::ros::service_mapping(&self.service_mapping).map_err(|e| e.to_string())?;
-        Ok(())
+        d.within("rate", self.rate, (100.0, 7000.0), "the box's RDT output rate [Hz]");
+        let low_pass =
+            if self.low_pass == 0.0 || (self.low_pass >= LOWEST_LOW_PASS && self.low_pass <= 0.45 * self.rate) {
+                Ok(())
+            } else {
+                Err(format!("must be 0 or lie in [{LOWEST_LOW_PASS}, {}] Hz, not {}", 0.45 * self.rate, self.low_pass))
+            };
+        let range = format!("0, or from {LOWEST_LOW_PASS} Hz to 0.45 × rate");
+        d.rule(
+            "low_pass",
+            low_pass,
+            &range,
+            "low-pass cut-off [Hz]; 0 for none (a lower cut-off delays the force the controller feeds forward)",
+        );
+        d.within(
+            "stale_after",
+            self.stale_after,
+            (2.0 / self.rate, 1.0),
+            "data older than this is stale [s] (at least two records)",
+        );
+        let tare_after = if !self.tare_after.is_finite() || self.tare_after > 60.0 {
+            Err(format!("must be finite and at most 60 s, not {}", self.tare_after))
+        } else {
+            Ok(())
+        };
+        d.rule("tare_after", tare_after, "at most 60 s; negative: never", "tare once, this long after the stream and the hand's orientation are both there [s]; negative: never (then call /ft_sensor/bias); /ft_sensor/wrench is published only once tared, and a refused start-up tare is retried");
+        d.within(
+            "bias_window",
+            self.bias_window,
+            ((10.0 / self.rate).max(0.01), 2.0),
+            "the tare's checks look back this long [s] (at least 10 records)",
+        );
+        d.within("bias_max_force", self.bias_max_force, (0.1, 20.0), "a tare is refused when the force beyond the hand's weight, with the present tare, exceeds this: the hand is in contact or loaded [N]");
+        d.within("bias_max_offset", self.bias_max_offset, (self.bias_max_force, 50.0), "the same for the node's first tare, when the sensor's own offset is unknown: set it above the box's unloaded reading [N] (at least bias_max_force)");
+        d.within("bias_max_spread", self.bias_max_spread, (0.01, 2.0), "a tare is refused when a force axis' standard deviation over the window exceeds this (a contact coming or going, vibration) [N]");
+        d.within(
+            "bias_max_motion",
+            self.bias_max_motion,
+            (1e-5, 0.01),
+            "a tare is refused when the tool travelled more than this over the window [m]",
+        );
+        d.within("bias_max_rotation", self.bias_max_rotation, (1e-4, 0.1), "... or turned more than this [rad]");
+        d.rule(
+            "service_mapping",
+            crate::ros::service_mapping(&self.service_mapping).map(|_| ()).map_err(|e| e.to_string()),
+            "cyclone, enhanced or basic",
+            "service mapping of the peers' middleware for /ft_sensor/bias",
+        );
+        d.within(
+            "exit_after_silence",
+            self.exit_after_silence,
+            (0.0, 86_400.0),
+            "stop after this long without a record (0: wait forever) [s]",
+        );
+        crate::liveness::declare_dead_after(
+            d,
+            self.dead_after,
+            0.0,
+            "/lwr/ee_pose silent this long after it flowed: the hand's orientation is unknown, /ft_sensor/wrench is withheld and /diagnostics says ERROR until poses flow again [s]",
+        );
+        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
     }
 }
 

@@ -11,16 +11,13 @@ use std::ops::RangeInclusive;
 /// The bounds of every node's `dead_after` parameter [s].
 pub const DEAD_AFTER_RANGE: RangeInclusive<f64> = 0.1..=60.0;
 
-/// The check every node's parameters make of `dead_after`.
-pub fn validate_dead_after(dead_after: f64) -> Result<(), String> {
-    if dead_after.is_finite() && DEAD_AFTER_RANGE.contains(&dead_after) {
-        Ok(())
+/// Declares a node's `dead_after` parameter: a liveness time within [`DEAD_AFTER_RANGE`], above `lowest`.
+pub fn declare_dead_after(d: &mut crate::params::Declarations, dead_after: f64, lowest: f64, description: &str) {
+    let (lo, hi) = (*DEAD_AFTER_RANGE.start(), *DEAD_AFTER_RANGE.end());
+    if lowest < lo {
+        d.within("dead_after", dead_after, (lo, hi), description);
     } else {
-        Err(format!(
-            "dead_after must lie in [{}, {}] s, not {dead_after}",
-            DEAD_AFTER_RANGE.start(),
-            DEAD_AFTER_RANGE.end()
-        ))
+        d.above("dead_after", dead_after, (lowest, hi), description);
     }
 }
 
@@ -195,11 +192,17 @@ mod tests {
 
     #[test]
     fn dead_after_is_bounded() {
+        let check = |dead_after: f64, lowest: f64| {
+            let mut d = crate::params::Declarations::default();
+            declare_dead_after(&mut d, dead_after, lowest, "silence");
+            d.error().is_none()
+        };
         for ok in [0.1, 2.0, 60.0] {
-            assert!(validate_dead_after(ok).is_ok(), "{ok}");
+            assert!(check(ok, 0.0), "{ok}");
         }
         for bad in [0.0, 0.05, -1.0, 61.0, f64::NAN, f64::INFINITY] {
-            assert!(validate_dead_after(bad).is_err(), "{bad}");
+            assert!(!check(bad, 0.0), "{bad}");
         }
+        assert!(!check(1.0, 1.0) && check(1.01, 1.0), "above the lowest");
     }
 }

@@ -535,41 +535,24 @@ impl Hold {
     }
 }
 
-/// The `lwr_driver` node's parameters (config/lwr_driver.yaml).
+/// The `lwr_driver` node's parameters (config/lwr_driver.yaml). What each means and the values it takes are
+/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK): this PC's address on the
-    /// robot network, never an unspecified address (0.0.0.0 answers every network).
     pub fri_bind: std::net::SocketAddr,
-    /// The KRC's IP address; empty: the first sender is pinned, every other address refused.
     pub krc_address: Option<IpAddr>,
-    /// Measurements resuming after this much silence start a new KRC session [s].
     pub new_session_after: f64,
-    /// A command answering a joint state older than this is refused [s].
     pub max_command_age: f64,
-    /// A command older than this many cycles makes the driver hold position.
     pub watchdog_cycles: u64,
-    /// Joint stiffness of the hold [N·m/rad] and its damping ratio.
     pub hold_stiffness: [f64; 7],
     pub hold_damping: f64,
-    /// Hold when a joint exceeds this fraction of its velocity limit.
     pub velocity_margin: f64,
-    /// Cycles over which a hold for a stale command fades out what its spring's preload cannot carry.
     pub hold_release_cycles: u64,
-    /// The largest offset of the hold's set point from the held position [rad], per joint: how much
-    /// of a stale command's torque (the surface's balance) the hold carries on, and the farthest it
-    /// moves a joint should the surface vanish.
     pub hold_max_preload: f64,
-    /// Do not ask the KRL program to start command mode (monitor only).
     pub monitor_only: bool,
-    /// Stop after this many seconds without a measurement (0: wait forever).
     pub exit_after_silence: f64,
-    /// Torque commands silent this long [s] while the KRC commands, after they flowed: the controller
-    /// or the middleware is dead. The driver holds (its watchdog) and reports it, in the log and as an
-    /// ERROR on /diagnostics; it never exits while the KRC commands.
     pub dead_after: f64,
-    /// Stamp messages with the simulated time of /clock.
     pub use_sim_time: bool,
 }
 
@@ -613,49 +596,85 @@ impl Params {
 }
 
 impl crate::params::NodeParams for Params {
-    fn validate(&self) -> Result<(), String> {
-        if !(1..=100).contains(&self.watchdog_cycles) {
-            return Err(format!("watchdog_cycles must lie in 1..=100, not {}", self.watchdog_cycles));
-        }
-        if let Some(ip) = self.krc_address
-            && (ip.is_unspecified() || ip.is_multicast() || ip == IpAddr::from([255, 255, 255, 255]))
-        {
-            return Err(format!("krc_address {ip} is not one machine's address"));
-        }
-        if self.fri_bind.ip().is_unspecified() {
-            return Err(format!(
-                "fri_bind {} listens on every network: give this PC's address on the robot network",
-                self.fri_bind
-            ));
-        }
-        for (i, k) in self.hold_stiffness.iter().enumerate() {
-            let (lo, hi) = HOLD_STIFFNESS[i];
-            if !(*k >= lo && *k <= hi) {
-                return Err(format!("hold_stiffness of joint {} must lie in [{lo}, {hi}] N·m/rad, not {k}", i + 1));
+    fn declare(&self, d: &mut crate::params::Declarations) {
+        let bind = if self.fri_bind.ip().is_unspecified() {
+            Err("listens on every network: give this PC's address on the robot network".to_string())
+        } else {
+            Ok(())
+        };
+        d.rule(
+            "fri_bind",
+            bind,
+            "one address of this PC, never 0.0.0.0",
+            "where the KRC sends its measurements (the KRC's FRIHOST:FRISOCK): this PC's address on the robot network",
+        );
+        let krc = match self.krc_address {
+            Some(ip) if ip.is_unspecified() || ip.is_multicast() || ip == IpAddr::from([255, 255, 255, 255]) => {
+                Err(format!("{ip} is not one machine's address"))
             }
-        }
-        if !(self.new_session_after.is_finite() && (0.005..=10.0).contains(&self.new_session_after)) {
-            return Err(format!("new_session_after must lie in [0.005, 10] s, not {}", self.new_session_after));
-        }
-        if !(self.max_command_age.is_finite() && (0.001..=0.1).contains(&self.max_command_age)) {
-            return Err(format!("max_command_age must lie in [0.001, 0.1] s, not {}", self.max_command_age));
-        }
-        if !(self.hold_damping.is_finite() && self.hold_damping > 0.0 && self.hold_damping <= 1.0) {
-            return Err(format!("hold_damping is a damping ratio in (0, 1], not {}", self.hold_damping));
-        }
-        if self.hold_release_cycles > 10_000 {
-            return Err(format!("hold_release_cycles must be at most 10000, not {}", self.hold_release_cycles));
-        }
-        if !(self.hold_max_preload.is_finite() && (0.0..=0.1).contains(&self.hold_max_preload)) {
-            return Err(format!("hold_max_preload must lie in [0, 0.1] rad, not {}", self.hold_max_preload));
-        }
-        if !(self.velocity_margin > 0.0 && self.velocity_margin <= 1.0) {
-            return Err(format!("velocity_margin must lie in (0, 1], not {}", self.velocity_margin));
-        }
-        if !(self.exit_after_silence.is_finite() && (0.0..=86_400.0).contains(&self.exit_after_silence)) {
-            return Err("exit_after_silence must lie in [0, 86400] s".into());
-        }
-        crate::liveness::validate_dead_after(self.dead_after)?;
-        Ok(())
+            _ => Ok(()),
+        };
+        d.rule(
+            "krc_address",
+            krc,
+            "one machine's address, or empty",
+            "the KRC's IP address; empty: the first sender is pinned, every other address refused",
+        );
+        d.within(
+            "new_session_after",
+            self.new_session_after,
+            (0.005, 10.0),
+            "measurements resuming after this much silence start a new KRC session [s]",
+        );
+        d.within(
+            "max_command_age",
+            self.max_command_age,
+            (0.001, 0.1),
+            "a command answering a joint state older than this is refused [s]",
+        );
+        d.integer(
+            "watchdog_cycles",
+            self.watchdog_cycles as i64,
+            (1, 100),
+            "a command older than this many cycles makes the driver hold position",
+        );
+        let stiffness =
+            self.hold_stiffness.iter().zip(HOLD_STIFFNESS).enumerate().try_for_each(|(i, (k, (lo, hi)))| {
+                if *k >= lo && *k <= hi {
+                    Ok(())
+                } else {
+                    Err(format!("joint {}: {k} outside [{lo}, {hi}] N·m/rad", i + 1))
+                }
+            });
+        let range = format!("per joint within {HOLD_STIFFNESS:?}");
+        d.rule("hold_stiffness", stiffness, &range, "joint stiffness of the hold [N·m/rad]");
+        d.above("hold_damping", self.hold_damping, (0.0, 1.0), "damping ratio of the hold");
+        d.above(
+            "velocity_margin",
+            self.velocity_margin,
+            (0.0, 1.0),
+            "hold when a joint exceeds this fraction of its velocity limit",
+        );
+        d.integer(
+            "hold_release_cycles",
+            self.hold_release_cycles as i64,
+            (0, 10_000),
+            "cycles over which a hold for a stale command fades out what its spring's preload cannot carry",
+        );
+        d.within("hold_max_preload", self.hold_max_preload, (0.0, 0.1), "largest offset of the hold's set point from the held position, per joint: how much of a stale command's torque the hold carries on, and the farthest it moves a joint should the surface vanish [rad]");
+        d.any("monitor_only", "do not ask the KRL program to start command mode (monitor only)");
+        d.within(
+            "exit_after_silence",
+            self.exit_after_silence,
+            (0.0, 86_400.0),
+            "stop after this long without a measurement (0: wait forever) [s]",
+        );
+        crate::liveness::declare_dead_after(
+            d,
+            self.dead_after,
+            0.0,
+            "torque commands silent this long while the KRC commands, after they flowed: the driver holds and reports the controller dead (it never exits while the KRC commands) [s]",
+        );
+        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
     }
 }

@@ -45,10 +45,155 @@ impl ParamArgs {
     }
 }
 
-/// A node's parameter struct: its defaults come from serde, its checks from here.
+/// A node's parameter struct: its defaults come from serde; each parameter is declared once, in
+/// [`declare`](Self::declare), with its description and the values it takes — the one place that both
+/// checks it at start-up and describes it over ROS (`ros2 param describe`).
 pub trait NodeParams: Serialize + DeserializeOwned {
-    /// Every value that serde cannot check by its type alone.
-    fn validate(&self) -> Result<(), String>;
+    /// Declares every parameter (a nested one by its top-level name) with what it means and its range.
+    fn declare(&self, d: &mut Declarations);
+
+    /// The first value outside its declared range, with why.
+    fn validate(&self) -> Result<(), String> {
+        let mut d = Declarations::default();
+        self.declare(&mut d);
+        d.error.map_or(Ok(()), Err)
+    }
+
+    /// What each parameter means and takes, as declared.
+    fn specs(&self) -> Vec<Spec> {
+        let mut d = Declarations::default();
+        self.declare(&mut d);
+        d.specs
+    }
+}
+
+/// One parameter as its node declares it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spec {
+    pub name: String,
+    pub description: String,
+    pub range: Range,
+}
+
+/// The values a parameter takes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Range {
+    /// A finite number in [lo, hi], or in (lo, hi] when `above` (lo itself excluded).
+    Number {
+        lo: f64,
+        hi: f64,
+        above: bool,
+    },
+    /// Every entry of an array in [lo, hi].
+    Each {
+        lo: f64,
+        hi: f64,
+    },
+    Integer {
+        lo: i64,
+        hi: i64,
+    },
+    /// A rule the node checks, in words.
+    Rule(String),
+}
+
+impl Spec {
+    /// The ROS parameter descriptor: description, read-only (nodes read their parameters at start-up),
+    /// the numeric range where there is one, and in words what a ROS range cannot say.
+    pub fn descriptor(&self) -> ros2_client::parameters::ParameterDescriptor {
+        use ros2_client::parameters::{NumericRange, ParameterDescriptor, ParameterType};
+        let (range, constraints) = match &self.range {
+            Range::Number { lo, hi, above } => (
+                NumericRange::FloatingPointRange { from_value: *lo, to_value: *hi, step: 0.0 },
+                if *above { format!("greater than {lo}") } else { String::new() },
+            ),
+            Range::Each { lo, hi } => (NumericRange::NotSpecified, format!("every entry in [{lo}, {hi}]")),
+            Range::Integer { lo, hi } => {
+                (NumericRange::IntegerRange { from_value: *lo, to_value: *hi, step: 0 }, String::new())
+            }
+            Range::Rule(rule) => (NumericRange::NotSpecified, rule.clone()),
+        };
+        ParameterDescriptor {
+            name: self.name.clone(),
+            param_type: ParameterType::NotSet,
+            description: self.description.clone(),
+            additional_constraints: constraints,
+            read_only: true,
+            dynamic_typing: false,
+            range,
+        }
+    }
+
+    /// Whether the flattened parameter `name` (`a.b` is part of `a`) is this one.
+    pub fn covers(&self, name: &str) -> bool {
+        name == self.name || name.strip_prefix(self.name.as_str()).is_some_and(|rest| rest.starts_with('.'))
+    }
+}
+
+/// The declarations of one node's parameters, and the first value found outside its range.
+#[derive(Debug, Default)]
+pub struct Declarations {
+    specs: Vec<Spec>,
+    error: Option<String>,
+}
+
+impl Declarations {
+    fn declare(&mut self, name: &str, description: &str, range: Range, fault: Option<String>) {
+        self.specs.push(Spec { name: name.into(), description: description.into(), range });
+        if self.error.is_none() {
+            self.error = fault;
+        }
+    }
+
+    /// The first value found outside its range.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// A finite number in (lo, hi].
+    pub fn above(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
+        let ok = value.is_finite() && value > lo && value <= hi;
+        let fault = (!ok).then(|| format!("{name} must lie in ({lo}, {hi}], not {value}"));
+        self.declare(name, description, Range::Number { lo, hi, above: true }, fault);
+    }
+
+    /// A finite number in [lo, hi].
+    pub fn within(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
+        let ok = value.is_finite() && (lo..=hi).contains(&value);
+        let fault = (!ok).then(|| format!("{name} must lie in [{lo}, {hi}], not {value}"));
+        self.declare(name, description, Range::Number { lo, hi, above: false }, fault);
+    }
+
+    /// Every entry in [lo, hi].
+    pub fn each(&mut self, name: &str, values: &[f64], (lo, hi): (f64, f64), description: &str) {
+        let ok = values.iter().all(|x| x.is_finite() && (lo..=hi).contains(x));
+        let fault = (!ok).then(|| format!("{name} must lie in [{lo}, {hi}] for every entry, not {values:?}"));
+        self.declare(name, description, Range::Each { lo, hi }, fault);
+    }
+
+    /// A whole number in [lo, hi].
+    pub fn integer(&mut self, name: &str, value: i64, (lo, hi): (i64, i64), description: &str) {
+        let fault = (!(lo..=hi).contains(&value)).then(|| format!("{name} must lie in {lo}..={hi}, not {value}"));
+        self.declare(name, description, Range::Integer { lo, hi }, fault);
+    }
+
+    /// A value the node checks itself: `check` says whether it holds (and why not), `rule` what it is.
+    pub fn rule(&mut self, name: &str, check: Result<(), String>, rule: &str, description: &str) {
+        let fault = check.err().map(|why| format!("{name}: {why}"));
+        self.declare(name, description, Range::Rule(rule.into()), fault);
+    }
+
+    /// A check of several parameters together (the first fault is kept).
+    pub fn together(&mut self, check: Result<(), String>) {
+        if self.error.is_none() {
+            self.error = check.err();
+        }
+    }
+
+    /// A parameter any value of its type suits (a switch, a name).
+    pub fn any(&mut self, name: &str, description: &str) {
+        self.declare(name, description, Range::Rule(String::new()), None);
+    }
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -63,8 +208,15 @@ pub enum ParamError {
     Invalid { node: String, reason: String },
 }
 
-/// Reads the parameters of `node` from `args`, checks them, and returns them with their flat list.
-pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Vec<(String, ParameterValue)>), ParamError> {
+/// What a node declares on ROS: its parameters' values, flattened (`a.b` for nested ones), and their specs.
+#[derive(Debug, Clone, Default)]
+pub struct Declared {
+    pub values: Vec<(String, ParameterValue)>,
+    pub specs: Vec<Spec>,
+}
+
+/// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
+pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
     let mut merged = Mapping::new();
     for path in &args.files {
         let text = std::fs::read_to_string(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
@@ -79,19 +231,17 @@ pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Vec<(Stri
 }
 
 /// The typed parameters from a merged mapping, checked, with their flat list.
-pub fn from_mapping<P: NodeParams>(
-    node: &str,
-    mapping: Mapping,
-) -> Result<(P, Vec<(String, ParameterValue)>), ParamError> {
+pub fn from_mapping<P: NodeParams>(node: &str, mapping: Mapping) -> Result<(P, Declared), ParamError> {
     let invalid = |reason: String| ParamError::Invalid { node: node.into(), reason };
     // Through text, so that a type error names the parameter it is about.
     let text = serde_yaml_ng::to_string(&mapping).map_err(|e| invalid(e.to_string()))?;
     let params: P = serde_yaml_ng::from_str(&text).map_err(|e| invalid(e.to_string()))?;
     params.validate().map_err(invalid)?;
     let value = serde_yaml_ng::to_value(&params).map_err(|e| invalid(e.to_string()))?;
-    let mut flat = Vec::new();
-    flatten("", &value, &mut flat);
-    Ok((params, flat))
+    let mut values = Vec::new();
+    flatten("", &value, &mut values);
+    let specs = params.specs();
+    Ok((params, Declared { values, specs }))
 }
 
 /// The `ros__parameters` of `node` in one file: the `/**` section, then the node's own (`node` or
@@ -216,8 +366,11 @@ mod tests {
         }
     }
     impl NodeParams for Demo {
-        fn validate(&self) -> Result<(), String> {
-            if self.rate > 0.0 { Ok(()) } else { Err(format!("rate must be positive, not {}", self.rate)) }
+        fn declare(&self, d: &mut Declarations) {
+            d.above("rate", self.rate, (0.0, 1e3), "how often");
+            d.any("name", "what it is called");
+            d.each("gains", &[self.gains.kp, self.gains.kd], (0.0, 10.0), "PD gains");
+            d.any("joints", "positions");
         }
     }
 
@@ -256,13 +409,65 @@ mod tests {
         }
     }
 
+    /// Every parameter of every node is declared exactly once, with a description; no declaration
+    /// names a parameter the node does not have.
+    fn declared_once<P: NodeParams>(node: &str) {
+        let (_, declared) = from_mapping::<P>(node, Mapping::new()).unwrap();
+        for (name, _) in &declared.values {
+            let n = declared.specs.iter().filter(|s| s.covers(name)).count();
+            assert_eq!(n, 1, "{node}: {name} is declared {n} times");
+        }
+        for s in &declared.specs {
+            assert!(declared.values.iter().any(|(n, _)| s.covers(n)), "{node}: {} is no parameter", s.name);
+            assert!(!s.description.is_empty(), "{node}: {} has no description", s.name);
+        }
+    }
+
+    #[test]
+    fn every_parameter_of_every_node_is_declared_once_with_its_description() {
+        declared_once::<crate::deformation_controller::Params>("deformation_controller");
+        declared_once::<crate::lwr_driver::Params>("lwr_driver");
+        declared_once::<crate::ft_sensor::Params>("ft_sensor");
+        declared_once::<crate::contact_estimator::Params>("contact_estimator");
+        declared_once::<crate::sim_arm::Params>("sim_arm");
+        declared_once::<Demo>("demo");
+    }
+
+    #[test]
+    fn a_declaration_becomes_the_ros_descriptor() {
+        let (_, declared) = from_mapping::<crate::deformation_controller::Params>("c", Mapping::new()).unwrap();
+        let spec = |name: &str| declared.specs.iter().find(|s| s.name == name).unwrap().descriptor();
+        let limit = spec("force_limit");
+        assert!(limit.read_only && limit.description.contains("backs off"));
+        assert!(matches!(
+            limit.range,
+            ros2_client::parameters::NumericRange::FloatingPointRange { from_value: 250.0, to_value: 500.0, .. }
+        ));
+        assert_eq!(limit.additional_constraints, "greater than 250");
+        let confirm = spec("onset_confirm");
+        assert!(matches!(
+            confirm.range,
+            ros2_client::parameters::NumericRange::IntegerRange { from_value: 1, to_value: 100, .. }
+        ));
+        assert_eq!(
+            spec("move_duration").additional_constraints,
+            "[shortest, longest] within [0.01, 3600] s, shortest < longest"
+        );
+        // Out of its range, a value is refused with the declared range.
+        let mut p = crate::deformation_controller::Params { force_limit: 600.0, ..Default::default() };
+        assert_eq!(p.validate().unwrap_err(), "force_limit must lie in (250, 500], not 600");
+        p.force_limit = f64::NAN;
+        assert!(p.validate().is_err());
+    }
+
     #[test]
     fn files_layer_and_overrides_win() {
         let base = file(
             "/**:\n  ros__parameters:\n    rate: 50.0\ndemo:\n  ros__parameters:\n    gains: {kp: 3.0}\nother:\n  ros__parameters:\n    rate: 7.0\n",
         );
         let robot = file("/demo:\n  ros__parameters:\n    name: robot\n    gains: {kd: 4.0}\n");
-        let (p, flat): (Demo, _) = load("demo", &args(&[&base, &robot], &["rate:=25", "gains.kp:=9"])).unwrap();
+        let (p, Declared { values: flat, .. }): (Demo, _) =
+            load("demo", &args(&[&base, &robot], &["rate:=25", "gains.kp:=9"])).unwrap();
         assert_eq!(
             p,
             Demo { rate: 25.0, name: "robot".into(), gains: Gains { kp: 9.0, kd: 4.0 }, joints: vec![1.0, 2.0] }
@@ -278,7 +483,7 @@ mod tests {
         let e = load::<Demo>("demo", &args(&[&typo], &[])).unwrap_err().to_string();
         assert!(e.contains("rte"), "{e}");
         let e = load::<Demo>("demo", &args(&[], &["rate:=-1"])).unwrap_err().to_string();
-        assert!(e.contains("rate must be positive"), "{e}");
+        assert!(e.contains("rate must lie in (0, 1000]"), "{e}");
         let e = load::<Demo>("demo", &args(&[], &["rate:=fast"])).unwrap_err().to_string();
         assert!(e.contains("rate"), "{e}");
         assert!(matches!(load::<Demo>("demo", &args(&[], &["rate=1"])), Err(ParamError::Override(_))));

@@ -14,6 +14,8 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 use softcontact_msgs::RosType;
 
+use crate::params::Declared;
+
 /// Sends the `log` records of the middleware (RustDDS, ros2-client) and of our crates to stderr, each
 /// line prefixed with `node`: warnings and errors by default, `RUST_LOG` (e.g. `info`, `rustdds=debug`)
 /// overrides. Without it a middleware failure is silent. Call it first in `main`; a second call is a no-op.
@@ -35,13 +37,14 @@ fn domain_id() -> anyhow::Result<u16> {
 
 /// A node on the domain of `ROS_DOMAIN_ID` (0 if unset), logging to /rosout, without parameters.
 pub fn node(name: &str) -> anyhow::Result<Node> {
-    node_with_parameters(name, Vec::new())
+    node_with_parameters(name, Declared::default())
 }
 
 /// A node on the domain of `ROS_DOMAIN_ID` that declares `parameters` and serves them through the
 /// standard parameter services (list, get, get_types, describe; set answers that a node reads its
 /// parameters at start-up). The services run on a spinner thread of their own, never in a 1 kHz path.
-pub fn node_with_parameters(name: &str, parameters: Vec<(String, ParameterValue)>) -> anyhow::Result<Node> {
+pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<Node> {
+    let Declared { values: parameters, specs } = declared;
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?))?;
     let serve = !parameters.is_empty();
     // Declaring sets each value once through the validator: those are the only values it accepts.
@@ -67,6 +70,11 @@ pub fn node_with_parameters(name: &str, parameters: Vec<(String, ParameterValue)
             }
         }));
     for (n, v) in parameters {
+        // A nested parameter (`a.b`) is described by its top-level declaration.
+        if let Some(spec) = specs.iter().find(|s| s.covers(&n)) {
+            let descriptor = ros2_client::parameters::ParameterDescriptor { name: n.clone(), ..spec.descriptor() };
+            options = options.describe_parameter(descriptor);
+        }
         options = options.declare_parameter(&n, v);
     }
     let mut node = context.new_node(NodeName::new("/", name)?, options)?;

@@ -210,29 +210,19 @@ pub enum SurfaceKind {
     None,
 }
 
-/// The `sim_arm` node's parameters (config/sim_arm.yaml).
+/// The `sim_arm` node's parameters (config/sim_arm.yaml). What each means and the values it takes are
+/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Where the FRI driver listens (the KRC's FRIHOST:FRISOCK).
     pub fri_remote: SocketAddr,
-    /// The simulated KRC's own FRI address.
     pub fri_bind: SocketAddr,
-    /// The simulated Net F/T box's RDT address.
     pub rdt_bind: SocketAddr,
     pub surface: SurfaceKind,
-    /// A contact model file (the model YAML `softcontact discrepancy` and `identify` write) for the
-    /// surface's law and effects in place of the preset's; "" keeps the preset. The `surface` preset still
-    /// places the surface (none: no surface, and no file either) and chooses the sensor.
     pub surface_model: String,
-    /// Stop after this many simulated seconds (0: run until stopped).
     pub seconds: f64,
-    /// Fraction of FRI datagrams lost once commanding, in each direction.
     pub drop_rate: f64,
-    /// RDT records per second while streaming (the box's comrdtrate).
     pub rdt_rate: f64,
-    /// Faster than real time: step as soon as the driver has answered, and publish the simulated time on
-    /// /clock (run the nodes with use_sim_time).
     pub lockstep: bool,
     pub seed: u64,
 }
@@ -270,18 +260,36 @@ impl Params {
 }
 
 impl crate::params::NodeParams for Params {
-    fn validate(&self) -> Result<(), String> {
-        self.surface_model()?;
-        if !(0.0..1.0).contains(&self.drop_rate) {
-            return Err(format!("drop_rate must lie in [0, 1), not {}", self.drop_rate));
-        }
-        if !(self.seconds.is_finite() && self.seconds >= 0.0) {
-            return Err("seconds must be ≥ 0".into());
-        }
-        if !(1.0..=7000.0).contains(&self.rdt_rate) {
-            return Err(format!("rdt_rate must lie in 1..=7000 Hz, not {}", self.rdt_rate));
-        }
-        Ok(())
+    fn declare(&self, d: &mut crate::params::Declarations) {
+        d.any("fri_remote", "where the FRI driver listens (the KRC's FRIHOST:FRISOCK)");
+        d.any("fri_bind", "the simulated KRC's own FRI address");
+        d.any("rdt_bind", "the simulated Net F/T box's RDT address");
+        d.any("surface", "the simulated surface: its preset law, place and sensor (none: free space)");
+        let model = self.surface_model().map(|_| ());
+        d.rule("surface_model", model, "\"\" or a readable contact model file, with a surface", "a contact model file (the model YAML `softcontact discrepancy` and `identify` write) for the surface's law and effects in place of the preset's; \"\" keeps the preset");
+        d.within(
+            "seconds",
+            self.seconds,
+            (0.0, f64::MAX),
+            "stop after this many simulated seconds (0: run until stopped)",
+        );
+        let drop_rate = if (0.0..1.0).contains(&self.drop_rate) {
+            Ok(())
+        } else {
+            Err(format!("must lie in [0, 1), not {}", self.drop_rate))
+        };
+        d.rule("drop_rate", drop_rate, "[0, 1)", "fraction of FRI datagrams lost once commanding, in each direction");
+        d.within(
+            "rdt_rate",
+            self.rdt_rate,
+            (1.0, 7000.0),
+            "RDT records per second while streaming (the box's comrdtrate) [Hz]",
+        );
+        d.any(
+            "lockstep",
+            "faster than real time: step as soon as the driver has answered, and publish the simulated time on /clock",
+        );
+        d.any("seed", "seed of the simulated noise and losses");
     }
 }
 

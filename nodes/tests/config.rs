@@ -12,7 +12,7 @@ fn config(file: &str) -> PathBuf {
 fn check<P: NodeParams + Default + PartialEq + std::fmt::Debug>(node: &str) -> P {
     let args = ParamArgs { files: vec![config(&format!("{node}.yaml"))], ..Default::default() };
     let (p, declared) = load::<P>(node, &args).unwrap_or_else(|e| panic!("{node}: {e}"));
-    assert!(!declared.is_empty());
+    assert!(!declared.values.is_empty() && !declared.specs.is_empty());
     let robot = ParamArgs { files: vec![config(&format!("{node}.yaml")), config("robot.yaml")], ..Default::default() };
     load::<P>(node, &robot).unwrap_or_else(|e| panic!("{node} with the robot overlay: {e}"));
     p

@@ -7,7 +7,6 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use ros2_client::ParameterValue;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
 use softcontact_wire::fri::InterfaceState;
@@ -32,7 +31,7 @@ impl InProcessController {
     /// node puts its readings in `forces`.
     pub fn new(
         p: &Params,
-        declared: Vec<(String, ParameterValue)>,
+        declared: crate::params::Declared,
         forces: Arc<Latest<ForceReading>>,
     ) -> anyhow::Result<Self> {
         let control = ControllerNode::from_params(p)?;

@@ -23,7 +23,7 @@ use ros2_client::action::{
 };
 use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
 use ros2_client::service::{Client, Server};
-use ros2_client::{ActionTypeName, Name, Node, ParameterValue, Publisher, RmwRequestId, ServiceTypeName, Subscription};
+use ros2_client::{ActionTypeName, Name, Node, Publisher, RmwRequestId, ServiceTypeName, Subscription};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{
@@ -106,7 +106,7 @@ pub struct ControllerInterface {
 
 impl ControllerInterface {
     /// The node "deformation_controller", serving its `declared` parameters, with its topics and action.
-    pub fn new(p: &Params, declared: Vec<(String, ParameterValue)>) -> anyhow::Result<Self> {
+    pub fn new(p: &Params, declared: crate::params::Declared) -> anyhow::Result<Self> {
         let mut node = ros::node_with_parameters("deformation_controller", declared)?;
         let commands =
             ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use ros2_client::{Name, ParameterValue, ServiceTypeName};
+use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
@@ -32,12 +32,7 @@ pub struct Links {
 
 /// The node until `stop` is set (or it exits after a silence): the binary's `main`, and a thread of
 /// `lwr_control`.
-pub fn run(
-    p: Params,
-    declared: Vec<(String, ParameterValue)>,
-    links: Links,
-    stop: Arc<AtomicBool>,
-) -> anyhow::Result<()> {
+pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
     let config = FtConfig {
         calibration: p.calibration().map_err(anyhow::Error::msg)?,
         tool: lwr4::tool_load(),

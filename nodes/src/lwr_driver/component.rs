@@ -5,7 +5,6 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use ros2_client::ParameterValue;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
@@ -87,12 +86,7 @@ pub struct Links {
 
 /// The node until `stop` is set (or it exits after a silence): the binary's `main`, and the FRI thread of
 /// `lwr_control`.
-pub fn run(
-    p: Params,
-    declared: Vec<(String, ParameterValue)>,
-    links: Links,
-    stop: Arc<AtomicBool>,
-) -> anyhow::Result<()> {
+pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
     let Links { mut controller, poses } = links;
     let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;

@@ -13,7 +13,7 @@
 //! documented as no-ops there (logged once at `debug` level).
 
 use crate::{
-  parameters::{Parameter, ParameterValue, SetParametersResult},
+  parameters::{Parameter, ParameterDescriptor, ParameterValue, SetParametersResult},
   service::ServiceMapping,
 };
 
@@ -38,6 +38,7 @@ pub struct NodeOptions {
   pub(crate) start_parameter_services: bool,
   pub(crate) parameter_service_mapping: ServiceMapping,
   pub(crate) declared_parameters: Vec<Parameter>,
+  pub(crate) parameter_descriptors: Vec<ParameterDescriptor>,
   pub(crate) allow_undeclared_parameters: bool,
   pub(crate) parameter_validator: Option<Box<ParameterFunc>>,
   pub(crate) parameter_set_action: Option<Box<ParameterFunc>>,
@@ -54,6 +55,7 @@ impl NodeOptions {
       start_parameter_services: true,
       parameter_service_mapping: ServiceMapping::Enhanced,
       declared_parameters: Vec::new(),
+      parameter_descriptors: Vec::new(),
       allow_undeclared_parameters: false,
       parameter_validator: None,
       parameter_set_action: None,
@@ -106,6 +108,14 @@ impl NodeOptions {
       value,
     });
     // TODO: check for duplicate parameter names
+    self
+  }
+
+  /// What `describe_parameters` answers for the parameter `descriptor.name`
+  /// (its description, read-only flag, constraints and range; the type is
+  /// always the value's). Without one, a placeholder description.
+  pub fn describe_parameter(mut self, descriptor: ParameterDescriptor) -> NodeOptions {
+    self.parameter_descriptors.push(descriptor);
     self
   }
 

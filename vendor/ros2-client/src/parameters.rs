@@ -198,6 +198,7 @@ impl From<SetParametersResult> for raw::SetParametersResult {
 }
 
 /// Documentation and constraints for a [`Parameter`]
+#[derive(Debug, Clone)]
 pub struct ParameterDescriptor {
   pub name: String,
   pub param_type: ParameterType, // ParameterType.msg defines enum
@@ -237,6 +238,7 @@ impl ParameterDescriptor {
 }
 
 /// Optional Limits for a numeric [`Parameter`]
+#[derive(Debug, Clone)]
 pub enum NumericRange {
   NotSpecified,
   IntegerRange {
@@ -351,6 +353,8 @@ pub(crate) struct ParameterStore {
   validator: Option<Mutex<Box<ParameterFunc>>>,
   set_action: Option<Mutex<Box<ParameterFunc>>>,
   use_sim_time: AtomicBool,
+  // What `describe` answers for a parameter, by name (its type is always the value's).
+  descriptors: BTreeMap<String, ParameterDescriptor>,
 }
 
 impl ParameterStore {
@@ -384,12 +388,20 @@ impl ParameterStore {
       validator: validator.map(Mutex::new),
       set_action: set_action.map(Mutex::new),
       use_sim_time: AtomicBool::new(false),
+      descriptors: BTreeMap::new(),
     };
     for (name, value) in &initial {
       store.check_value(name, value)?;
       store.run_set_action(name, value)?;
     }
     Ok(store)
+  }
+
+  /// Descriptions and ranges that `describe` answers with, instead of the
+  /// placeholder, for the parameters they name.
+  pub fn with_descriptors(mut self, descriptors: impl IntoIterator<Item = ParameterDescriptor>) -> Self {
+    self.descriptors = descriptors.into_iter().map(|d| (d.name.clone(), d)).collect();
+    self
   }
 
   pub fn allow_undeclared(&self) -> bool {
@@ -428,9 +440,13 @@ impl ParameterStore {
     let values = self.values.lock().unwrap();
     names
       .iter()
-      .map(|name| match values.get(name) {
-        Some(value) => ParameterDescriptor::from_value(name, value),
-        None => ParameterDescriptor::unknown(name),
+      .map(|name| match (values.get(name), self.descriptors.get(name)) {
+        (Some(value), Some(described)) => ParameterDescriptor {
+          param_type: value.to_parameter_type(),
+          ..described.clone()
+        },
+        (Some(value), None) => ParameterDescriptor::from_value(name, value),
+        (None, _) => ParameterDescriptor::unknown(name),
       })
       .collect()
   }
