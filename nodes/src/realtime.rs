@@ -3,8 +3,11 @@
 //! datagram arrives. On the robot give the process a real-time priority (`chrt -f 80`, see
 //! launch-scripts/README.md): then it always does. Without one, the thread asks Linux's fair scheduler for
 //! a short time slice (`sched_setattr`, allowed to any user): under EEVDF (Linux 6.6 and later) a task
-//! with a shorter slice gets an earlier deadline and so preempts a busy neighbour when it wakes, while its
-//! share of the CPU stays what its nice value gives it.
+//! with a shorter slice gets an earlier deadline and so may preempt a busy neighbour when it wakes — but
+//! only while it is eligible, i.e. has not had more than its share of the CPU. Measured, the slice alone
+//! changed little; what keeps the thread answering under a busy neighbour is a share of its own: the
+//! launch script gives the 1 kHz path's processes sessions of their own, which Linux's autogroup scheduling
+//! serves before it splits their share between threads (launch-scripts/README.md, "Under load").
 
 use std::time::Duration;
 
