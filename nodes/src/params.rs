@@ -433,6 +433,57 @@ mod tests {
         declared_once::<Demo>("demo");
     }
 
+    /// Every number of every node refuses NaN and ±∞, and huge or negative values unless named here
+    /// (with why): a value reaching the arm is checked whatever the parameter.
+    fn non_finite_numbers_are_refused<P: NodeParams + std::fmt::Debug>(
+        node: &str,
+        huge_ok: &[&str],
+        negative_ok: &[&str],
+    ) {
+        let (_, declared) = from_mapping::<P>(node, Mapping::new()).unwrap();
+        let mut checked = 0;
+        for (name, value) in &declared.values {
+            let with = |x: f64| -> Value {
+                match value {
+                    ParameterValue::DoubleArray(v) => Value::Sequence(v.iter().map(|_| Value::from(x)).collect()),
+                    _ => Value::from(x),
+                }
+            };
+            if !matches!(value, ParameterValue::Double(_) | ParameterValue::DoubleArray(_)) {
+                continue;
+            }
+            checked += 1;
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, -1.0] {
+                let allowed = (bad == 1e300 && huge_ok.contains(&name.as_str()))
+                    || (bad < 0.0 && bad.is_finite() && negative_ok.contains(&name.as_str()));
+                let mut m = Mapping::new();
+                set_path(&mut m, name, with(bad));
+                let taken = from_mapping::<P>(node, m);
+                assert!(allowed || taken.is_err(), "{node}: {name} = {bad} is taken: {:?}", taken.map(|t| t.0));
+            }
+        }
+        assert!(checked >= 3, "{node}: only {checked} numbers");
+    }
+
+    #[test]
+    fn no_node_takes_a_non_finite_huge_or_negative_number() {
+        non_finite_numbers_are_refused::<crate::deformation_controller::Params>(
+            "deformation_controller",
+            &[],
+            &["normal"],
+        );
+        non_finite_numbers_are_refused::<crate::lwr_driver::Params>("lwr_driver", &[], &[]);
+        // tare_after: negative is "never".
+        non_finite_numbers_are_refused::<crate::ft_sensor::Params>("ft_sensor", &[], &["tare_after"]);
+        non_finite_numbers_are_refused::<crate::contact_estimator::Params>(
+            "contact_estimator",
+            &[],
+            &["normal", "offset_range"],
+        );
+        // The simulator's run length (seconds) may be as long as one likes.
+        non_finite_numbers_are_refused::<crate::sim_arm::Params>("sim_arm", &["seconds"], &[]);
+    }
+
     #[test]
     fn a_declaration_becomes_the_ros_descriptor() {
         let (_, declared) = from_mapping::<crate::deformation_controller::Params>("c", Mapping::new()).unwrap();
