@@ -128,11 +128,14 @@ trap 'echo "launch: stopping" >&2; stop_all' INT TERM
 # default in Debian's and Ubuntu's kernels) shares the CPU between sessions before threads, so busy work
 # elsewhere at the same nice value cannot keep the FRI thread waiting for a scheduler tick when a
 # datagram arrives (tools/bench-graph.sh, a busy loop per core: 99.7 % of replies within 200 us in one
-# session with them, 99.98 % in sessions of their own). The script still stops them (stop_all).
+# session with them, 99.98 % in sessions of their own). The script still stops them (stop_all). Not in
+# lockstep, where the simulated time waits for the driver's answer but not for the F/T node: there the
+# sessions' shares let the sensor's thread fall behind the simulation (stale forces in 2 runs of 5).
 declare -A nice_of=([sim_arm]=0 [lwr_control]=0 [lwr_driver]=0 [deformation_controller]=2 [ft_sensor]=2 [contact_estimator]=10)
 for n in "${nodes[@]}"; do
     mapfile -t p < <(params_of "$n")
-    session=(setsid); [[ $n == contact_estimator ]] && session=()
+    session=(setsid)
+    if [[ $n == contact_estimator ]] || ((lockstep)); then session=(); fi
     "${session[@]}" nice -n "${nice_of[$n]}" "$bin/$n" "${p[@]}" </dev/null >"$log_dir/$n.log" 2>&1 &
     pid_of[$n]=$!
 done
