@@ -252,9 +252,7 @@ impl Params {
 
 impl crate::params::NodeParams for Params {
     fn declare(&self, d: &mut crate::params::Declarations) {
-        let normal_ok = Vector3::from(self.normal).norm().is_normal();
-        let nonzero = if normal_ok { Ok(()) } else { Err(format!("a zero direction {:?}", self.normal)) };
-        d.rule("normal", nonzero, "a non-zero direction", "contact direction n in the world");
+        d.direction("normal", self.normal, "contact direction n in the world");
         d.above("sample_period", self.sample_period, (0.0, 1.0), "time between window samples (seed 001: 10 ms) [s]");
         d.integer(
             "window",
@@ -262,13 +260,7 @@ impl crate::params::NodeParams for Params {
             (10 * self.folds.max(1) as i64, 1_000_000),
             "samples in the window (seed 001: 1200; at least 10 per fold)",
         );
-        d.above("onset_threshold", self.onset_threshold, (0.0, 50.0), "normal force that marks the contact onset [N]");
-        d.integer(
-            "onset_confirm",
-            self.onset_confirm as i64,
-            (1, 100),
-            "consecutive readings above onset_threshold that confirm the onset",
-        );
+        d.onset(self.onset_threshold, self.onset_confirm);
         d.integer("folds", self.folds as i64, (1, 100), "cross-validation folds of the model selection");
         d.above(
             "max_relative_error",
@@ -313,7 +305,7 @@ impl crate::params::NodeParams for Params {
             0.0,
             "/ft_sensor/wrench or /lwr/ee_pose silent this long after they flowed (both are due at 1 kHz): their publisher or the middleware is dead, and the node exits with an error [s]",
         );
-        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
+        d.use_sim_time();
         // The estimator checks its configuration as it is built.
         d.together(ContactEstimatorNode::new(self.estimator_config()).map(|_| ()).map_err(|e| e.to_string()));
     }

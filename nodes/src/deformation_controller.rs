@@ -889,12 +889,9 @@ impl Params {
 impl crate::params::NodeParams for Params {
     /// Every number has a physical range: a value outside it refuses to start the node.
     fn declare(&self, d: &mut crate::params::Declarations) {
-        let normal_ok = Vector3::from(self.normal).norm().is_normal();
-        let nonzero = if normal_ok { Ok(()) } else { Err(format!("a zero direction {:?}", self.normal)) };
-        d.rule(
+        d.direction(
             "normal",
-            nonzero,
-            "a non-zero direction",
+            self.normal,
             "contact direction n in the world (the hand compresses the surface along it)",
         );
         d.above(
@@ -924,13 +921,7 @@ impl crate::params::NodeParams for Params {
             (0.0, 0.5),
             "farthest the approach goes without finding a surface; then the hand holds [m]",
         );
-        d.above("onset_threshold", self.onset_threshold, (0.0, 50.0), "normal force that marks the contact onset [N]");
-        d.integer(
-            "onset_confirm",
-            self.onset_confirm as i64,
-            (1, 100),
-            "consecutive readings above onset_threshold that confirm the onset",
-        );
+        d.onset(self.onset_threshold, self.onset_confirm);
         d.above("torque_rate", self.torque_rate, (0.0, 1e5), "largest torque rate commanded [N·m/s]");
         d.above("max_force", self.max_force, (0.0, 500.0), "largest force a command may ask for [N]");
         d.above("max_deformation", self.max_deformation, (0.0, 0.2), "largest deformation commanded [m]");
@@ -999,10 +990,8 @@ impl crate::params::NodeParams for Params {
             self.restart_after,
             "/lwr/joint_states silent this long after they flowed: the driver or the middleware is dead, exit with an error [s] (above restart_after)",
         );
-        d.rule(
-            "service_mapping",
-            crate::ros::service_mapping(&self.service_mapping).map(|_| ()).map_err(|e| e.to_string()),
-            "cyclone, enhanced or basic",
+        d.service_mapping(
+            &self.service_mapping,
             "service mapping of the peers' middleware for the force action and the re-tare service",
         );
         d.any("model_update", "on_command (seed 001: the newest model is adopted at each force command) or continuous (each model on arrival, the standing command re-planned through it)");
@@ -1018,7 +1007,7 @@ impl crate::params::NodeParams for Params {
             "a valid contact model",
             "the model used until the estimator has one (a rough guess is enough to start identification)",
         );
-        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
+        d.use_sim_time();
     }
 }
 

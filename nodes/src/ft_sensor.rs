@@ -657,12 +657,7 @@ impl crate::params::NodeParams for Params {
             "a tare is refused when the tool travelled more than this over the window [m]",
         );
         d.within("bias_max_rotation", self.bias_max_rotation, (1e-4, 0.1), "... or turned more than this [rad]");
-        d.rule(
-            "service_mapping",
-            crate::ros::service_mapping(&self.service_mapping).map(|_| ()).map_err(|e| e.to_string()),
-            "cyclone, enhanced or basic",
-            "service mapping of the peers' middleware for /ft_sensor/bias",
-        );
+        d.service_mapping(&self.service_mapping, "service mapping of the peers' middleware for /ft_sensor/bias");
         d.within(
             "exit_after_silence",
             self.exit_after_silence,
@@ -675,7 +670,7 @@ impl crate::params::NodeParams for Params {
             0.0,
             "/lwr/ee_pose silent this long after it flowed: the hand's orientation is unknown, /ft_sensor/wrench is withheld and /diagnostics says ERROR until poses flow again [s]",
         );
-        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
+        d.use_sim_time();
     }
 }
 

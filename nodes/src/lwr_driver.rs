@@ -675,6 +675,6 @@ impl crate::params::NodeParams for Params {
             0.0,
             "torque commands silent this long while the KRC commands, after they flowed: the driver holds and reports the controller dead (it never exits while the KRC commands) [s]",
         );
-        d.any("use_sim_time", "stamp messages with the simulated time of /clock");
+        d.use_sim_time();
     }
 }

@@ -190,6 +190,32 @@ impl Declarations {
         }
     }
 
+    /// A direction in the world: three finite numbers, not all zero.
+    pub fn direction(&mut self, name: &str, v: [f64; 3], description: &str) {
+        let norm = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let check = if norm.is_normal() { Ok(()) } else { Err(format!("a zero direction {v:?}")) };
+        self.rule(name, check, "a non-zero direction", description);
+    }
+
+    /// The peers' service mapping (`service_mapping`), for the services the node serves and calls.
+    pub fn service_mapping(&mut self, mapping: &str, description: &str) {
+        let check = crate::ros::service_mapping(mapping).map(|_| ()).map_err(|e| e.to_string());
+        self.rule("service_mapping", check, "cyclone, enhanced or basic", description);
+    }
+
+    /// The contact onset's detector (`onset_threshold`, `onset_confirm`), the same in every node that
+    /// finds the surface.
+    pub fn onset(&mut self, threshold: f64, confirm: usize) {
+        self.above("onset_threshold", threshold, (0.0, 50.0), "normal force that marks the contact onset [N]");
+        let what = "consecutive readings above onset_threshold that confirm the onset";
+        self.integer("onset_confirm", confirm as i64, (1, 100), what);
+    }
+
+    /// The ROS 2 switch every node has.
+    pub fn use_sim_time(&mut self) {
+        self.any("use_sim_time", "stamp messages with the simulated time of /clock");
+    }
+
     /// A parameter any value of its type suits (a switch, a name).
     pub fn any(&mut self, name: &str, description: &str) {
         self.declare(name, description, Range::Rule(String::new()), None);
