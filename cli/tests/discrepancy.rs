@@ -249,7 +249,7 @@ fn every_wrench_channel_is_predicted_to_its_noise_with_the_tangential_law() {
     assert!(worst > 100.0, "a model without a tangential law misses the tangential load: {without:?}");
     // The corpus's dice law (seed 001's dice) and its tangential law, as the simulator's surface has them.
     let mut law = ContactModel::new(Kind::KelvinVoigt, 130.0 / 0.07, 60.0).unwrap();
-    law.tangential = Some(softcontact_contact::Tangential { stiffness: 1.0e4, friction: 0.8 });
+    law.tangential = Some(softcontact_contact::Tangential::walton(1.0e4, 0.8));
     let model = dir.path().join("law.yaml");
     std::fs::write(&model, law.to_yaml()).unwrap();
     for (name, rms, sigma) in channels(Some(&model)) {

@@ -82,7 +82,7 @@ fn with(mut m: ContactModel, effects: &[Effect]) -> ContactModel {
 
 /// The law with a Walton tangential law and friction (the sway then loads the sensor sideways).
 fn gripping(mut m: ContactModel) -> ContactModel {
-    m.tangential = Some(Tangential { stiffness: 1.0e4, friction: 0.8 });
+    m.tangential = Some(Tangential::walton(1.0e4, 0.8));
     m
 }
 

@@ -8,7 +8,9 @@
 //!   named [`Kind`]s Kelvin-Voigt (a = c = 1, b = 0), Hunt-Crossley (a = b = 3/2, c = 1),
 //!   Azad-Featherstone (a = 3/2, b = 1/2, c = 1), Hertz-Walton's normal part, or general exponents;
 //!   żᶜ keeps the sign of ż (sgn(ż)|ż|ᶜ);
-//! - optionally the Walton tangential law of seed 000, f_t = k_t √z δ_t inside the friction cone;
+//! - optionally a tangential law ([`Tangential`]): seed 000's Walton law f_t = k_t √z δ_t, or the
+//!   incremental Mindlin–Deresiewicz law that agrees with it on straight paths and carries the path's
+//!   history off them, both inside the friction cone;
 //! - optionally named [`Effect`]s (viscoelastic relaxation, hysteresis, contact-offset drift, sensor
 //!   bias and drift) with their own state, advanced by [`ContactModel::step`].
 //!
@@ -46,6 +48,7 @@ mod fit;
 mod model;
 mod onset;
 mod stats;
+mod tangential;
 mod window;
 
 pub use exponent::{DampingExponent, estimate_contact_offset, estimate_exponent, minimize_scalar};
@@ -54,11 +57,12 @@ pub use fit::{
     regressors, robust_least_squares,
 };
 pub use model::{
-    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, StickAnchor, Tangential,
-    gravity_change, maxwell_step, maxwell_step_with_decay,
+    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, gravity_change,
+    maxwell_step, maxwell_step_with_decay,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
+pub use tangential::{MindlinDeresiewicz, Tangential, TangentialLaw, TangentialMemory};
 pub use window::{Estimate, WindowEstimator, estimate};
 
 /// Why a contact computation was refused.

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::ContactError;
+use crate::{ContactError, Tangential};
 
 /// The named normal-force laws f = k zᵃ + λ zᵇ żᶜ (seed 001 eq. 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -67,22 +67,6 @@ pub struct Exponents {
     pub b: f64,
     pub c: f64,
 }
-
-/// Walton-form tangential law of seed 000 (eq. 3–4): f_t = k_t √z δ_t inside the friction cone
-/// |f_t| ≤ μ f_n; beyond it the contact slides and |f_t| = μ f_n.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Tangential {
-    /// k_t [N/m^{3/2}].
-    pub stiffness: f64,
-    /// Coulomb friction coefficient μ.
-    pub friction: f64,
-}
-
-/// The tangential law's memory: where the tool first touched (dragged along while it slides); `None` out
-/// of contact. See [`ContactModel::tangential_step`].
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct StickAnchor(pub Option<[f64; 3]>);
 
 /// A named augmentation of the base law (design.md section 7 ids). Surface effects change the force the
 /// surface exerts; sensor effects change what the F/T sensor reports of it.
@@ -361,10 +345,8 @@ impl ContactModel {
         if a <= 0.0 || b < 0.0 || c <= 0.0 {
             return Err(ContactError::InvalidModel(format!("exponents need a > 0, b ≥ 0, c > 0 (got {a}, {b}, {c})")));
         }
-        if let Some(t) = self.tangential
-            && !(t.stiffness.is_finite() && t.stiffness >= 0.0 && t.friction.is_finite() && t.friction >= 0.0)
-        {
-            return Err(ContactError::InvalidModel("tangential stiffness and friction must be finite and ≥ 0".into()));
+        if let Some(t) = self.tangential {
+            t.validate()?;
         }
         self.effects.iter().try_for_each(Effect::validate)
     }
@@ -419,61 +401,6 @@ impl ContactModel {
             return Err(ContactError::NegativeForce(f));
         }
         Ok((f / self.stiffness).powf(1.0 / self.exponents.a))
-    }
-
-    /// Tangential force [N] of the Walton law at normal deformation z and tangential displacement δ_t
-    /// [m], limited to the friction cone of the given normal force; `None` without a tangential law.
-    /// Returns the force and whether the contact slides.
-    pub fn tangential_force(
-        &self,
-        z: f64,
-        delta_t: f64,
-        normal_force: f64,
-    ) -> Result<Option<(f64, bool)>, ContactError> {
-        let Some(t) = self.tangential else { return Ok(None) };
-        let (z, delta_t, normal_force) =
-            (finite("z", z)?, finite("δ_t", delta_t)?, finite("normal force", normal_force)?);
-        if z <= 0.0 {
-            return Ok(Some((0.0, false)));
-        }
-        let stick = t.stiffness * z.sqrt() * delta_t;
-        let limit = t.friction * normal_force.max(0.0);
-        Ok(Some(if stick.abs() <= limit { (stick, false) } else { (limit.copysign(stick), true) }))
-    }
-
-    /// The tangential force on the tool [N, world] with the Walton law and its friction cone, and whether
-    /// the contact slides, for a tool at `position` [m, world] pressed `z` deep with normal force
-    /// `normal_force` along the unit `normal`; zero without a tangential law or out of contact. The
-    /// displacement δ_t is the tool's tangential offset from `anchor`, where it first touched; while it
-    /// slides, the anchor follows so that the spring holds exactly the friction limit. The simulated
-    /// surface and the discrepancy workflow's wrench prediction both call this.
-    pub fn tangential_step(
-        &self,
-        anchor: &mut StickAnchor,
-        position: [f64; 3],
-        normal: [f64; 3],
-        z: f64,
-        normal_force: f64,
-    ) -> Result<([f64; 3], bool), ContactError> {
-        let Some(t) = self.tangential.filter(|_| z > 0.0) else {
-            anchor.0 = None;
-            return Ok(([0.0; 3], false));
-        };
-        let start = *anchor.0.get_or_insert(position);
-        let offset: [f64; 3] = std::array::from_fn(|i| position[i] - start[i]);
-        let along = (0..3).map(|i| offset[i] * normal[i]).sum::<f64>();
-        let delta: [f64; 3] = std::array::from_fn(|i| offset[i] - along * normal[i]);
-        let magnitude = delta.iter().map(|d| d * d).sum::<f64>().sqrt();
-        if magnitude <= 0.0 {
-            return Ok(([0.0; 3], false));
-        }
-        let (ft, slides) = self.tangential_force(z, magnitude, normal_force)?.unwrap_or((0.0, false));
-        let direction: [f64; 3] = std::array::from_fn(|i| delta[i] / magnitude);
-        if slides && t.stiffness > 0.0 {
-            let stretch = t.friction * normal_force / (t.stiffness * z.sqrt());
-            anchor.0 = Some(std::array::from_fn(|i| position[i] - along * normal[i] - stretch * direction[i]));
-        }
-        Ok((std::array::from_fn(|i| -ft.abs() * direction[i]), slides))
     }
 
     /// A fresh state for [`ContactModel::step`].

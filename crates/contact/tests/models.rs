@@ -99,7 +99,7 @@ proptest! {
 #[test]
 fn yaml_round_trip_keeps_everything() {
     let model = ContactModel {
-        tangential: Some(Tangential { stiffness: 3.7482, friction: 0.9 }),
+        tangential: Some(Tangential::walton(3.7482, 0.9)),
         effects: vec![
             Effect::ViscoelasticRelaxation { stiffness: 800.0, time_constant: 1.5 },
             Effect::Hysteresis { fraction: 0.05, velocity_scale: 0.01 },
@@ -137,7 +137,7 @@ fn yaml_mistakes_are_named() {
 #[test]
 fn walton_tangential_law_sticks_inside_the_cone_and_slides_outside() {
     let model = ContactModel {
-        tangential: Some(Tangential { stiffness: 3.7482, friction: 0.5 }),
+        tangential: Some(Tangential::walton(3.7482, 0.5)),
         ..ContactModel::new(Kind::HertzWalton, 8.28, 0.0).unwrap()
     };
     let z: f64 = 2.0; // seed 000 works in millimetre-scale units; the law is unit-agnostic

@@ -1,12 +1,12 @@
 //! The residual of every wrench channel. The model predicts the whole wrench the sensor should read: the
 //! normal force through [`ContactModel::step_surface`] and [`ContactModel::sense`] (as [`crate::simulate`]),
-//! the tangential force through the model's tangential law and its stick anchor
+//! the tangential force through the model's tangential law and its memory
 //! ([`ContactModel::tangential_step`], the simulated surface's own code), and the torque of that force,
 //! applied at the tool point, about the sensor's origin. A model without a tangential law predicts no
 //! tangential force, so the residual of the tangential channels then shows the load it misses.
 
 use serde::Serialize;
-use softcontact_contact::{ContactModel, StickAnchor};
+use softcontact_contact::{ContactModel, TangentialMemory};
 
 use crate::{DiscrepancyError, Phase, Series};
 
@@ -85,11 +85,11 @@ pub fn predict_wrench(
 ) -> Result<Vec<[f64; 6]>, DiscrepancyError> {
     let forces = crate::steps(model, series)?;
     let n = wrench.normal;
-    let mut anchor = StickAnchor::default();
+    let mut memory = TangentialMemory::default();
     (0..series.len())
         .map(|i| {
             let (surface, measured) = forces[i];
-            let (tangential, _) = model.tangential_step(&mut anchor, wrench.position[i], n, series.z[i], surface)?;
+            let (tangential, _) = model.tangential_step(&mut memory, wrench.position[i], n, series.z[i], surface)?;
             // The force on the hand (world): the surface pushes against n, the sensor's effects on its normal
             // reading included; then in the sensor frame, and its torque at the tool point.
             let world: [f64; 3] = std::array::from_fn(|k| -measured * n[k] + tangential[k]);
@@ -149,7 +149,7 @@ mod tests {
     fn a_stuck_contact_reads_its_walton_force_and_torque_in_the_sensor_frame() {
         let (k, kt, z, delta) = (2000.0, 1.0e4, 0.01, 0.002);
         let mut model = ContactModel::new(Kind::KelvinVoigt, k, 0.0).unwrap();
-        model.tangential = Some(Tangential { stiffness: kt, friction: 0.8 });
+        model.tangential = Some(Tangential::walton(kt, 0.8));
         // Touch at x = 0, press to z, then slide the tool δ along x while held at z.
         let t: Vec<f64> = (0..4).map(|i| i as f64 * 0.01).collect();
         let zs = vec![0.0, z, z, z];

@@ -1,8 +1,8 @@
 //! A flat soft surface: any contact model of crates/contact along its normal, and across it the model's
-//! Walton tangential law with a friction cone and slip (`ContactModel::tangential_step`).
+//! tangential law (Walton or Mindlin–Deresiewicz) with a friction cone and slip (`ContactModel::tangential_step`).
 
 use nalgebra::Vector3;
-use softcontact_contact::{ContactModel, EffectState, SensorInputs, StickAnchor};
+use softcontact_contact::{ContactModel, EffectState, SensorInputs, TangentialMemory};
 
 use crate::SimError;
 
@@ -35,13 +35,13 @@ pub struct Contact {
     pub sliding: bool,
 }
 
-/// A surface with its contact state (effects with memory, the stick anchor of the tangential law).
+/// A surface with its contact state (effects with memory, the tangential law's memory).
 #[derive(Debug, Clone)]
 pub struct Surface {
     config: SurfaceConfig,
     normal: Vector3<f64>,
     effects: EffectState,
-    anchor: StickAnchor,
+    tangential: TangentialMemory,
 }
 
 impl Surface {
@@ -52,7 +52,7 @@ impl Surface {
         }
         config.model.validate()?;
         let effects = config.model.effect_state();
-        Ok(Self { normal: config.normal / norm, effects, anchor: StickAnchor::default(), config })
+        Ok(Self { normal: config.normal / norm, effects, tangential: TangentialMemory::default(), config })
     }
 
     pub fn config(&self) -> &SurfaceConfig {
@@ -66,7 +66,7 @@ impl Surface {
         let zd = velocity.dot(&n);
         let f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
         let (tangential, sliding) =
-            self.config.model.tangential_step(&mut self.anchor, (*position).into(), n.into(), z, f)?;
+            self.config.model.tangential_step(&mut self.tangential, (*position).into(), n.into(), z, f)?;
         let force = -f * n + Vector3::from(tangential);
         // The sensor effects on the normal reading; the tangential load of this step feeds crosstalk. (A
         // model's unknown tool weight is carried by the sensor's load instead: see `Sim::new`.)

@@ -241,7 +241,7 @@ fn the_walton_tangential_law_sticks_then_slides_at_the_friction_cone() {
     use softcontact_contact::Tangential;
     use softcontact_sim::{Surface, SurfaceConfig};
     let model = ContactModel {
-        tangential: Some(Tangential { stiffness: 4.0e4, friction: 0.5 }),
+        tangential: Some(Tangential::walton(4.0e4, 0.5)),
         ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
     };
     let mut surface =
@@ -295,7 +295,7 @@ fn a_surface_models_crosstalk_reads_tangential_load_as_normal_force() {
     use softcontact_contact::{Effect, Tangential};
     use softcontact_sim::{Surface, SurfaceConfig};
     let model = ContactModel {
-        tangential: Some(Tangential { stiffness: 4.0e4, friction: 0.5 }),
+        tangential: Some(Tangential::walton(4.0e4, 0.5)),
         effects: vec![Effect::SensorCrosstalk { coupling: [0.02, 0.0, 0.0] }],
         ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
     };
