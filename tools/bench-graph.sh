@@ -41,4 +41,4 @@ launch-scripts/sim.sh --isolated "${layout[@]}" --log-dir "$log_dir" --run bash 
         target/release/softcontact force 60 >/dev/null || true
         target/release/softcontact force 30 >/dev/null || true
     done" 2>/dev/null || { echo "bench-graph: the graph failed; logs in $log_dir" >&2; exit 1; }
-grep -h -E "^lwr_driver: (exit|reply latency|command age)|^deformation_controller: exit" "$log_dir"/*.log
+grep -h -E "^lwr_driver: (exit|reply latency|command age|commands applied)|^deformation_controller: exit" "$log_dir"/*.log

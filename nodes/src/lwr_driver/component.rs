@@ -122,6 +122,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     // stamps its command with the stamp of the joint state it answered; older ones are stale cycles).
     let mut command_age = Histogram::new(1e-5, 100_000);
     let mut command_stamp: Option<f64> = None;
+    let mut lag = CommandLag::default();
     let mut last: Option<DriverOutput> = None;
     let mut next_diagnostics = Instant::now();
     let mut last_seen = Instant::now();
@@ -142,6 +143,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         // The measurement's stamp: the controller answers it, and the joint state carries it.
         let mut measured_at = None;
         let mut sign_of_life = false;
+        let mut refused = None;
         let output = client.cycle_with(Duration::from_millis(5), |driver, out| {
             // In lockstep the KRC's own clock is the loop's: /clock may not have caught up with the
             // datagram, and a repeated stamp would leave the measurement unanswered.
@@ -150,28 +152,34 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             if let Some(c) = controller.as_mut() {
                 c.respond(driver, out, stamp.as_secs_f64());
             }
-        })?;
-        // Newest torque command wins; a bad one is refused and counted, the previous one stays.
-        // A command must answer a joint state of the present KRC session, within the watchdog's age
-        // by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
-        while let Some(Ok(Some((cmd, _)))) = commands.as_ref().map(|c| c.take()) {
-            let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
-            let age = clock.now().as_secs_f64() - cmd.header.stamp.as_secs_f64();
-            let taken = client.driver.set_remote_command(&cmd.effort, session, age);
-            // A live controller answers the present session in time (a hold request included); a backlog
-            // delivered after a stall, or another session's commands, are no sign of life.
-            if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..))) {
-                command_watch.seen(start.elapsed().as_secs_f64());
-                sign_of_life = true;
-            }
-            match taken {
-                Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
-                Err(e) if Instant::now() >= next_refusal_log => {
-                    ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
-                    next_refusal_log = Instant::now() + Duration::from_secs(1);
+            // A controller of its own: the newest torque command, taken now, just before the answer — so
+            // that the command for the previous measurement has had the whole cycle to arrive.
+            // A bad one is refused and counted, the previous one stays. A command must answer a joint
+            // state of the present KRC session, within the watchdog's age by that joint state's stamp
+            // (the driver's own clock); an empty one asks for a hold.
+            while let Some(Ok(Some((cmd, _)))) = commands.as_ref().map(|c| c.take()) {
+                let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
+                let age = stamp.as_secs_f64() - cmd.header.stamp.as_secs_f64();
+                let taken = driver.set_remote_command(&cmd.effort, session, age);
+                // A live controller answers the present session in time (a hold request included); a
+                // backlog delivered after a stall, or another session's commands, are no sign of life.
+                if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..))) {
+                    sign_of_life = true;
                 }
-                Err(_) => {}
+                match taken {
+                    Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
+                    Err(e) => refused = Some(e),
+                }
             }
+        })?;
+        if sign_of_life {
+            command_watch.seen(start.elapsed().as_secs_f64());
+        }
+        if let Some(e) = refused
+            && Instant::now() >= next_refusal_log
+        {
+            ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
+            next_refusal_log = Instant::now() + Duration::from_secs(1);
         }
         if let Some(out) = output {
             last_seen = Instant::now();
@@ -187,8 +195,10 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             if controller.is_some() && commanded {
                 command_stamp = Some(stamp.as_secs_f64());
             }
+            lag.measured(stamp.as_secs_f64());
             if let Some(t) = command_stamp.filter(|_| commanded) {
                 command_age.record(clock.now().as_secs_f64() - t);
+                lag.applied(t);
             }
             if let Some(c) = controller.as_mut() {
                 publish_errors += c.publish(stamp);
@@ -260,9 +270,81 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         "lwr_driver: command age {}; stale cycles {stale}, {after_start} after the first command",
         command_age.summary(1e3, "ms")
     );
+    eprintln!("lwr_driver: {lag}");
     if let Some(c) = &controller {
         eprintln!("deformation_controller: exit: {}", c.control.counters);
     }
     eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
+}
+
+/// How far behind the KRC the applied commands are, in measurements: 0 when the command answers this very
+/// measurement (composed), 1 when it answers the one before (the best a controller of its own can do,
+/// over DDS), more when its answer came late. Also the KRC's period as the driver sees it (between
+/// measurement stamps): with a controller of its own, the command age includes it.
+struct CommandLag {
+    /// The stamps of the last measurements, the newest at `count % RECENT`.
+    recent: [f64; RECENT],
+    count: usize,
+    /// Applied commands 0, 1, 2 and ≥ 3 measurements behind.
+    behind: [u64; 4],
+    period: Histogram,
+}
+
+const RECENT: usize = 8;
+
+impl Default for CommandLag {
+    fn default() -> Self {
+        CommandLag { recent: [f64::NAN; RECENT], count: 0, behind: [0; 4], period: Histogram::new(1e-5, 100_000) }
+    }
+}
+
+impl CommandLag {
+    fn measured(&mut self, stamp: f64) {
+        if self.count > 0 {
+            self.period.record(stamp - self.recent[(self.count - 1) % RECENT]);
+        }
+        self.recent[self.count % RECENT] = stamp;
+        self.count += 1;
+    }
+
+    /// A command that answers the measurement stamped `answers` was applied to the newest measurement.
+    fn applied(&mut self, answers: f64) {
+        let back = (0..RECENT.min(self.count)).find(|k| self.recent[(self.count - 1 - k) % RECENT] == answers);
+        self.behind[back.unwrap_or(3).min(3)] += 1;
+    }
+}
+
+impl std::fmt::Display for CommandLag {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.behind.iter().sum::<u64>().max(1) as f64;
+        let [b0, b1, b2, b3] = self.behind.map(|b| 100.0 * b as f64 / n);
+        write!(
+            f,
+            "commands applied 0 / 1 / 2 / ≥3 measurements behind: {b0:.2} / {b1:.2} / {b2:.2} / {b3:.2} %; KRC period {}",
+            self.period.summary(1e3, "ms")
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::CommandLag;
+
+    #[test]
+    fn a_command_is_counted_by_the_measurements_it_is_behind() {
+        let mut lag = CommandLag::default();
+        for k in 0..20 {
+            lag.measured(k as f64 * 1e-3);
+            match k {
+                0..5 => lag.applied(k as f64 * 1e-3),         // this measurement (composed)
+                5..15 => lag.applied((k - 1) as f64 * 1e-3),  // the one before
+                15..18 => lag.applied((k - 2) as f64 * 1e-3), // late
+                _ => lag.applied(-1.0),                       // long gone
+            }
+        }
+        assert_eq!(lag.behind, [5, 10, 3, 2]);
+        assert!((lag.period.quantile(0.5) - 1e-3).abs() < 2e-5);
+        assert!(lag.to_string().contains("25.00 / 50.00 / 15.00 / 10.00 %"), "{lag}");
+    }
 }
