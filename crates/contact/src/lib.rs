@@ -41,10 +41,12 @@
 //!   the surface separates and the force is 0 rather than the law's negative value, so such samples
 //!   (f below the onset threshold) say nothing about the law and bias it.
 //! - Contact onset: [`OnsetDetector`] (threshold 1 N, confirmed by 3 consecutive readings).
-//! - Reporting as seed 000 does: [`fit_statistics`] and [`dispersion`].
+//! - Reporting as seed 000 does: [`fit_statistics`] and [`dispersion`]; its 205 loading paths and what a
+//!   model predicts at their ends: [`seed_000_experiments`], [`predicted_dispersion`].
 
 mod exponent;
 mod fit;
+mod loading_paths;
 mod model;
 mod onset;
 mod stats;
@@ -55,6 +57,10 @@ pub use exponent::{DampingExponent, estimate_contact_offset, estimate_exponent, 
 pub use fit::{
     Fit, FitConfig, Moments, Prior, Sample, fit, fit_folds, fitness, fold_moments, fold_of, least_squares_qr,
     regressors, robust_least_squares,
+};
+pub use loading_paths::{
+    CONVERGENCE_ANGLE, FINAL_NORMAL_FORCE, Family, LoadingPath, SET_ANGLES, convergence_points, corner_path,
+    forces_at_end, predicted_dispersion, seed_000_experiments,
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, gravity_change,
