@@ -11,10 +11,12 @@
 
 mod krc;
 mod sensor;
+mod specimen;
 mod surface;
 
 pub use krc::{Krc, KrcConfig, KrcEvent, QualityPolicy};
 pub use sensor::{FtSensor, FtSensorConfig};
+pub use specimen::{BenchRun, BenchSample, SpecimenBench, SpecimenConfig, ZERO_THRESHOLD};
 pub use surface::{Contact, Surface, SurfaceConfig};
 
 use nalgebra::{Isometry3, Vector3};
