@@ -7,6 +7,7 @@ mod discrepancy_cmd;
 mod discrepancy_figures;
 mod force_cmd;
 mod identify_cmd;
+mod loading_paths_cmd;
 mod model_cmd;
 mod record_cmd;
 
@@ -44,6 +45,9 @@ enum Command {
     /// Send a force command to the running deformation controller (over DDS) and report the force
     /// reached at the end of the move.
     Force(force_cmd::ForceArgs),
+    /// Seed 000's 205 loading-path experiments on the simulated half-ball: Tables I–III beside the
+    /// paper's, and the convergence-point spread the Mindlin–Deresiewicz law predicts.
+    LoadingPaths(loading_paths_cmd::LoadingPathsArgs),
     /// Benchmarks of the product's hot paths.
     Bench {
         #[command(subcommand)]
@@ -60,6 +64,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Replay(args) => record_cmd::replay(&args),
         Command::Model(args) => model_cmd::run(args),
         Command::Force(args) => force_cmd::run(&args),
+        Command::LoadingPaths(args) => loading_paths_cmd::run(&args),
         Command::Bench { what } => bench::run(what),
     }
 }

@@ -60,7 +60,7 @@ pub use fit::{
 };
 pub use loading_paths::{
     CONVERGENCE_ANGLE, FINAL_NORMAL_FORCE, Family, LoadingPath, SET_ANGLES, convergence_points, corner_path,
-    forces_at_end, predicted_dispersion, seed_000_experiments,
+    fit_normal_stiffness, fit_tangential_stiffness, forces_at_end, predicted_dispersion, seed_000_experiments,
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, gravity_change,

@@ -171,6 +171,32 @@ pub fn predicted_dispersion(
     dispersion(&groups)
 }
 
+/// Seed 000's eq. 4 normal part fitted by least squares: k_n of f_n = k_n δ_n^{3/2}, from (δ_n, f_n)
+/// samples (those with δ_n > 0). A model linear in its one parameter: k = Σ f x / Σ x², x = δ_n^{3/2}.
+pub fn fit_normal_stiffness(samples: &[(f64, f64)]) -> Result<f64, ContactError> {
+    fit_through_origin(samples.iter().filter(|s| s.0 > 0.0).map(|&(dn, f)| (dn.powf(1.5), f)), "k_n")
+}
+
+/// Seed 000's eq. 4 tangential part fitted by least squares: k_t of f_t = k_t √δ_n δ_t, from
+/// (δ_n, δ_t, f_t) samples (those with δ_n > 0).
+pub fn fit_tangential_stiffness(samples: &[(f64, f64, f64)]) -> Result<f64, ContactError> {
+    fit_through_origin(samples.iter().filter(|s| s.0 > 0.0).map(|&(dn, dt, f)| (dn.sqrt() * dt, f)), "k_t")
+}
+
+fn fit_through_origin(points: impl Iterator<Item = (f64, f64)>, name: &'static str) -> Result<f64, ContactError> {
+    let (mut xy, mut xx) = (0.0, 0.0);
+    for (x, y) in points {
+        if !(x.is_finite() && y.is_finite()) {
+            return Err(ContactError::NonFinite { name, value: if x.is_finite() { y } else { x } });
+        }
+        (xy, xx) = (xy + x * y, xx + x * x);
+    }
+    if xx <= 0.0 {
+        return Err(ContactError::NotEnoughData { kind: name });
+    }
+    Ok(xy / xx)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -182,6 +208,19 @@ mod tests {
         let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * per_mm, 0.0).unwrap();
         m.tangential = Some(Tangential { stiffness: 3.7482 * per_mm, ..law });
         m
+    }
+
+    #[test]
+    fn eq_4_fits_recover_the_constants_and_refuse_what_they_cannot_use() {
+        let normal: Vec<(f64, f64)> =
+            (1..50).map(|k| (k as f64 * 1e-5, 8.28e5 * (k as f64 * 1e-5f64).powf(1.5))).collect();
+        assert!((fit_normal_stiffness(&normal).unwrap() - 8.28e5).abs() < 1e-6);
+        let tangential: Vec<(f64, f64, f64)> = (1..50)
+            .map(|k| (k as f64 * 1e-5, k as f64 * 3e-6, 3.7e5 * (k as f64 * 1e-5f64).sqrt() * k as f64 * 3e-6))
+            .collect();
+        assert!((fit_tangential_stiffness(&tangential).unwrap() - 3.7e5).abs() < 1e-6);
+        assert!(fit_normal_stiffness(&[(0.0, 1.0), (-1e-3, 2.0)]).is_err());
+        assert!(fit_normal_stiffness(&[(1e-3, f64::NAN)]).is_err());
     }
 
     #[test]

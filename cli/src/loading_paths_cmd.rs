@@ -1,0 +1,325 @@
+//! `softcontact loading-paths`: seed 000's 205 loading-path experiments ("Modeling and Experimental
+//! Validation of a Compliant Contact Model…", section IV) on the simulated specimen, its Tables I–III
+//! beside the paper's, and what the paper could not model: the spread at the convergence points, as the
+//! Mindlin–Deresiewicz law fitted from the linear paths alone predicts it.
+//!
+//! The stage here is the paper's: an ideal displacement stage (crates/sim `SpecimenBench`). The arm as
+//! the stage (issue 19, must-have 2) is not built yet; its runs will be graded against this one.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use serde::Serialize;
+use softcontact_contact::{
+    ContactModel, Family, FitStatistics, Kind, Tangential, TangentialLaw, dispersion, fit_normal_stiffness,
+    fit_statistics, fit_tangential_stiffness, predicted_dispersion, seed_000_experiments,
+};
+use softcontact_sim::{SpecimenBench, SpecimenConfig};
+
+/// N/mm^{3/2} → N/m^{3/2}.
+const PER_MM: f64 = 31_622.776_601_683_792;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct LoadingPathsArgs {
+    /// Seed of the sensor noise and the creep draws.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The specimen's tangential law.
+    #[arg(long, value_enum, default_value_t = LawArg::MindlinDeresiewicz)]
+    law: LawArg,
+    /// Standard deviation of the creep of the zero over one experiment [µm].
+    #[arg(long, default_value_t = 5.0)]
+    creep_um: f64,
+    /// Sensor axes turned from the pushing axes in the loading plane [°].
+    #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
+    misalignment_deg: f64,
+    /// White noise of each force channel [N].
+    #[arg(long, default_value_t = 0.005)]
+    noise: f64,
+    /// Write every table as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+enum LawArg {
+    Walton,
+    MindlinDeresiewicz,
+}
+
+/// The specimen's truth (seed 000's linear-path fit, k_n 8.280 and k_t 3.7482 N/mm^{3/2}; μ 0.9 for
+/// rubber on sandpaper) — what the fits are compared with, never read by them.
+fn specimen(law: LawArg) -> ContactModel {
+    let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * PER_MM, 0.0).expect("a valid model");
+    m.tangential = Some(match law {
+        LawArg::Walton => Tangential::walton(3.7482 * PER_MM, 0.9),
+        LawArg::MindlinDeresiewicz => Tangential::mindlin_deresiewicz(3.7482 * PER_MM, 0.9),
+    });
+    m
+}
+
+/// Seed 000's numbers, measured on real rubber.
+const PAPER_TABLE_I: Stats =
+    Stats { r_squared: 0.9997, mean_abs: 0.1677, mean_norm_pct: 3.421, max: 0.7523, min: -0.8248 };
+const PAPER_TABLE_II: [Stats; 2] = [
+    Stats { r_squared: 0.9993, mean_abs: 0.2326, mean_norm_pct: 5.21, max: 1.187, min: -2.241 },
+    Stats { r_squared: 0.9982, mean_abs: 0.0482, mean_norm_pct: 13.02, max: 0.1439, min: -0.2036 },
+];
+const PAPER_TABLE_III: [(f64, f64); 3] = [(10.28, 1.8), (9.28, 3.6), (4.61, 1.0)];
+const PAPER_K: (f64, f64, f64) = (8.506, 8.280, 3.7482);
+
+#[derive(Serialize, Debug, Clone, Copy, PartialEq)]
+struct Stats {
+    r_squared: f64,
+    mean_abs: f64,
+    mean_norm_pct: f64,
+    max: f64,
+    min: f64,
+}
+
+impl From<FitStatistics> for Stats {
+    fn from(s: FitStatistics) -> Self {
+        Stats {
+            r_squared: s.r_squared,
+            mean_abs: s.mean_abs_error,
+            mean_norm_pct: 100.0 * s.mean_normalized_abs_error,
+            max: s.max_error,
+            min: s.min_error,
+        }
+    }
+}
+
+#[derive(Serialize, Debug, Clone, Copy)]
+struct SetRow {
+    set: u8,
+    measured_total: f64,
+    measured_mean_norm_pct: f64,
+    /// Walton's prediction: one force per point.
+    walton_total: f64,
+    /// Mindlin–Deresiewicz from the linear-path fit (no microslip: μ is not identifiable from them).
+    mindlin_deresiewicz_total: f64,
+    mindlin_deresiewicz_mean_norm_pct: f64,
+    paper_total: f64,
+    paper_mean_norm_pct: f64,
+}
+
+/// Everything the command prints, as JSON (SI units, forces in N; stiffnesses in N/mm^{3/2} as the paper).
+#[derive(Serialize, Debug)]
+struct Report {
+    comparison: &'static str,
+    stage: &'static str,
+    specimen_law: &'static str,
+    seed: u64,
+    creep_um: f64,
+    misalignment_deg: f64,
+    noise: f64,
+    experiments: usize,
+    k_n_normal: f64,
+    k_n_linear: f64,
+    k_t_linear: f64,
+    paper_k_n_normal: f64,
+    paper_k_n_linear: f64,
+    paper_k_t_linear: f64,
+    table_i: Stats,
+    table_ii_normal: Stats,
+    table_ii_tangential: Stats,
+    table_iii: Vec<SetRow>,
+}
+
+fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Report> {
+    anyhow::ensure!(args.creep_um.is_finite() && args.creep_um >= 0.0, "--creep-um must be ≥ 0");
+    anyhow::ensure!(args.misalignment_deg.abs() <= 5.0, "--misalignment-deg must be within ±5°");
+    anyhow::ensure!(args.noise.is_finite() && args.noise >= 0.0 && args.noise < 1.0, "--noise must be in [0, 1) N");
+    let truth = specimen(args.law);
+    let paths = seed_000_experiments(&truth, 2e-3)?;
+    let mut bench = SpecimenBench::new(SpecimenConfig {
+        creep_sd: args.creep_um * 1e-6,
+        misalignment: args.misalignment_deg.to_radians(),
+        noise: args.noise,
+        ..SpecimenConfig::seed_000(truth.clone(), args.seed)
+    })?;
+    let runs = paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?;
+    let of =
+        |family: Family| paths.iter().zip(&runs).filter(move |(p, _)| p.family == family).flat_map(|(_, r)| &r.samples);
+
+    // Table I: k_n from the normal loadings.
+    let normal: Vec<(f64, f64)> = of(Family::Normal).map(|s| (s.normal_displacement, s.normal_force)).collect();
+    let k_n_normal = fit_normal_stiffness(&normal)?;
+    let table_i = stats(&normal, |dn| k_n_normal * dn.max(0.0).powf(1.5))?;
+    // Table II: k_n and k_t from the linear paths.
+    let linear: Vec<_> = of(Family::Linear).collect();
+    let linear_normal: Vec<(f64, f64)> = linear.iter().map(|s| (s.normal_displacement, s.normal_force)).collect();
+    let linear_tangential: Vec<(f64, f64, f64)> =
+        linear.iter().map(|s| (s.normal_displacement, s.tangential_displacement, s.tangential_force)).collect();
+    let k_n_linear = fit_normal_stiffness(&linear_normal)?;
+    let k_t_linear = fit_tangential_stiffness(&linear_tangential)?;
+    let table_ii_normal = stats(&linear_normal, |dn| k_n_linear * dn.max(0.0).powf(1.5))?;
+    let tangential: Vec<(f64, f64)> =
+        linear_tangential.iter().map(|&(dn, dt, f)| (dn.max(0.0).sqrt() * dt, f)).collect();
+    let table_ii_tangential = stats(&tangential, |x| k_t_linear * x)?;
+
+    // Table III: the spread of the measured forces at each convergence point, and the predictions of
+    // the laws fitted from the linear paths (Walton: none).
+    let mut fitted = ContactModel::new(Kind::HertzWalton, k_n_linear, 0.0)?;
+    let mut table_iii = Vec::new();
+    for set in 1..=3u8 {
+        let mut groups: Vec<Vec<(f64, f64)>> = vec![Vec::new(); 5];
+        for (p, r) in paths.iter().zip(&runs).filter(|(p, _)| p.family == Family::TwoSegment(set)) {
+            let end = r.samples.last().context("an experiment without samples")?;
+            groups[p.point.context("a two-segment path without its point")?]
+                .push((end.normal_force, end.tangential_force));
+        }
+        let measured = dispersion(&groups)?;
+        fitted.tangential = Some(Tangential::walton(k_t_linear, f64::MAX));
+        let walton = predicted_dispersion(&fitted, &paths, set, 50)?;
+        fitted.tangential = Some(Tangential::mindlin_deresiewicz(k_t_linear, 1e9));
+        let md = predicted_dispersion(&fitted, &paths, set, 50)?;
+        let (paper_total, paper_mean_norm_pct) = PAPER_TABLE_III[set as usize - 1];
+        table_iii.push(SetRow {
+            set,
+            measured_total: measured.total_error,
+            measured_mean_norm_pct: 100.0 * measured.mean_normalized_error,
+            walton_total: walton.total_error,
+            mindlin_deresiewicz_total: md.total_error,
+            mindlin_deresiewicz_mean_norm_pct: 100.0 * md.mean_normalized_error,
+            paper_total,
+            paper_mean_norm_pct,
+        });
+    }
+    Ok(Report {
+        comparison: "simulation vs seed 000's bench (real rubber)",
+        stage: "ideal displacement stage (the paper's); the arm as the stage is not built yet",
+        specimen_law: truth.tangential.map_or(TangentialLaw::Walton, |t| t.law).id(),
+        seed: args.seed,
+        creep_um: args.creep_um,
+        misalignment_deg: args.misalignment_deg,
+        noise: args.noise,
+        experiments: paths.len(),
+        k_n_normal: k_n_normal / PER_MM,
+        k_n_linear: k_n_linear / PER_MM,
+        k_t_linear: k_t_linear / PER_MM,
+        paper_k_n_normal: PAPER_K.0,
+        paper_k_n_linear: PAPER_K.1,
+        paper_k_t_linear: PAPER_K.2,
+        table_i,
+        table_ii_normal,
+        table_ii_tangential,
+        table_iii,
+    })
+}
+
+/// Seed 000's statistics of the measured forces f against the fit's predictions at x, for (x, f) samples.
+fn stats(samples: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> anyhow::Result<Stats> {
+    let measured: Vec<f64> = samples.iter().map(|s| s.1).collect();
+    let predicted: Vec<f64> = samples.iter().map(|s| predict(s.0)).collect();
+    Ok(fit_statistics(&measured, &predicted)?.into())
+}
+
+pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
+    let r = experiments(args)?;
+    println!("Seed 000's loading-path experiments, {} of them — {}; stage: {}.", r.experiments, r.comparison, r.stage);
+    println!(
+        "Specimen: Hertz + {} (k_n 8.280, k_t 3.7482 N/mm^1.5, μ 0.9), creep sd {} µm, misalignment {}°, noise {} N, seed {}.\n",
+        r.specimen_law, r.creep_um, r.misalignment_deg, r.noise, r.seed
+    );
+    println!("Fitted stiffness [N/mm^1.5]      simulation   paper");
+    println!("  k_n, normal loadings           {:>10.3}   {:>6.3}", r.k_n_normal, r.paper_k_n_normal);
+    println!("  k_n, linear paths              {:>10.3}   {:>6.3}", r.k_n_linear, r.paper_k_n_linear);
+    println!("  k_t, linear paths              {:>10.4}   {:>6.4}\n", r.k_t_linear, r.paper_k_t_linear);
+    let row = |name: &str, s: &Stats| {
+        println!(
+            "  {name:<18} {:>7.4} {:>9.4} N {:>8.3} % {:>8.4} N {:>8.4} N",
+            s.r_squared, s.mean_abs, s.mean_norm_pct, s.max, s.min
+        )
+    };
+    println!("TABLE I  normal loading path statistics");
+    println!("  {:<18} {:>7} {:>11} {:>10} {:>10} {:>10}", "", "R²", "mean abs", "mean norm", "max", "min");
+    row("simulation", &r.table_i);
+    row("paper", &PAPER_TABLE_I);
+    println!("\nTABLE II  linear loading path statistics, normal & tangential fits");
+    row("normal, simulation", &r.table_ii_normal);
+    row("normal, paper", &PAPER_TABLE_II[0]);
+    row("tan., simulation", &r.table_ii_tangential);
+    row("tan., paper", &PAPER_TABLE_II[1]);
+    println!("\nTABLE III  two-segment path dispersion at the convergence points (total N / mean norm %)");
+    println!("  set   simulation        Walton   Mindlin-Deresiewicz   paper");
+    for s in &r.table_iii {
+        println!(
+            "  {}   {:>6.2} N {:>5.2} %   {:>5.2} N   {:>6.2} N {:>5.2} %      {:>5.2} N {:>4.1} %",
+            s.set,
+            s.measured_total,
+            s.measured_mean_norm_pct,
+            s.walton_total,
+            s.mindlin_deresiewicz_total,
+            s.mindlin_deresiewicz_mean_norm_pct,
+            s.paper_total,
+            s.paper_mean_norm_pct
+        );
+    }
+    println!(
+        "  (predictions from the linear-path fit alone: Walton's law has one force per point; Mindlin-Deresiewicz"
+    );
+    println!("   without microslip, an upper bound — friction is not identifiable on straight paths)");
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&r)? + "\n")
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("\nJSON: {}", path.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn args(law: LawArg, creep_um: f64, misalignment_deg: f64, noise: f64) -> LoadingPathsArgs {
+        LoadingPathsArgs { seed: 3, law, creep_um, misalignment_deg, noise, json: None }
+    }
+
+    #[test]
+    fn the_normal_and_linear_fits_agree_and_walton_predicts_no_spread() {
+        let r = experiments(&args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005)).unwrap();
+        assert_eq!(r.experiments, 205);
+        // Seed 000: 8.506 vs 8.280 (2.7 %); goal within 3 %.
+        assert!((r.k_n_normal / r.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", r.k_n_normal, r.k_n_linear);
+        assert!(r.table_i.r_squared > 0.999 && r.table_ii_tangential.r_squared > 0.99, "{r:?}");
+        for s in &r.table_iii {
+            assert!(s.walton_total < 1e-9, "{s:?}");
+            assert!(s.measured_total > 0.0 && s.mindlin_deresiewicz_total > 0.0, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn on_an_ideal_bench_the_spread_is_the_laws() {
+        // Walton's specimen: every path to a point ends at the same force (no spread at all).
+        let w = experiments(&args(LawArg::Walton, 0.0, 0.0, 0.0)).unwrap();
+        for s in &w.table_iii {
+            assert!(s.measured_total < 1e-9, "Walton's specimen spreads: {s:?}");
+        }
+        // Mindlin–Deresiewicz's: the spread predicted from the linear paths alone, without microslip (μ is
+        // not identifiable on straight paths), bounds the measured one from above; microslip on the
+        // tangential segments takes a little off it.
+        let md = experiments(&args(LawArg::MindlinDeresiewicz, 0.0, 0.0, 0.0)).unwrap();
+        for s in &md.table_iii {
+            let ratio = s.measured_total / s.mindlin_deresiewicz_total;
+            assert!(
+                ratio > 0.75 && ratio <= 1.0,
+                "set {}: measured {} vs predicted {}",
+                s.set,
+                s.measured_total,
+                s.mindlin_deresiewicz_total
+            );
+        }
+        // Sets narrow from 1 to 3, as in the paper's sets 1 and 3.
+        assert!(md.table_iii[0].measured_total > md.table_iii[1].measured_total);
+        assert!(md.table_iii[1].measured_total > md.table_iii[2].measured_total);
+    }
+
+    #[test]
+    fn bad_arguments_are_refused() {
+        assert!(experiments(&args(LawArg::Walton, -1.0, 0.0, 0.0)).is_err());
+        assert!(experiments(&args(LawArg::Walton, f64::NAN, 0.0, 0.0)).is_err());
+        assert!(experiments(&args(LawArg::Walton, 0.0, 90.0, 0.0)).is_err());
+        assert!(experiments(&args(LawArg::Walton, 0.0, 0.0, f64::INFINITY)).is_err());
+    }
+}
