@@ -11,10 +11,12 @@ use std::path::PathBuf;
 use anyhow::Context;
 use serde::Serialize;
 use softcontact_contact::{
-    ContactModel, Family, FitStatistics, Kind, Tangential, TangentialLaw, dispersion, fit_normal_stiffness,
-    fit_statistics, fit_tangential_stiffness, predicted_dispersion, seed_000_experiments,
+    ContactModel, Family, FitStatistics, Kind, LoadingPath, Tangential, TangentialLaw, dispersion,
+    fit_normal_stiffness, fit_statistics, fit_tangential_stiffness, predicted_dispersion, seed_000_experiments,
 };
-use softcontact_sim::{SpecimenBench, SpecimenConfig};
+use softcontact_sim::{BenchRun, SpecimenBench, SpecimenConfig};
+
+use crate::loading_paths_figures;
 
 /// N/mm^{3/2} → N/m^{3/2}.
 const PER_MM: f64 = 31_622.776_601_683_792;
@@ -36,6 +38,9 @@ pub struct LoadingPathsArgs {
     /// White noise of each force channel [N].
     #[arg(long, default_value_t = 0.005)]
     noise: f64,
+    /// Write figures like the paper's Figs. 4–8 (paths, fits, convergence points) into this folder.
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Write every table as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -126,7 +131,14 @@ struct Report {
     table_iii: Vec<SetRow>,
 }
 
-fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Report> {
+/// The report, and the experiments behind it (for the figures).
+struct Outcome {
+    report: Report,
+    paths: Vec<LoadingPath>,
+    runs: Vec<BenchRun>,
+}
+
+fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
     anyhow::ensure!(args.creep_um.is_finite() && args.creep_um >= 0.0, "--creep-um must be ≥ 0");
     anyhow::ensure!(args.misalignment_deg.abs() <= 5.0, "--misalignment-deg must be within ±5°");
     anyhow::ensure!(args.noise.is_finite() && args.noise >= 0.0 && args.noise < 1.0, "--noise must be in [0, 1) N");
@@ -186,7 +198,7 @@ fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Report> {
             paper_mean_norm_pct,
         });
     }
-    Ok(Report {
+    let report = Report {
         comparison: "simulation vs seed 000's bench (real rubber)",
         stage: "ideal displacement stage (the paper's); the arm as the stage is not built yet",
         specimen_law: truth.tangential.map_or(TangentialLaw::Walton, |t| t.law).id(),
@@ -205,7 +217,8 @@ fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Report> {
         table_ii_normal,
         table_ii_tangential,
         table_iii,
-    })
+    };
+    Ok(Outcome { report, paths, runs })
 }
 
 /// Seed 000's statistics of the measured forces f against the fit's predictions at x, for (x, f) samples.
@@ -216,7 +229,7 @@ fn stats(samples: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> anyhow::Result
 }
 
 pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
-    let r = experiments(args)?;
+    let Outcome { report: r, paths, runs } = experiments(args)?;
     println!("Seed 000's loading-path experiments, {} of them — {}; stage: {}.", r.experiments, r.comparison, r.stage);
     println!(
         "Specimen: Hertz + {} (k_n 8.280, k_t 3.7482 N/mm^1.5, μ 0.9), creep sd {} µm, misalignment {}°, noise {} N, seed {}.\n",
@@ -260,6 +273,17 @@ pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
         "  (predictions from the linear-path fit alone: Walton's law has one force per point; Mindlin-Deresiewicz"
     );
     println!("   without microslip, an upper bound — friction is not identifiable on straight paths)");
+    if let Some(out) = &args.out {
+        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+        let fits = loading_paths_figures::Fits {
+            k_n_normal: r.k_n_normal * PER_MM,
+            k_n_linear: r.k_n_linear * PER_MM,
+            k_t_linear: r.k_t_linear * PER_MM,
+        };
+        for written in loading_paths_figures::write(out, &paths, &runs, &fits)? {
+            println!("figure: {}", written.display());
+        }
+    }
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_string_pretty(&r)? + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
@@ -273,12 +297,12 @@ mod tests {
     use super::*;
 
     fn args(law: LawArg, creep_um: f64, misalignment_deg: f64, noise: f64) -> LoadingPathsArgs {
-        LoadingPathsArgs { seed: 3, law, creep_um, misalignment_deg, noise, json: None }
+        LoadingPathsArgs { seed: 3, law, creep_um, misalignment_deg, noise, out: None, json: None }
     }
 
     #[test]
     fn the_normal_and_linear_fits_agree_and_walton_predicts_no_spread() {
-        let r = experiments(&args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005)).unwrap();
+        let r = experiments(&args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005)).unwrap().report;
         assert_eq!(r.experiments, 205);
         // Seed 000: 8.506 vs 8.280 (2.7 %); goal within 3 %.
         assert!((r.k_n_normal / r.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", r.k_n_normal, r.k_n_linear);
@@ -292,14 +316,14 @@ mod tests {
     #[test]
     fn on_an_ideal_bench_the_spread_is_the_laws() {
         // Walton's specimen: every path to a point ends at the same force (no spread at all).
-        let w = experiments(&args(LawArg::Walton, 0.0, 0.0, 0.0)).unwrap();
+        let w = experiments(&args(LawArg::Walton, 0.0, 0.0, 0.0)).unwrap().report;
         for s in &w.table_iii {
             assert!(s.measured_total < 1e-9, "Walton's specimen spreads: {s:?}");
         }
         // Mindlin–Deresiewicz's: the spread predicted from the linear paths alone, without microslip (μ is
         // not identifiable on straight paths), bounds the measured one from above; microslip on the
         // tangential segments takes a little off it.
-        let md = experiments(&args(LawArg::MindlinDeresiewicz, 0.0, 0.0, 0.0)).unwrap();
+        let md = experiments(&args(LawArg::MindlinDeresiewicz, 0.0, 0.0, 0.0)).unwrap().report;
         for s in &md.table_iii {
             let ratio = s.measured_total / s.mindlin_deresiewicz_total;
             assert!(
@@ -313,6 +337,27 @@ mod tests {
         // Sets narrow from 1 to 3, as in the paper's sets 1 and 3.
         assert!(md.table_iii[0].measured_total > md.table_iii[1].measured_total);
         assert!(md.table_iii[1].measured_total > md.table_iii[2].measured_total);
+    }
+
+    #[test]
+    fn the_figures_are_written_and_stay_small() {
+        let o = experiments(&args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005)).unwrap();
+        let dir = std::env::temp_dir().join(format!("softcontact-loading-paths-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let per_mm = PER_MM;
+        let fits = loading_paths_figures::Fits {
+            k_n_normal: o.report.k_n_normal * per_mm,
+            k_n_linear: o.report.k_n_linear * per_mm,
+            k_t_linear: o.report.k_t_linear * per_mm,
+        };
+        let written = loading_paths_figures::write(&dir, &o.paths, &o.runs, &fits).unwrap();
+        assert_eq!(written.len(), 4);
+        for f in &written {
+            let text = std::fs::read_to_string(f).unwrap();
+            assert!(text.starts_with("<svg") && text.contains("</svg>"), "{}", f.display());
+            assert!(text.len() < 2_000_000, "{}: {} bytes", f.display(), text.len());
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -8,6 +8,7 @@ mod discrepancy_figures;
 mod force_cmd;
 mod identify_cmd;
 mod loading_paths_cmd;
+mod loading_paths_figures;
 mod model_cmd;
 mod record_cmd;
 
