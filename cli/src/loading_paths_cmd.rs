@@ -99,6 +99,11 @@ struct SetRow {
     set: u8,
     measured_total: f64,
     measured_mean_norm_pct: f64,
+    /// Measured with the specimen's law alone (no creep, misalignment or noise).
+    law_alone_total: f64,
+    /// What the creep alone adds to that, and what the misalignment alone adds.
+    creep_adds: f64,
+    misalignment_adds: f64,
     /// Walton's prediction: one force per point.
     walton_total: f64,
     /// Mindlin–Deresiewicz from the linear-path fit (no microslip: μ is not identifiable from them).
@@ -173,14 +178,23 @@ fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
     // Table III: the spread of the measured forces at each convergence point, and the predictions of
     // the laws fitted from the linear paths (Walton: none).
     let mut fitted = ContactModel::new(Kind::HertzWalton, k_n_linear, 0.0)?;
+    // The spread each named error adds: the same experiments with the specimen's law alone, then with
+    // only the creep, then with only the misalignment (same seed).
+    let spread_of = |creep_um: f64, misalignment_deg: f64| -> anyhow::Result<Vec<f64>> {
+        let mut bench = SpecimenBench::new(SpecimenConfig {
+            creep_sd: creep_um * 1e-6,
+            misalignment: misalignment_deg.to_radians(),
+            ..SpecimenConfig::seed_000(truth.clone(), args.seed)
+        })?;
+        let runs = paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?;
+        (1..=3).map(|set| Ok(dispersion(&convergence_groups(&paths, &runs, set)?)?.total_error)).collect()
+    };
+    let law_alone = spread_of(0.0, 0.0)?;
+    let creep_only = spread_of(args.creep_um, 0.0)?;
+    let misalignment_only = spread_of(0.0, args.misalignment_deg)?;
     let mut table_iii = Vec::new();
     for set in 1..=3u8 {
-        let mut groups: Vec<Vec<(f64, f64)>> = vec![Vec::new(); 5];
-        for (p, r) in paths.iter().zip(&runs).filter(|(p, _)| p.family == Family::TwoSegment(set)) {
-            let end = r.samples.last().context("an experiment without samples")?;
-            groups[p.point.context("a two-segment path without its point")?]
-                .push((end.normal_force, end.tangential_force));
-        }
+        let groups = convergence_groups(&paths, &runs, set)?;
         let measured = dispersion(&groups)?;
         fitted.tangential = Some(Tangential::walton(k_t_linear, f64::MAX));
         let walton = predicted_dispersion(&fitted, &paths, set, 50)?;
@@ -191,6 +205,9 @@ fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
             set,
             measured_total: measured.total_error,
             measured_mean_norm_pct: 100.0 * measured.mean_normalized_error,
+            law_alone_total: law_alone[set as usize - 1],
+            creep_adds: creep_only[set as usize - 1] - law_alone[set as usize - 1],
+            misalignment_adds: misalignment_only[set as usize - 1] - law_alone[set as usize - 1],
             walton_total: walton.total_error,
             mindlin_deresiewicz_total: md.total_error,
             mindlin_deresiewicz_mean_norm_pct: 100.0 * md.mean_normalized_error,
@@ -219,6 +236,16 @@ fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
         table_iii,
     };
     Ok(Outcome { report, paths, runs })
+}
+
+/// The forces at the end of every two-segment path of `set`, grouped by convergence point.
+fn convergence_groups(paths: &[LoadingPath], runs: &[BenchRun], set: u8) -> anyhow::Result<Vec<Vec<(f64, f64)>>> {
+    let mut groups: Vec<Vec<(f64, f64)>> = vec![Vec::new(); 5];
+    for (p, r) in paths.iter().zip(runs).filter(|(p, _)| p.family == Family::TwoSegment(set)) {
+        let end = r.samples.last().context("an experiment without samples")?;
+        groups[p.point.context("a two-segment path without its point")?].push((end.normal_force, end.tangential_force));
+    }
+    Ok(groups)
 }
 
 /// Seed 000's statistics of the measured forces f against the fit's predictions at x, for (x, f) samples.
@@ -255,13 +282,16 @@ pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
     row("tan., simulation", &r.table_ii_tangential);
     row("tan., paper", &PAPER_TABLE_II[1]);
     println!("\nTABLE III  two-segment path dispersion at the convergence points (total N / mean norm %)");
-    println!("  set   simulation        Walton   Mindlin-Deresiewicz   paper");
+    println!("  set   simulation        law alone  +creep  +misalign.   Walton   Mindlin-Deresiewicz   paper");
     for s in &r.table_iii {
         println!(
-            "  {}   {:>6.2} N {:>5.2} %   {:>5.2} N   {:>6.2} N {:>5.2} %      {:>5.2} N {:>4.1} %",
+            "  {}   {:>6.2} N {:>5.2} %   {:>6.2} N {:>+6.2} N {:>+6.2} N     {:>5.2} N   {:>6.2} N {:>5.2} %      {:>5.2} N {:>4.1} %",
             s.set,
             s.measured_total,
             s.measured_mean_norm_pct,
+            s.law_alone_total,
+            s.creep_adds,
+            s.misalignment_adds,
             s.walton_total,
             s.mindlin_deresiewicz_total,
             s.mindlin_deresiewicz_mean_norm_pct,
@@ -308,6 +338,9 @@ mod tests {
         assert!((r.k_n_normal / r.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", r.k_n_normal, r.k_n_linear);
         assert!(r.table_i.r_squared > 0.999 && r.table_ii_tangential.r_squared > 0.99, "{r:?}");
         for s in &r.table_iii {
+            // A misaligned sensor turns every reading by the same angle: distances between the readings at
+            // a point, so the spread, stay (up to the resolution); creep moves each path's zero: it spreads.
+            assert!(s.misalignment_adds.abs() < 0.01 && s.creep_adds > 0.1, "{s:?}");
             assert!(s.walton_total < 1e-9, "{s:?}");
             assert!(s.measured_total > 0.0 && s.mindlin_deresiewicz_total > 0.0, "{s:?}");
         }
