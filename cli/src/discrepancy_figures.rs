@@ -49,7 +49,7 @@ pub fn write(out: &Path, figures: &Figures) -> anyhow::Result<Vec<PathBuf>> {
 }
 
 /// Like demo::figures::range, ignoring non-finite values.
-fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+pub(crate) fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) =
         values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
     if lo > hi {

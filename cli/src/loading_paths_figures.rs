@@ -10,6 +10,8 @@ use plotters::prelude::*;
 use softcontact_contact::{ContactModel, Family, Kind, LoadingPath, Tangential, forces_at_end};
 use softcontact_sim::BenchRun;
 
+use crate::discrepancy_figures::range;
+
 /// Fitted constants [N/m^{3/2}].
 pub struct Fits {
     pub k_n_normal: f64,
@@ -29,16 +31,6 @@ pub fn write(out: &Path, paths: &[LoadingPath], runs: &[BenchRun], fits: &Fits) 
         linear_figure(out, paths, runs, fits)?,
         convergence_figure(out, paths, runs, fits)?,
     ])
-}
-
-fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
-    let (lo, hi) =
-        values.filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    if lo > hi {
-        return 0.0..1.0;
-    }
-    let pad = ((hi - lo) * 0.05).max(1e-9);
-    (lo - pad)..(hi + pad)
 }
 
 /// Every experiment of `family`, each thinned to at most `PER_EXPERIMENT` samples, as (x, y).
