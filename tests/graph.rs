@@ -73,6 +73,112 @@ fn the_graph_reaches_force_commands_on_the_sponge() {
     let _ = std::fs::remove_dir_all(&logs);
 }
 
+/// The separate layout (`sim.sh --separate`: driver, F/T node and controller each a process, the torque
+/// loop over DDS) against a stranger on its DDS domain who does what an adversarial test did: joint states
+/// stamped 100 s ahead (which silenced the controller), then zero wrenches and torque commands copied from
+/// the live joint states with 8 N·m more on joint 4 (which drove the arm past a limit). Each node takes
+/// its streams from one writer (the first, while it is the only one): the controller goes on commanding,
+/// the stranger's samples are counted and refused, and no joint trips a fault.
+#[test]
+fn the_separate_layout_takes_nothing_from_a_stranger_on_its_domain() {
+    if std::env::var(SEPARATE_INSIDE).is_ok() {
+        return stranger_client();
+    }
+    let logs = std::env::temp_dir().join(format!("softcontact-separate-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&logs);
+    std::fs::create_dir_all(&logs).unwrap();
+    let passed = sim_sh(SEPARATE_TEST, &["--separate"], &logs, &[(SEPARATE_INSIDE, Path::new("1"))]);
+    assert!(passed, "the separate run failed (logs in {})", logs.display());
+    let driver = std::fs::read_to_string(logs.join("lwr_driver.log")).unwrap();
+    let controller = std::fs::read_to_string(logs.join("deformation_controller.log")).unwrap();
+    let count = |text: &str, key: &str| number_after(text, key).unwrap_or_else(|| panic!("`{key}` reported"));
+    let refused_commands = count(&driver, "commands_from_strangers: ");
+    let refused_states = count(&controller, "pinned ones: ");
+    let refused_wrenches = count(&controller, " joint states, ");
+    eprintln!(
+        "separate: refused from the stranger {refused_commands} torque commands, {refused_states} joint states, {refused_wrenches} wrenches"
+    );
+    assert!(refused_commands > 500.0 && refused_wrenches > 500.0 && refused_states >= 5.0);
+    assert_eq!(count(&driver, "overspeed_cycles: ") + count(&driver, "limit_cycles: "), 0.0, "{driver}");
+    let _ = std::fs::remove_dir_all(&logs);
+}
+
+/// Inside the separate graph: the stranger.
+fn stranger_client() {
+    use softcontact_msgs::geometry_msgs::WrenchStamped;
+    use softcontact_msgs::sensor_msgs::JointState;
+    let mut node = ros::node("stranger").unwrap();
+    let states =
+        ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
+    let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let commands =
+        ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+    let start = Instant::now();
+    let mut in_contact = 0;
+    while in_contact < 500 {
+        while let Ok(Some((s, _))) = states.take() {
+            in_contact += usize::from(s.in_contact);
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "no contact after 30 s");
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    // Writers of the stranger's own, created only now: the graph's nodes have pinned theirs.
+    let forged_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::reliable_qos()).unwrap();
+    let wrenches = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
+    let torques = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+    let stranger = torques.gid();
+    std::thread::sleep(Duration::from_millis(500)); // discovery
+    let newest = |joints: &ros2_client::Subscription<JointState>| {
+        let mut newest = None;
+        while let Ok(Some((js, _))) = joints.take() {
+            newest = Some(js);
+        }
+        newest
+    };
+    let live = loop {
+        if let Some(js) = newest(&joints) {
+            break js;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    for _ in 0..5 {
+        let mut ahead = live.clone();
+        ahead.header.stamp.sec += 100;
+        forged_states.publish(ahead).unwrap();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let model = softcontact_dynamics::lwr4::model();
+    let mut data = model.data();
+    let (mut controller_commands, mut forged) = (0, 0);
+    let attack = Instant::now();
+    while attack.elapsed() < Duration::from_secs(2) {
+        while let Ok(Some((_, info))) = commands.take() {
+            controller_commands += usize::from(info.publisher_gid() != stranger);
+        }
+        if let Some(js) = newest(&joints) {
+            let mut effort: Vec<f64> = model.gravity_torques(&mut data, &js.position).iter().copied().collect();
+            effort[3] += 8.0;
+            torques.publish(JointState { header: js.header.clone(), effort, ..Default::default() }).unwrap();
+            let mut w = WrenchStamped::default();
+            w.header.stamp = js.header.stamp;
+            w.header.frame_id = "ft_sensor".into();
+            wrenches.publish(w).unwrap();
+            forged += 1;
+        }
+        std::thread::sleep(Duration::from_micros(500));
+    }
+    eprintln!("stranger: {forged} forged commands and wrenches; the controller sent {controller_commands} in 2 s");
+    assert!(forged > 1000, "the stranger kept up: {forged}");
+    assert!(controller_commands > 1000, "the controller was not silenced: {controller_commands} commands in 2 s");
+    let mut still_in_contact = false;
+    while let Ok(Some((s, _))) = states.take() {
+        still_in_contact = s.in_contact;
+    }
+    assert!(still_in_contact, "the hand stayed on the sponge");
+}
+
+const SEPARATE_TEST: &str = "the_separate_layout_takes_nothing_from_a_stranger_on_its_domain";
+const SEPARATE_INSIDE: &str = "SOFTCONTACT_SEPARATE_CLIENT";
 const GRAPH_TEST: &str = "the_graph_reaches_force_commands_on_the_sponge";
 const LOCKSTEP_TEST: &str = "the_lockstep_graph_runs_the_controller_on_the_simulated_clock";
 

@@ -20,3 +20,4 @@ pub mod ros;
 pub mod sim_arm;
 pub mod stats;
 pub mod udp;
+pub mod writer_pin;

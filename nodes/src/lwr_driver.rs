@@ -3,10 +3,13 @@
 //! KRC expects — joint impedance with zero stiffness, the measured position mirrored, and the KRC's own
 //! gravity removed because the KRC adds it back.
 //!
-//! Safety, in this order: a command older than `watchdog_cycles` (or none yet), or a joint moving faster
-//! than `velocity_margin` of its limit, makes the driver hold the current position with a stiff joint
-//! impedance instead; torques are clipped to the joint limits; the driver never waits for the
-//! controller — it answers with the newest command it has and counts stale cycles.
+//! Safety, in this order: a joint moving faster than `velocity_margin` of its limit, or heading into the
+//! last `limit_margin` before its position limit, is a fault: the driver holds where the arm is, with no
+//! torque of any command, until the KRC starts a new session (as the KRC's own limit switches stop the
+//! arm until the operator acts). A command older than `watchdog_cycles` (or none yet) makes the driver
+//! hold the current position with a stiff joint impedance instead. A torque beyond its joint's limit is
+//! no command a sound controller sends: it is refused (hold), never clipped into one. The driver never
+//! waits for the controller — it answers with the newest command it has and counts stale cycles.
 //!
 //! A stale command's torque is handed over to the hold's spring: in contact the last torque is what
 //! balances the surface, and dropping it would let the surface throw the hand back against the spring
@@ -27,9 +30,12 @@
 //! - A measurement that is not physically plausible (sample time outside 0.5–100 ms, a joint beyond its
 //!   limit by more than [`POSITION_MARGIN`], a KRC gravity torque beyond twice the joint's limit) is
 //!   refused unanswered: the KRC's own fallback takes over.
-//! - A command that is not 7 finite torques makes the driver hold at once (the controller sends an
-//!   empty command when its tick failed); a command from another session, or older than the watchdog by
-//!   its stamp, is refused and the previous one ages out.
+//! - A command that is not 7 finite torques within the joints' limits makes the driver hold at once (the
+//!   controller sends an empty command when its tick failed); a command from another session, or older
+//!   than the watchdog by its stamp, is refused and the previous one ages out.
+//! - Commands over the network come from one writer: the first heard while it is the only one on the
+//!   topic, pinned for the KRC session ([`crate::writer_pin`]); any other writer's are refused and
+//!   counted, and the arm never answers to them.
 
 pub mod component;
 
@@ -40,6 +46,8 @@ use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 use softcontact_wire::WireError;
 use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
 
+use crate::writer_pin::{WriterId, WriterPin, WriterRefused};
+
 /// How far beyond its limit a measured joint position is still believed [rad] (the KRC's software
 /// limits lie inside the URDF's; more is a corrupt or forged datagram).
 pub const POSITION_MARGIN: f64 = 0.1;
@@ -48,6 +56,10 @@ pub const POSITION_MARGIN: f64 = 0.1;
 /// KRC chatters at 500 Hz (5000 on joints 1–4 did, at every start).
 pub const HOLD_STIFFNESS: [(f64, f64); 7] =
     [(500.0, 3000.0), (500.0, 3000.0), (200.0, 1500.0), (200.0, 1500.0), (50.0, 500.0), (20.0, 300.0), (20.0, 300.0)];
+/// How far ahead the position-limit guard looks at the present joint velocity [s]: the hold's spring
+/// stops a joint within about this long (ω ≈ 30–80 rad/s at the hold's stiffness), so a joint moving
+/// into its last `limit_margin` is stopped before its limit, not after.
+pub const LIMIT_LOOKAHEAD: f64 = 0.05;
 /// Sample times the KRC can be configured to (FRI: 1 to 100 ms), with a margin below.
 const SAMPLE_TIME: std::ops::RangeInclusive<f64> = 0.0005..=0.1;
 
@@ -66,8 +78,11 @@ pub struct DriverConfig {
     pub hold_damping: f64,
     /// Ask the KRL program to start command mode once the KRC grades the timing perfect.
     pub request_command_mode: bool,
-    /// Hold when a joint exceeds this fraction of its velocity limit.
+    /// A joint beyond this fraction of its velocity limit is a fault: hold until a new KRC session.
     pub velocity_margin: f64,
+    /// A joint heading within this much of its position limit [rad] (at its velocity, looking
+    /// [`LIMIT_LOOKAHEAD`] ahead) is a fault: hold until a new KRC session.
+    pub limit_margin: f64,
     /// Cycles over which a hold for a stale command fades out what its spring's preload cannot carry.
     pub hold_release_cycles: u64,
     /// The largest offset of the hold's set point from the held position [rad]: how much of a stale
@@ -90,6 +105,7 @@ impl Default for DriverConfig {
             hold_damping: 0.7,
             request_command_mode: true,
             velocity_margin: 0.9,
+            limit_margin: 0.1,
             hold_release_cycles: 500,
             hold_max_preload: 0.05,
             krc_address: None,
@@ -108,6 +124,10 @@ pub enum DriverError {
     CommandLength(usize),
     #[error("torque command holds a non-finite value for joint {0}")]
     NonFiniteCommand(usize),
+    #[error("torque command of {1} N·m for joint {0} is beyond its limit of {2} N·m")]
+    BeyondLimit(usize, f64, f64),
+    #[error("torque command refused: {0}")]
+    Writer(#[from] WriterRefused),
     #[error("torque command answers KRC session {0:?}, the present one is {1}")]
     OtherSession(Option<u32>, u32),
     #[error("torque command is {0:.4} s old, beyond the watchdog's {1:.4} s")]
@@ -135,13 +155,36 @@ pub struct DriverCounters {
     pub network_errors: u64,
     /// Cycles answered with a command older than the watchdog, or none.
     pub stale_cycles: u64,
-    /// Cycles where a torque was clipped to its limit.
-    pub clipped_cycles: u64,
-    /// Cycles held because a joint was too fast.
+    /// Cycles held for a fault: a joint too fast, or heading into its position limit.
     pub overspeed_cycles: u64,
+    pub limit_cycles: u64,
     pub commands_refused: u64,
     /// Commands refused for their age or their session (part of `commands_refused`).
     pub commands_too_old: u64,
+    /// Commands from another writer than the pinned one, or while writers were ambiguous (not part of
+    /// `commands_refused`: they never touch the present command).
+    pub commands_from_strangers: u64,
+}
+
+/// Why the driver holds until the KRC starts a new session.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// Joint (from 1) at this velocity [rad/s], beyond `velocity_margin` of its limit.
+    Overspeed { joint: usize, velocity: f64 },
+    /// Joint (from 1) at this position [rad] heading into its last `limit_margin`.
+    PositionLimit { joint: usize, position: f64 },
+}
+
+impl std::fmt::Display for Fault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Fault::Overspeed { joint, velocity } => write!(f, "joint {joint} overspeed at {velocity:.3} rad/s"),
+            Fault::PositionLimit { joint, position } => {
+                write!(f, "joint {joint} at {position:.4} rad, heading into its position limit")
+            }
+        }?;
+        write!(f, ": holding until the KRC starts a new session")
+    }
 }
 
 impl DriverCounters {
@@ -247,7 +290,10 @@ pub struct LwrDriver {
     peer: Option<SocketAddr>,
     session: u32,
     command: Option<([f64; 7], u64)>,
+    /// The writer of the network's commands, pinned for the session.
+    commander: WriterPin,
     hold: Option<Hold>,
+    fault: Option<Fault>,
     /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
     last_torque: [f32; 7],
     pub counters: DriverCounters,
@@ -275,7 +321,9 @@ impl LwrDriver {
             peer: None,
             session: 0,
             command: None,
+            commander: WriterPin::default(),
             hold: None,
+            fault: None,
             last_torque: [0.0; 7],
             counters: DriverCounters::default(),
         }
@@ -312,24 +360,34 @@ impl LwrDriver {
         }
     }
 
-    /// A new KRC session: forget the command, the hold and the velocity history.
+    /// The fault the driver holds for, if any.
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    /// A new KRC session: forget the command, its writer, the hold, a fault and the velocity history.
     pub fn begin_session(&mut self) {
         self.session = self.session.wrapping_add(1);
         self.counters.sessions += 1;
         self.last_msr = None;
         self.command = None;
+        self.commander.release();
         self.hold = None;
+        self.fault = None;
         self.last_torque = [0.0; 7];
     }
 
     /// A new total joint torque command (gravity included), answering the newest measurement. If it is
-    /// not 7 finite values it is refused and the driver holds from the next cycle on (an empty command
-    /// is the controller's way to ask for that hold).
+    /// not 7 finite values within the joints' effort limits it is refused and the driver holds from the
+    /// next cycle on (an empty command is the controller's way to ask for that hold).
     pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
         let refused = if effort.len() != 7 {
             Some(DriverError::CommandLength(effort.len()))
+        } else if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
+            Some(DriverError::NonFiniteCommand(i))
         } else {
-            effort.iter().position(|v| !v.is_finite()).map(DriverError::NonFiniteCommand)
+            let beyond = effort.iter().zip(&self.effort_limits).position(|(v, l)| !(v.abs() <= *l));
+            beyond.map(|i| DriverError::BeyondLimit(i, effort[i], self.effort_limits[i]))
         };
         if let Some(e) = refused {
             self.counters.commands_refused += 1;
@@ -346,10 +404,23 @@ impl LwrDriver {
         self.command = None;
     }
 
-    /// A command that arrived over the network: it names the session of the joint state it answers and
-    /// is `age` seconds old by that joint state's stamp. One from another session, or older than
-    /// `max_command_age` (or stamped as far in the future), is refused and the present command ages out as usual.
-    pub fn set_remote_command(&mut self, effort: &[f64], session: Option<u32>, age: f64) -> Result<(), DriverError> {
+    /// A command that arrived over the network from `writer` (`writers_matched`: how many writers the
+    /// middleware matched on the topic): it names the session of the joint state it answers and is `age`
+    /// seconds old by that joint state's stamp. One from a writer other than the session's pinned one is
+    /// refused and touches nothing; one from another session, or older than `max_command_age` (or stamped
+    /// as far in the future), is refused and the present command ages out as usual.
+    pub fn set_remote_command(
+        &mut self,
+        effort: &[f64],
+        session: Option<u32>,
+        age: f64,
+        writer: WriterId,
+        writers_matched: impl FnOnce() -> usize,
+    ) -> Result<(), DriverError> {
+        if let Err(e) = self.commander.admit(writer, writers_matched) {
+            self.counters.commands_from_strangers += 1;
+            return Err(e.into());
+        }
         if session != Some(self.session) {
             self.counters.commands_refused += 1;
             self.counters.commands_too_old += 1;
@@ -452,13 +523,15 @@ impl LwrDriver {
         Ok(Measured { m, output })
     }
 
-    /// The answer to a measurement: the present command when it is fresh and no joint overspeeds, the
-    /// hold otherwise, or, while the KRC does not command, what the KRC commands itself.
+    /// The answer to a measurement: the present command when it is fresh and no fault stands, the hold
+    /// otherwise, or, while the KRC does not command, what the KRC commands itself.
     pub fn answer(&mut self, measured: Measured) -> (fri::Command, DriverOutput) {
         let Measured { m, mut output } = measured;
         let (q, dq, seq) = (output.q, output.dq, output.sequence);
         let commanding = m.intf.state == InterfaceState::Command && m.robot.power != 0;
-        let overspeed = dq.iter().zip(&self.velocity_limits).any(|(v, l)| v.abs() > self.config.velocity_margin * l);
+        if commanding && self.fault.is_none() {
+            self.fault = self.fault_of(&q, &dq);
+        }
         let fresh = self.command.filter(|(_, at)| self.cycle.saturating_sub(*at) <= self.config.watchdog_cycles);
 
         let mut reply = fri::Command::default();
@@ -477,30 +550,31 @@ impl LwrDriver {
             self.hold = None;
             self.last_torque = [0.0; 7];
             holding = false;
-        } else if let (Some((effort, _)), false) = (fresh, overspeed) {
-            let mut clipped = false;
-            for (i, (&wanted, &limit)) in effort.iter().zip(&self.effort_limits).enumerate() {
-                let total = wanted.clamp(-limit, limit);
-                clipped |= total != wanted;
+        } else if let (Some((effort, _)), None) = (fresh, self.fault) {
+            for (i, total) in effort.iter().enumerate() {
                 // The KRC adds its own gravity model: send only the rest.
                 reply.add_jnt_trq[i] = (total - m.data.gravity[i] as f64) as f32;
             }
-            self.counters.clipped_cycles += u64::from(clipped);
             reply.jnt_pos = m.data.msr_jnt_pos;
             self.last_torque = reply.add_jnt_trq;
             self.hold = None;
             holding = false;
         } else {
             self.counters.stale_cycles += u64::from(fresh.is_none());
-            self.counters.overspeed_cycles += u64::from(overspeed);
-            if overspeed {
-                self.last_torque = [0.0; 7];
+            match self.fault {
+                Some(Fault::Overspeed { .. }) => self.counters.overspeed_cycles += 1,
+                Some(Fault::PositionLimit { .. }) => self.counters.limit_cycles += 1,
+                None => {}
             }
             let config = &self.config;
             let hold = self.hold.get_or_insert_with(|| Hold::new(q, self.cycle, &self.last_torque, config));
-            if overspeed {
+            if self.fault.is_some() {
+                // The command itself is suspect: no torque of it is kept, and the hold stays where the arm
+                // is (never beyond a limit).
+                self.last_torque = [0.0; 7];
                 hold.preload = [0.0; 7];
                 hold.rest = [0.0; 7];
+                hold.q = std::array::from_fn(|i| hold.q[i].clamp(self.position_limits[i].0, self.position_limits[i].1));
             }
             let elapsed = self.cycle.saturating_sub(hold.since) as f64;
             let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0);
@@ -513,6 +587,22 @@ impl LwrDriver {
 
         output.holding = holding;
         (reply, output)
+    }
+
+    /// A joint beyond `velocity_margin` of its velocity limit, or in or heading into (at its velocity,
+    /// [`LIMIT_LOOKAHEAD`] ahead) the last `limit_margin` before a position limit.
+    fn fault_of(&self, q: &[f64; 7], dq: &[f64; 7]) -> Option<Fault> {
+        let margin = self.config.limit_margin;
+        (0..7).find_map(|i| {
+            if !(dq[i].abs() <= self.config.velocity_margin * self.velocity_limits[i]) {
+                return Some(Fault::Overspeed { joint: i + 1, velocity: dq[i] });
+            }
+            let (lower, upper) = self.position_limits[i];
+            let ahead = q[i] + dq[i] * LIMIT_LOOKAHEAD;
+            // A joint already in the band faults too: the KRC jogs it out, not a torque command.
+            let inside = |x: f64| x >= lower + margin && x <= upper - margin;
+            (!inside(q[i]) || !inside(ahead)).then_some(Fault::PositionLimit { joint: i + 1, position: q[i] })
+        })
     }
 }
 
@@ -548,6 +638,7 @@ pub struct Params {
     pub hold_stiffness: [f64; 7],
     pub hold_damping: f64,
     pub velocity_margin: f64,
+    pub limit_margin: f64,
     pub hold_release_cycles: u64,
     pub hold_max_preload: f64,
     pub monitor_only: bool,
@@ -568,6 +659,7 @@ impl Default for Params {
             hold_stiffness: c.hold_stiffness,
             hold_damping: c.hold_damping,
             velocity_margin: c.velocity_margin,
+            limit_margin: c.limit_margin,
             hold_release_cycles: c.hold_release_cycles,
             hold_max_preload: c.hold_max_preload,
             monitor_only: false,
@@ -586,6 +678,7 @@ impl Params {
             hold_damping: self.hold_damping,
             request_command_mode: !self.monitor_only,
             velocity_margin: self.velocity_margin,
+            limit_margin: self.limit_margin,
             hold_release_cycles: self.hold_release_cycles,
             hold_max_preload: self.hold_max_preload,
             krc_address: self.krc_address,
@@ -653,7 +746,13 @@ impl crate::params::NodeParams for Params {
             "velocity_margin",
             self.velocity_margin,
             (0.0, 1.0),
-            "hold when a joint exceeds this fraction of its velocity limit",
+            "a joint beyond this fraction of its velocity limit is a fault: hold until the KRC starts a new session",
+        );
+        d.within(
+            "limit_margin",
+            self.limit_margin,
+            (0.02, 0.5),
+            "a joint in or heading into (50 ms ahead at its velocity) the last this much before its position limit is a fault: hold until the KRC starts a new session [rad]",
         );
         d.integer(
             "hold_release_cycles",

@@ -3,7 +3,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{Biquad, FtConfig, FtSensorNode};
-use softcontact_nodes::lwr_driver::{DriverConfig, DriverError, LwrDriver};
+use softcontact_nodes::lwr_driver::{DriverConfig, DriverError, Fault, LwrDriver};
+use softcontact_nodes::writer_pin::WriterRefused;
 use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
 use softcontact_wire::rdt::{Calibration, Record, Status};
 
@@ -28,6 +29,9 @@ fn measurement(seq: u16, state: InterfaceState, q: [f32; 7], gravity: [f32; 7]) 
 }
 
 const Q: [f32; 7] = [0.0, 0.5, 0.0, -1.4, 0.0, 1.2, 0.0];
+/// The DDS writer of the controller's commands, and of someone else's.
+const CONTROLLER: [u8; 16] = [1; 16];
+const STRANGER: [u8; 16] = [2; 16];
 const G: [f32; 7] = [0.0, -30.0, 0.5, 10.0, -0.2, 0.9, 0.0];
 
 #[test]
@@ -125,13 +129,13 @@ fn strangers_are_refused_and_a_new_port_of_the_krc_is_a_new_session() {
     assert!(out.holding && reply.add_jnt_trq == [0.0; 7]);
     assert_eq!(out.session, first + 1);
     assert_eq!(
-        d.set_remote_command(&[5.0; 7], Some(first), 0.0),
+        d.set_remote_command(&[5.0; 7], Some(first), 0.0, CONTROLLER, || 1),
         Err(DriverError::OtherSession(Some(first), first + 1))
     );
-    assert!(d.set_remote_command(&[5.0; 7], None, 0.0).is_err());
+    assert!(d.set_remote_command(&[5.0; 7], None, 0.0, CONTROLLER, || 1).is_err());
     assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
     // Silence longer than new_session_after is a new session too.
-    d.set_remote_command(&[5.0; 7], Some(first + 1), 0.001).unwrap();
+    d.set_remote_command(&[5.0; 7], Some(first + 1), 0.001, CONTROLLER, || 1).unwrap();
     assert!(!d.handle(&measurement(3, InterfaceState::Command, Q, G)).unwrap().1.holding);
     d.resumed_after(0.5);
     assert!(d.handle(&measurement(4, InterfaceState::Command, Q, G)).unwrap().1.holding);
@@ -146,10 +150,13 @@ fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     let s = Some(d.session());
     for age in [1200.0, 0.021, -0.021, f64::NAN, f64::INFINITY] {
-        assert!(matches!(d.set_remote_command(&[5.0; 7], s, age), Err(DriverError::TooOld(..))), "{age}");
+        assert!(
+            matches!(d.set_remote_command(&[5.0; 7], s, age, CONTROLLER, || 1), Err(DriverError::TooOld(..))),
+            "{age}"
+        );
     }
     assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding);
-    d.set_remote_command(&[5.0; 7], s, 0.004).unwrap();
+    d.set_remote_command(&[5.0; 7], s, 0.004, CONTROLLER, || 1).unwrap();
     assert!(!d.handle(&measurement(3, InterfaceState::Command, Q, G)).unwrap().1.holding);
     assert_eq!(d.counters.commands_too_old, 5);
 }
@@ -182,13 +189,103 @@ fn implausible_measurements_are_refused_unanswered() {
 }
 
 #[test]
-fn torques_are_clipped_to_the_joint_limits() {
+fn torques_beyond_the_joint_limits_are_refused_and_the_driver_holds() {
+    // Adversary, separate layout: 1e300 and 1e6 N·m were clipped to the limits and applied.
+    for (joint, bad) in [(0, 176.01), (1, -1e6), (6, 1e300), (4, -100.5)] {
+        let mut d = LwrDriver::new(DriverConfig::default());
+        d.handle(&measurement(1, InterfaceState::Command, Q, [0.0; 7])).unwrap();
+        d.set_command(&[5.0; 7]).unwrap();
+        let mut tau = [0.0; 7];
+        tau[joint] = bad;
+        assert!(matches!(d.set_command(&tau), Err(DriverError::BeyondLimit(j, ..)) if j == joint), "{bad}");
+        let (reply, out) = d.handle(&measurement(2, InterfaceState::Command, Q, [0.0; 7])).unwrap();
+        assert!(out.holding && reply.add_jnt_trq == [0.0; 7], "no torque of either command: {:?}", reply.add_jnt_trq);
+    }
+    // At the limit is a command.
     let mut d = LwrDriver::new(DriverConfig::default());
     d.handle(&measurement(1, InterfaceState::Command, Q, [0.0; 7])).unwrap();
-    d.set_command(&[500.0, -500.0, 0.0, 0.0, 0.0, 0.0, 50.0]).unwrap();
+    d.set_command(&[176.0, -176.0, 100.0, -100.0, 100.0, 38.0, -38.0]).unwrap();
     let (reply, _) = d.handle(&measurement(2, InterfaceState::Command, Q, [0.0; 7])).unwrap();
-    assert_eq!((reply.add_jnt_trq[0], reply.add_jnt_trq[1], reply.add_jnt_trq[6]), (176.0, -176.0, 38.0));
-    assert_eq!(d.counters.clipped_cycles, 1);
+    assert_eq!((reply.add_jnt_trq[0], reply.add_jnt_trq[6]), (176.0, -38.0));
+}
+
+#[test]
+fn only_the_pinned_writer_commands_for_the_session() {
+    // Adversary, separate layout: a stranger's commands, with stamp and session copied from the live
+    // joint states, were all accepted.
+    let mut d = LwrDriver::new(DriverConfig::default());
+    d.accept_sender("127.0.0.1:40000".parse().unwrap(), f64::INFINITY);
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    let s = Some(d.session());
+    // Two writers and none pinned: neither commands.
+    assert!(matches!(
+        d.set_remote_command(&[5.0; 7], s, 0.001, STRANGER, || 2),
+        Err(DriverError::Writer(WriterRefused::Ambiguous(2)))
+    ));
+    d.set_remote_command(&G.map(f64::from), s, 0.001, CONTROLLER, || 1).unwrap();
+    // The stranger's command, well formed and in time, touches nothing: the controller's stays.
+    let err = d.set_remote_command(&[50.0; 7], s, 0.001, STRANGER, || 2).unwrap_err();
+    assert_eq!(err, DriverError::Writer(WriterRefused::Stranger));
+    let (reply, out) = d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap();
+    assert!(!out.holding && reply.add_jnt_trq == [0.0; 7], "the controller's gravity torque: {:?}", reply.add_jnt_trq);
+    // Nor can a stranger's NaN make the driver hold.
+    assert!(d.set_remote_command(&[f64::NAN; 7], s, 0.001, STRANGER, || 2).is_err());
+    assert!(!d.handle(&measurement(3, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!((d.counters.commands_from_strangers, d.counters.commands_refused), (3, 0));
+    // A new KRC session releases the pin: the sole writer then is pinned.
+    d.begin_session();
+    let s = Some(d.session());
+    d.set_remote_command(&[5.0; 7], s, 0.001, STRANGER, || 1).unwrap();
+    assert!(d.set_remote_command(&[5.0; 7], s, 0.001, CONTROLLER, || 2).is_err());
+}
+
+/// Measurements of joint `joint` moving from `from` at `speed` [rad/s] (1 ms apart), the driver applying
+/// `torque` (total) whenever it does not hold; the cycle of the first hold and the driver.
+fn drive(joint: usize, from: f32, speed: f32, cycles: u16, config: DriverConfig) -> (Option<u16>, LwrDriver) {
+    let mut d = LwrDriver::new(config);
+    let mut first_hold = None;
+    for k in 1..=cycles {
+        let mut q = Q;
+        q[joint] = from + speed * 1e-3 * k as f32;
+        d.set_command(&G.map(f64::from)).unwrap();
+        let (reply, out) = d.handle(&measurement(k, InterfaceState::Command, q, G)).unwrap();
+        if out.holding && first_hold.is_none() {
+            first_hold = Some(k);
+            assert_eq!(reply.add_jnt_trq, [0.0; 7], "a fault keeps no torque");
+            assert!(reply.jnt_pos[joint] <= 2.0944, "never held beyond the limit: {}", reply.jnt_pos[joint]);
+        }
+    }
+    (first_hold, d)
+}
+
+#[test]
+fn a_joint_heading_into_its_position_limit_holds_the_arm_until_a_new_session() {
+    // Adversary, separate layout: +8 N·m on joint 5 carried it 0.1 rad past its limit while the driver
+    // applied every command (it only stopped answering once the measurement was implausible).
+    let upper = 2.0944; // joint 4, ±120°
+    let margin = DriverConfig::default().limit_margin;
+    // At 1 rad/s from 1.7 rad: the band begins at 1.9944 rad, seen 50 ms (0.05 rad) ahead, i.e. from
+    // 1.9444 rad, reached after 244 ms.
+    let (first, d) = drive(3, 1.7, 1.0, 400, DriverConfig::default());
+    let expected = ((upper - margin - 0.05 - 1.7) / 1e-3_f64).ceil() as u16;
+    assert!(first.is_some_and(|k| k.abs_diff(expected) <= 1), "first hold {first:?}, expected {expected}");
+    assert!(matches!(d.fault(), Some(Fault::PositionLimit { joint: 4, .. })), "{:?}", d.fault());
+    assert!(d.counters.limit_cycles >= 150, "held on, fresh commands or not: {}", d.counters.limit_cycles);
+    // Slowly, the band itself.
+    // Slowly (0.1 rad/s, 5 mrad ahead) from 1.98 rad: at 1.9894 rad, after 94 ms.
+    let (first, _) = drive(3, 1.98, 0.1, 200, DriverConfig::default());
+    assert!(first.is_some_and(|k| (93..=95).contains(&k)), "{first:?}");
+    // Away from the limit: never.
+    let (first, d) = drive(3, 1.7, -1.0, 400, DriverConfig::default());
+    assert_eq!((first, d.fault()), (None, None));
+    // The fault stands until the KRC starts a new session.
+    let (_, mut d) = drive(3, 1.99, 0.0, 10, DriverConfig::default());
+    d.set_command(&G.map(f64::from)).unwrap();
+    assert!(d.handle(&measurement(11, InterfaceState::Command, Q, G)).unwrap().1.holding, "back inside, still held");
+    d.begin_session();
+    d.set_command(&G.map(f64::from)).unwrap();
+    assert!(!d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!(d.fault(), None);
 }
 
 #[test]
@@ -282,6 +379,12 @@ fn a_joint_too_fast_makes_the_driver_hold() {
     let (_, out) = d.handle(&measurement(2, InterfaceState::Command, fast, G)).unwrap();
     assert!(out.holding && d.counters.overspeed_cycles == 1);
     assert!((out.dq[6] - 3.1).abs() < 1e-3);
+    // A fault: held on, fresh commands and a still joint or not, until the KRC starts a new session.
+    for seq in 3..10 {
+        d.set_command(&[0.0; 7]).unwrap();
+        assert!(d.handle(&measurement(seq, InterfaceState::Command, fast, G)).unwrap().1.holding);
+    }
+    assert!(matches!(d.fault(), Some(Fault::Overspeed { joint: 7, .. })));
 }
 
 #[test]

@@ -56,14 +56,28 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
     let mut driver_diag = None;
     let mut bias_answer = None;
     let mut bias_sent = false;
+    // A second writer of torque commands, joining once the first is pinned: well-formed commands for the
+    // present session, in time, 20 N·m on joint 1 beyond gravity. Refused, they move nothing.
+    let mut stranger: Option<(ros2_client::Node, ros2_client::Publisher<JointState>)> = None;
     while start.elapsed() < Duration::from_secs(7) {
         while let Ok(Some((js, _))) = joints.take() {
             assert_eq!(js.name.len(), 7);
             assert_eq!(js.name[2], "lwr_e1_joint");
             n_joints += 1;
-            // The controller's part: hold the arm with exactly the gravity torque.
+            // The controller's part: gravity torques, for no session (refused, so the driver holds).
             let g = model.gravity_torques(&mut data, &js.position).as_slice().to_vec();
+            if let Some((_, p)) = &stranger {
+                let mut push = g.clone();
+                push[0] += 20.0;
+                p.publish(JointState { header: js.header.clone(), effort: push, ..Default::default() }).unwrap();
+            }
             torque.publish(JointState { effort: g, ..Default::default() }).unwrap();
+            if n_joints == 1500 {
+                let mut node = ros::node("stranger").unwrap();
+                let qos = ros::reliable_qos();
+                let p = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", qos).unwrap();
+                stranger = Some((node, p));
+            }
             if n_joints > 2000 && first_q.is_none() {
                 first_q = Some(js.position.clone());
             }
@@ -114,6 +128,10 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
     assert!(answer.success, "{answer:?}");
     let d = driver_diag.expect("driver diagnostics");
     assert!(d.values.iter().any(|kv| kv.key == "lost"), "{d:?}");
+    let strangers = d.values.iter().find(|kv| kv.key == "commands_from_strangers").map(|kv| kv.value.clone());
+    assert!(strangers.as_ref().and_then(|v| v.parse::<u64>().ok()).is_some_and(|n| n > 1000), "{d:?}");
+    let faults = d.values.iter().filter(|kv| kv.key == "overspeed_cycles" || kv.key == "limit_cycles");
+    assert!(faults.clone().all(|kv| kv.value == "0") && faults.count() == 2, "the stranger moved the arm: {d:?}");
 }
 
 #[test]

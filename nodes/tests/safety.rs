@@ -497,3 +497,49 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
     }
     eprintln!("deformation command after a back-off: peak {peak:.1} N");
 }
+
+/// The KRC commanding, the hand above the sponge, and whatever writes the driver's commands (a stranger,
+/// a controller gone wrong) pushing one joint with `push` N·m beyond gravity, within the torque limits,
+/// until 0.5 s after the driver's fault (at most 6 s); the fault the driver held for.
+fn pushed(joint: usize, push: f64) -> Option<softcontact_nodes::lwr_driver::Fault> {
+    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    let mut sim = Simulator::new(SimConfig::above_surface(softcontact_sim::sponge(), 3)).unwrap();
+    let mut driver = LwrDriver::new(DriverConfig::default());
+    let model = lwr4::model();
+    let mut data = model.data();
+    let limit = model.joints[joint].limits.effort;
+    let mut held_for = 0;
+    for k in 0..6000 {
+        if held_for > 500 {
+            break;
+        }
+        held_for += usize::from(driver.fault().is_some());
+        let measured = driver.measure(&sim.measurement().encode()).unwrap();
+        let mut tau: Vec<f64> = model.gravity_torques(&mut data, &measured.output.q).iter().copied().collect();
+        tau[joint] = (tau[joint] + push).clamp(-limit, limit);
+        driver.set_command(&tau).unwrap();
+        let (reply, _) = driver.answer(measured);
+        sim.command(&reply);
+        sim.step_cycle().unwrap();
+        if let Some(v) = violation_within(&sim, f64::INFINITY) {
+            panic!("joint {} pushed {push} N·m, cycle {k}: {v}", joint + 1);
+        }
+    }
+    driver.fault()
+}
+
+#[test]
+fn torques_that_drive_a_joint_to_its_limits_are_stopped_before_them() {
+    // Adversary, separate layout: a stranger's +8 N·m on joint 5 carried it past its position limit;
+    // 176 N·m on joint 1 swung it 114° and took joint 3 past its limit. Whoever commands, within the
+    // torque limits, every joint stays within its position and velocity limits.
+    let model = lwr4::model();
+    for joint in 0..7 {
+        let limit = model.joints[joint].limits.effort;
+        for push in [0.1 * limit, -0.1 * limit, limit, -limit] {
+            let fault = pushed(joint, push);
+            eprintln!("joint {} pushed {push:.1} N·m: {fault:?}", joint + 1);
+            assert!(fault.is_some(), "joint {} pushed {push:.1} N·m: no fault, yet a push of its own", joint + 1);
+        }
+    }
+}

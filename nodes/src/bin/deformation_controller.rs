@@ -6,6 +6,10 @@
 //! /deformation_controller/state. With a stale force reading it sends nothing, and the driver holds.
 //! Joint states silent for `dead_after` after they flowed (a dead driver or middleware): it exits with an
 //! error naming the stream, and the launch script stops the graph.
+//!
+//! Joint states, wrenches and external torques are each taken from one DDS writer, the first heard while
+//! it is the only one on its topic (`softcontact_nodes::writer_pin`): a stranger's joint states stamped
+//! ahead once silenced this controller, and a stranger's wrenches would steer its force.
 
 use std::time::{Duration, Instant};
 
@@ -19,6 +23,7 @@ use softcontact_nodes::liveness::StreamWatch;
 use softcontact_nodes::messages::DriverSession;
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
+use softcontact_nodes::writer_pin::WriterPin;
 
 #[derive(Parser)]
 #[command(
@@ -50,20 +55,34 @@ fn main() -> anyhow::Result<()> {
     let now = || start.elapsed().as_secs_f64();
     let mut joint_states_watch = StreamWatch::new("/lwr/joint_states", 1000.0, p.dead_after);
     let mut dead = None;
+    let (mut pin_joint_states, mut pin_wrenches, mut pin_external) = Default::default();
+    let mut strangers_logged = 0;
+    let mut next_strangers_log = Instant::now();
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         topics.take_inputs(&mut control);
-        while let Ok(Some((w, _))) = wrenches.take() {
+        let node = &topics.node;
+        while let Ok(Some((w, info))) = wrenches.take() {
+            let writers = || wrenches.get_publisher_count(node);
+            if admit(&mut pin_wrenches, &info, writers).is_err() {
+                continue;
+            }
             control.on_force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force), now());
         }
-        while let Ok(Some((e, _))) = external.take() {
+        while let Ok(Some((e, info))) = external.take() {
+            if admit(&mut pin_external, &info, || external.get_publisher_count(node)).is_err() {
+                continue;
+            }
             if let Ok(torque) = <[f64; 7]>::try_from(&e.effort[..]) {
                 control.on_external_torque(e.header.stamp.as_secs_f64(), &torque);
             }
         }
         // Of a backlog, only the newest joint state is answered (older ones would be stale anyway).
         let mut newest: Option<JointState> = None;
-        while let Ok(Some((js, _))) = joint_states.take() {
+        while let Ok(Some((js, info))) = joint_states.take() {
+            if admit(&mut pin_joint_states, &info, || joint_states.get_publisher_count(node)).is_err() {
+                continue;
+            }
             if newest.as_ref().is_none_or(|n| js.header.stamp.as_secs_f64() > n.header.stamp.as_secs_f64()) {
                 newest = Some(js);
             }
@@ -86,6 +105,12 @@ fn main() -> anyhow::Result<()> {
             let step = control.on_joint_state(&sample, now());
             topics.publish(&control, &step, &js.header, sample.commanding);
         }
+        let strangers = pin_joint_states.refused + pin_wrenches.refused + pin_external.refused;
+        if strangers > strangers_logged && Instant::now() >= next_strangers_log {
+            let why = strangers_report(&pin_joint_states, &pin_wrenches, &pin_external);
+            topics.log(LogLevel::Warn, &why);
+            (strangers_logged, next_strangers_log) = (strangers, Instant::now() + Duration::from_secs(1));
+        }
         // Judged after everything that arrived was read.
         if let Some(d) = joint_states_watch.dead(now()) {
             topics.log(LogLevel::Error, &format!("{d}: exiting"));
@@ -94,9 +119,25 @@ fn main() -> anyhow::Result<()> {
         }
     }
     eprintln!(
-        "deformation_controller: exit: {}; peak RSS {:.1} MB",
+        "deformation_controller: exit: {}; {}; peak RSS {:.1} MB",
         control.counters,
+        strangers_report(&pin_joint_states, &pin_wrenches, &pin_external),
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
     dead.map_or(Ok(()), |d| Err(d.into()))
+}
+
+fn admit(
+    pin: &mut WriterPin,
+    info: &ros2_client::MessageInfo,
+    writers_matched: impl FnOnce() -> usize,
+) -> Result<(), softcontact_nodes::writer_pin::WriterRefused> {
+    pin.admit(info.publisher_gid().to_bytes16(), writers_matched)
+}
+
+fn strangers_report(joint_states: &WriterPin, wrenches: &WriterPin, external: &WriterPin) -> String {
+    format!(
+        "samples refused from writers other than the pinned ones: {} joint states, {} wrenches, {} external torques",
+        joint_states.refused, wrenches.refused, external.refused
+    )
 }

@@ -23,23 +23,34 @@ use crate::ros::{self, LogLevel};
 use crate::stats::Histogram;
 use crate::udp::FriClient;
 
-/// The driver's status: a dead controller, then datagrams all refused, then any refused, then holding.
+/// The driver's status: a fault, then a dead controller, then datagrams all refused, then any refused or
+/// commands from strangers, then holding.
 fn diagnostics(
     client: &FriClient,
     command_age: &Histogram,
     last: Option<&DriverOutput>,
     dead: Option<&DeadStream>,
     refusals: &Refusals,
+    stranger_commands: u64,
     stamp: Time,
 ) -> DiagnosticArray {
     let c = client.driver.counters;
     let us = |s: f64| (s * 1e6).round() as u64;
     let (level, message) = match (dead, last) {
+        _ if client.driver.fault().is_some() => {
+            (DiagnosticStatus::ERROR, client.driver.fault().map(|f| f.to_string()).unwrap_or_default())
+        }
         (Some(d), _) => (DiagnosticStatus::ERROR, format!("{d}; holding position")),
         _ if refusals.all_refused() => {
             (DiagnosticStatus::ERROR, format!("{refusals} in the last second: the KRC is not answered"))
         }
         _ if refusals.refused() > 0 => (DiagnosticStatus::WARN, format!("{refusals} in the last second")),
+        _ if stranger_commands > 0 => (
+            DiagnosticStatus::WARN,
+            format!(
+                "{stranger_commands} torque commands from a writer other than the pinned one refused in the last second"
+            ),
+        ),
         (None, None) => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
         (None, Some(o)) if o.holding => {
             (DiagnosticStatus::WARN, format!("holding position ({:?}, quality {:?})", o.state, o.quality))
@@ -63,8 +74,9 @@ fn diagnostics(
             ("network_errors", c.network_errors),
             ("commands_too_old", c.commands_too_old),
             ("stale_cycles", c.stale_cycles),
-            ("clipped_cycles", c.clipped_cycles),
             ("overspeed_cycles", c.overspeed_cycles),
+            ("limit_cycles", c.limit_cycles),
+            ("commands_from_strangers", c.commands_from_strangers),
             ("commands_refused", c.commands_refused),
             ("reply_latency_p99_us", us(client.reply_latency.quantile(0.99))),
             ("reply_latency_max_us", us(client.reply_latency.max())),
@@ -134,6 +146,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     // The counters at the last diagnostics, for what was refused since.
     let mut counted = DriverCounters::default();
     let mut all_refused_logged = false;
+    let mut fault_logged = None;
     // Cycles answered with a held command once the controller first commanded (start-up excluded).
     let mut stale_at_first_command: Option<u64> = None;
     while !ros::stopping(&stop) {
@@ -157,13 +170,20 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             // A bad one is refused and counted, the previous one stays. A command must answer a joint
             // state of the present KRC session, within the watchdog's age by that joint state's stamp
             // (the driver's own clock); an empty one asks for a hold.
-            while let Some(Ok(Some((cmd, _)))) = commands.as_ref().map(|c| c.take()) {
+            // Only the session's pinned writer commands (crate::writer_pin).
+            while let Some(Ok(Some((cmd, info)))) = commands.as_ref().map(|c| c.take()) {
                 let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
                 let age = stamp.as_secs_f64() - cmd.header.stamp.as_secs_f64();
-                let taken = driver.set_remote_command(&cmd.effort, session, age);
+                let writer = info.publisher_gid().to_bytes16();
+                let writers = || commands.as_ref().map_or(0, |c| c.get_publisher_count(&node));
+                let taken = driver.set_remote_command(&cmd.effort, session, age, writer, writers);
                 // A live controller answers the present session in time (a hold request included); a
-                // backlog delivered after a stall, or another session's commands, are no sign of life.
-                if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..))) {
+                // backlog delivered after a stall, another session's commands, or a stranger's, are no sign
+                // of life.
+                if !matches!(
+                    taken,
+                    Err(DriverError::TooOld(..) | DriverError::OtherSession(..) | DriverError::Writer(_))
+                ) {
                     sign_of_life = true;
                 }
                 match taken {
@@ -174,6 +194,12 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         })?;
         if sign_of_life {
             command_watch.seen(start.elapsed().as_secs_f64());
+        }
+        if client.driver.fault() != fault_logged {
+            fault_logged = client.driver.fault();
+            if let Some(f) = fault_logged {
+                ros::log(&node, LogLevel::Error, &f.to_string());
+            }
         }
         if let Some(e) = refused
             && Instant::now() >= next_refusal_log
@@ -246,16 +272,18 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
                 ros::log(&node, LogLevel::Error, &format!("{refusals} in the last second: the KRC is not answered"));
             }
             all_refused_logged = refusals.all_refused();
+            let strangers = client.driver.counters.commands_from_strangers - counted.commands_from_strangers;
             counted = client.driver.counters;
             let dead = commands_dead.as_ref();
-            let status = diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now());
+            let status = diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, strangers, clock.now());
             publish_errors += u64::from(diag.publish(status).is_err());
             next_diagnostics += Duration::from_secs(1);
         }
     }
     let refusals = client.driver.counters.refusals_since(&counted);
+    let strangers = client.driver.counters.commands_from_strangers - counted.commands_from_strangers;
     let dead = commands_dead.as_ref();
-    diag.publish(diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, clock.now()))?;
+    diag.publish(diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, strangers, clock.now()))?;
     // The exit report: tests and `launch-scripts/sim.sh` read these lines.
     eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
