@@ -18,8 +18,7 @@ use softcontact_sim::{BenchRun, SpecimenBench, SpecimenConfig};
 
 use crate::loading_paths_figures;
 
-/// N/mm^{3/2} → N/m^{3/2}.
-const PER_MM: f64 = 31_622.776_601_683_792;
+use softcontact_contact::N_PER_MM_1_5 as PER_MM;
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct LoadingPathsArgs {

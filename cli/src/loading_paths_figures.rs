@@ -118,7 +118,7 @@ fn normal_figure(out: &Path, paths: &[LoadingPath], runs: &[BenchRun], fits: &Fi
     let root = SVGBackend::new(&path, (800, 600)).into_drawing_area();
     root.fill(&WHITE)?;
     let points = thinned(paths, runs, Family::Normal, |s| (s.normal_displacement * 1e3, s.normal_force));
-    let k = fits.k_n_normal / 1000f64.powf(1.5);
+    let k = fits.k_n_normal / softcontact_contact::N_PER_MM_1_5;
     let title = format!("Normal loadings and the fit k_n = {k:.3} N/mm^1.5");
     scatter_with_fit(&root, &title, ("δn [mm]", "normal force [N]"), &points, |dn| k * dn.max(0.0).powf(1.5))?;
     root.present()?;
@@ -131,7 +131,7 @@ fn linear_figure(out: &Path, paths: &[LoadingPath], runs: &[BenchRun], fits: &Fi
     let root = SVGBackend::new(&path, (1200, 500)).into_drawing_area();
     root.fill(&WHITE)?;
     let (left, right) = root.split_horizontally(600);
-    let per_mm = 1000f64.powf(1.5);
+    let per_mm = softcontact_contact::N_PER_MM_1_5;
     let (kn, kt) = (fits.k_n_linear / per_mm, fits.k_t_linear / per_mm);
     let normal = thinned(paths, runs, Family::Linear, |s| (s.normal_displacement * 1e3, s.normal_force));
     scatter_with_fit(

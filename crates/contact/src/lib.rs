@@ -59,8 +59,9 @@ pub use fit::{
     regressors, robust_least_squares,
 };
 pub use loading_paths::{
-    CONVERGENCE_ANGLE, FINAL_NORMAL_FORCE, Family, LoadingPath, SET_ANGLES, convergence_points, corner_path,
-    fit_normal_stiffness, fit_tangential_stiffness, forces_at_end, predicted_dispersion, seed_000_experiments,
+    CONVERGENCE_ANGLE, FINAL_NORMAL_FORCE, Family, LoadingPath, N_PER_MM_1_5, SET_ANGLES, convergence_points,
+    corner_path, fit_normal_stiffness, fit_tangential_stiffness, forces_at_end, predicted_dispersion,
+    seed_000_experiments,
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, gravity_change,

@@ -18,6 +18,9 @@
 
 use crate::{ContactError, ContactModel, Dispersion, MindlinDeresiewicz, TangentialLaw, dispersion};
 
+/// Seed 000 gives its stiffnesses in N/mm^{3/2}; the models take N/m^{3/2}: multiply by this (1000^{3/2}).
+pub const N_PER_MM_1_5: f64 = 31_622.776_601_683_792;
+
 /// Which of seed 000's experiment families a path belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Family {
@@ -200,11 +203,16 @@ fn fit_through_origin(points: impl Iterator<Item = (f64, f64)>, name: &'static s
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_unit_factor_is_1000_to_the_three_halves() {
+        assert!((N_PER_MM_1_5 / 1000f64.powf(1.5) - 1.0).abs() < 1e-15);
+    }
     use crate::{Kind, Tangential};
 
     /// Seed 000's fitted linear-path constants in SI: k_n 8.280 N/mm^1.5, k_t 3.7482 N/mm^1.5.
     fn specimen(law: Tangential) -> ContactModel {
-        let per_mm = 1000f64.powf(1.5);
+        let per_mm = N_PER_MM_1_5;
         let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * per_mm, 0.0).unwrap();
         m.tangential = Some(Tangential { stiffness: 3.7482 * per_mm, ..law });
         m
@@ -233,7 +241,7 @@ mod tests {
         for set in 1..=3 {
             assert_eq!(count(Family::TwoSegment(set)), 50);
         }
-        let depth = (25.0 / (8.280 * 1000f64.powf(1.5))).powf(2.0 / 3.0);
+        let depth = (25.0 / (8.280 * N_PER_MM_1_5)).powf(2.0 / 3.0);
         for p in paths.iter().filter(|p| matches!(p.family, Family::Normal | Family::Linear)) {
             let [dn, dt] = p.end();
             assert!((model.force(dn, 0.0).unwrap() - 25.0).abs() < 1e-9 && (dn - depth).abs() < 1e-15);
@@ -286,7 +294,7 @@ mod tests {
         let md = specimen(Tangential::mindlin_deresiewicz(0.0, 1e9));
         let paths = seed_000_experiments(&md, 2e-3).unwrap();
         let tb = 20f64.to_radians().tan();
-        let (kn, kt) = (8.280 * 1000f64.powf(1.5), 3.7482 * 1000f64.powf(1.5));
+        let (kn, kt) = (8.280 * N_PER_MM_1_5, 3.7482 * N_PER_MM_1_5);
         for set in 1..=3u8 {
             let groups: Vec<Vec<(f64, f64)>> = convergence_points(2e-3)
                 .iter()

@@ -260,7 +260,7 @@ pub(crate) fn pow(z: f64, e: f64) -> f64 {
     }
 }
 
-fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
+pub(crate) fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
     if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 

@@ -32,6 +32,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::model::finite;
 use crate::{ContactError, ContactModel};
 
 /// The tangential law of a model: its stiffness, friction, and whether it carries history.
@@ -229,10 +230,6 @@ fn mean_sqrt(z0: f64, z1: f64) -> f64 {
     } else {
         (2.0 / 3.0) * (z1.powf(1.5) - z0.powf(1.5)) / (z1 - z0)
     }
-}
-
-fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
-    if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 
 /// The tangential law's memory for a tool moving in 3-D: where it first touched (dragged along while it

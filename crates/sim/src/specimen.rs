@@ -121,16 +121,17 @@ impl SpecimenBench {
 
     /// Runs one experiment along `path` (displacements from the zero the bench finds).
     pub fn run(&mut self, path: &LoadingPath) -> Result<BenchRun, SimError> {
-        let c = self.config.clone();
+        let c = &self.config;
         let law = c.model.tangential.expect("checked in new");
         let creep = self.creep.sample(&mut self.rng);
+        let mut read = |p: f64, t: f64| sensor_reading(c, &self.noise, &mut self.rng, p, t);
         let total = path.length();
         // Find the zero: approach along the normal until the third reading above the threshold.
         let mut depth = -c.approach;
         let mut above = 0;
         while above < 3 {
             depth += c.step;
-            if self.read(c.model.force(depth, 0.0)?, 0.0).0 > ZERO_THRESHOLD {
+            if read(c.model.force(depth, 0.0)?, 0.0).0 > ZERO_THRESHOLD {
                 above += 1;
             }
             if depth > 10.0 * c.approach + 1e-3 {
@@ -155,7 +156,7 @@ impl SpecimenBench {
                     TangentialLaw::Walton => c.model.tangential_force(z, dt, p)?.map_or(0.0, |(t, _)| t),
                     TangentialLaw::MindlinDeresiewicz => md.step(&law, z, dt, p)?.0,
                 };
-                let (normal_force, tangential_force) = self.read(p, t);
+                let (normal_force, tangential_force) = read(p, t);
                 samples.push(BenchSample {
                     normal_displacement: dn,
                     tangential_displacement: dt,
@@ -168,16 +169,16 @@ impl SpecimenBench {
         }
         Ok(BenchRun { samples, creep, zero_error: zero })
     }
+}
 
-    /// The sensor's reading of normal force p and tangential force t: turned by the misalignment,
-    /// noisy, quantised.
-    fn read(&mut self, p: f64, t: f64) -> (f64, f64) {
-        let (s, co) = self.config.misalignment.sin_cos();
-        let q = self.config.resolution;
-        let mut channel = |f: f64| ((f + self.noise.sample(&mut self.rng)) / q).round() * q;
-        let normal = channel(p * co - t * s);
-        (normal, channel(t * co + p * s))
-    }
+/// The sensor's reading of normal force p and tangential force t: turned by the misalignment, noisy,
+/// quantised.
+fn sensor_reading(c: &SpecimenConfig, noise: &Normal<f64>, rng: &mut SmallRng, p: f64, t: f64) -> (f64, f64) {
+    let (s, co) = c.misalignment.sin_cos();
+    let q = c.resolution;
+    let mut channel = |f: f64| ((f + noise.sample(rng)) / q).round() * q;
+    let normal = channel(p * co - t * s);
+    (normal, channel(t * co + p * s))
 }
 
 #[cfg(test)]
@@ -185,7 +186,7 @@ mod tests {
     use super::*;
     use softcontact_contact::{Kind, Tangential, seed_000_experiments};
 
-    const PER_MM: f64 = 31_622.776_601_683_792; // 1000^1.5: N/mm^1.5 → N/m^1.5
+    use softcontact_contact::N_PER_MM_1_5 as PER_MM;
 
     fn model(law: Tangential) -> ContactModel {
         let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * PER_MM, 0.0).unwrap();
