@@ -51,6 +51,7 @@ mod model;
 mod onset;
 mod stats;
 mod tangential;
+mod tangential_fit;
 mod window;
 
 pub use exponent::{DampingExponent, estimate_contact_offset, estimate_exponent, minimize_scalar};
@@ -70,6 +71,7 @@ pub use model::{
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
 pub use tangential::{MindlinDeresiewicz, Tangential, TangentialLaw, TangentialMemory};
+pub use tangential_fit::{PathSample, TangentialFit, TangentialIdentification, identify_tangential};
 pub use window::{Estimate, WindowEstimator, estimate};
 
 /// Why a contact computation was refused.
