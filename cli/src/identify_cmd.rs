@@ -15,6 +15,8 @@ use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::EstimatorConfig;
 use softcontact_nodes::identify::{FramesFrom, Identification, Identifier};
 
+use crate::tangential_paths;
+
 pub const WRENCH: &str = "/ft_sensor/wrench";
 pub const POSE: &str = "/lwr/ee_pose";
 pub const TWIST: &str = "/lwr/ee_twist";
@@ -251,15 +253,35 @@ pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
             .progress_chars("=> "),
     );
     bar.set_message("identify");
-    let id = identify(&recording, args, |n| bar.set_position(n))?;
+    let normal = identify(&recording, args, |n| bar.set_position(n));
     bar.finish_and_clear();
+    let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers, e.g. 0,0,-1") };
+    let tangential = tangential_paths::from_recording(&recording, Vector3::new(x, y, z))?;
     // Damage found while reading (a chunk skipped).
     for w in recording.warnings().iter().skip(said.len()) {
         eprintln!("warning: {w}");
     }
-    print_table(&id, &args.file);
+    // A recording of sideways pushes (seed 000's loading paths) may hold too little of the normal law's
+    // kind of excitation for the normal fits: its tangential law is reported all the same.
+    let normal = match (normal, &tangential) {
+        (Ok(id), _) => Some(id),
+        (Err(e), Some(_)) => {
+            println!("Normal law: not identified ({e:#})\n");
+            None
+        }
+        (Err(e), None) => return Err(e),
+    };
+    if let Some(id) = &normal {
+        print_table(id, &args.file);
+    }
+    if let Some(t) = &tangential {
+        println!();
+        tangential_paths::print(t);
+    }
     if let Some(path) = &args.json {
-        write_json(path, &to_json(&id))?;
+        let mut value = normal.as_ref().map_or_else(|| json!({}), to_json);
+        value["tangential"] = tangential.as_ref().map_or(serde_json::Value::Null, tangential_paths::to_json);
+        write_json(path, &value)?;
     }
     Ok(())
 }

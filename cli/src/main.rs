@@ -9,8 +9,10 @@ mod force_cmd;
 mod identify_cmd;
 mod loading_paths_cmd;
 mod loading_paths_figures;
+mod loading_paths_record;
 mod model_cmd;
 mod record_cmd;
+mod tangential_paths;
 
 use std::process::ExitCode;
 

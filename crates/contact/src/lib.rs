@@ -61,8 +61,8 @@ pub use fit::{
 };
 pub use loading_paths::{
     CONVERGENCE_ANGLE, FINAL_NORMAL_FORCE, Family, LoadingPath, N_PER_MM_1_5, SET_ANGLES, convergence_points,
-    corner_path, fit_normal_stiffness, fit_tangential_stiffness, forces_at_end, predicted_dispersion,
-    seed_000_experiments,
+    corner_path, fit_normal_stiffness, fit_normal_stiffness_and_zero, fit_tangential_stiffness, forces_at_end,
+    predicted_dispersion, seed_000_experiments,
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_DELAY, SensorInputs, gravity_change,
@@ -71,7 +71,7 @@ pub use model::{
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
 pub use tangential::{MindlinDeresiewicz, Tangential, TangentialLaw, TangentialMemory};
-pub use tangential_fit::{PathSample, TangentialFit, TangentialIdentification, identify_tangential};
+pub use tangential_fit::{PathSample, TangentialFit, TangentialIdentification, identify_tangential, thinned};
 pub use window::{Estimate, WindowEstimator, estimate};
 
 /// Why a contact computation was refused.

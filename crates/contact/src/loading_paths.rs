@@ -180,6 +180,20 @@ pub fn fit_normal_stiffness(samples: &[(f64, f64)]) -> Result<f64, ContactError>
     fit_through_origin(samples.iter().filter(|s| s.0 > 0.0).map(|&(dn, f)| (dn.powf(1.5), f)), "k_n")
 }
 
+/// Seed 000's zero (the third reading above a threshold) lies below the true surface: Hertz's law
+/// fitted with the depth of the zero as a second parameter, f_n = k_n (δ_n + z_0)^{3/2} over z_0 in
+/// [0, `max_zero`] (k_n by least squares at each); (k_n, z_0). Without z_0 a fitted k_t absorbs the
+/// missing √z_0 and a fitted μ the curvature it leaves.
+pub fn fit_normal_stiffness_and_zero(samples: &[(f64, f64)], max_zero: f64) -> Result<(f64, f64), ContactError> {
+    let shifted = |z0: f64| samples.iter().map(move |&(dn, f)| (dn + z0, f)).filter(|s| s.0 > 0.0);
+    let rss = |z0: f64| {
+        let k = fit_through_origin(shifted(z0).map(|(z, f)| (z.powf(1.5), f)), "k_n").unwrap_or(f64::NAN);
+        shifted(z0).map(|(z, f)| (f - k * z.powf(1.5)).powi(2)).sum::<f64>()
+    };
+    let (z0, _, _) = crate::minimize_scalar(rss, 0.0, max_zero.max(0.0), 20, 1e-9);
+    Ok((fit_through_origin(shifted(z0).map(|(z, f)| (z.powf(1.5), f)), "k_n")?, z0))
+}
+
 /// Seed 000's eq. 4 tangential part fitted by least squares: k_t of f_t = k_t √δ_n δ_t, from
 /// (δ_n, δ_t, f_t) samples (those with δ_n > 0).
 pub fn fit_tangential_stiffness(samples: &[(f64, f64, f64)]) -> Result<f64, ContactError> {

@@ -90,6 +90,27 @@ pub fn predict(law: &Tangential, path: &[PathSample]) -> Result<Vec<f64>, Contac
     Ok(out)
 }
 
+/// The samples of `path` at least `spacing` [m] apart in the (δ_n, δ_t) plane, and its last: the laws
+/// are exact on straight steps, so a dense recording fits the same with a fraction of its samples.
+pub fn thinned(path: &[PathSample], spacing: f64) -> Vec<PathSample> {
+    let mut out: Vec<PathSample> = Vec::new();
+    for s in path {
+        let far = out.last().is_none_or(|l| {
+            (s.normal_displacement - l.normal_displacement).hypot(s.tangential_displacement - l.tangential_displacement)
+                >= spacing
+        });
+        if far {
+            out.push(*s);
+        }
+    }
+    if let (Some(last), Some(kept)) = (path.last(), out.last())
+        && last != kept
+    {
+        out.push(*last);
+    }
+    out
+}
+
 /// Sum of squared residuals of `law` over `paths`, and the sums Σ T·T̂ and Σ T̂² that rescale k_t.
 fn residuals(law: &Tangential, paths: &[&[PathSample]]) -> Result<(f64, f64, f64), ContactError> {
     let (mut sse, mut tp, mut pp) = (0.0, 0.0, 0.0);
