@@ -5,9 +5,11 @@
 pub mod law;
 pub mod limits;
 pub mod quintic;
+pub mod stage;
 pub mod task;
 
 pub use law::{DeformationGains, deformation_acceleration, force_to_deformation};
 pub use limits::{LimitError, Limits, TorqueLimiter};
 pub use quintic::{Oscillation, Quintic, Reference, Segment, SetpointSequence, Trajectory};
+pub use stage::{PositionStage, StageError};
 pub use task::{Damping, TaskTorque, task_space_torque};
