@@ -91,7 +91,12 @@ fn the_separate_layout_takes_nothing_from_a_stranger_on_its_domain() {
     assert!(passed, "the separate run failed (logs in {})", logs.display());
     let driver = std::fs::read_to_string(logs.join("lwr_driver.log")).unwrap();
     let controller = std::fs::read_to_string(logs.join("deformation_controller.log")).unwrap();
+    let estimator = std::fs::read_to_string(logs.join("contact_estimator.log")).unwrap();
     let count = |text: &str, key: &str| number_after(text, key).unwrap_or_else(|| panic!("`{key}` reported"));
+    // The estimator's wrenches and the controller's models come from their one writer too.
+    let refused_by_estimator = count(&estimator, " twists, ");
+    assert!(refused_by_estimator > 500.0, "the estimator took the stranger's wrenches: {estimator}");
+    assert!(controller.contains("model refused"), "the controller took the stranger's model: {controller}");
     let refused_commands = count(&driver, "commands_from_strangers: ");
     let refused_states = count(&controller, "pinned ones: ");
     let refused_wrenches = count(&controller, " joint states, ");
@@ -126,6 +131,12 @@ fn stranger_client() {
     let forged_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::reliable_qos()).unwrap();
     let wrenches = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
     let torques = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+    let models = ros::publisher::<softcontact_nodes::contact_estimator::ModelMsg>(
+        &mut node,
+        "/contact_estimator/model",
+        ros::reliable_qos(),
+    )
+    .unwrap();
     let stranger = torques.gid();
     std::thread::sleep(Duration::from_millis(500)); // discovery
     let newest = |joints: &ros2_client::Subscription<JointState>| {
@@ -146,6 +157,21 @@ fn stranger_client() {
         ahead.header.stamp.sec += 100;
         forged_states.publish(ahead).unwrap();
         std::thread::sleep(Duration::from_millis(2));
+    }
+    // A plausible model, ten times too soft, with the surface 9.5 mm deeper: the controller would press
+    // far harder than commanded through it.
+    let soft = softcontact_nodes::contact_estimator::ModelMsg {
+        kind: "kelvin_voigt".into(),
+        stiffness: 200.0,
+        damping: 10.0,
+        exponent_a: 1.0,
+        exponent_b: 0.0,
+        exponent_c: 1.0,
+        contact_position: softcontact_msgs::geometry_msgs::Point { x: 0.0, y: 0.0, z: -0.0095 },
+        ..Default::default()
+    };
+    for _ in 0..3 {
+        models.publish(soft.clone()).unwrap();
     }
     let model = softcontact_dynamics::lwr4::model();
     let mut data = model.data();

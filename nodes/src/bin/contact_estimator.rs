@@ -19,6 +19,7 @@ use softcontact_nodes::geometry;
 use softcontact_nodes::liveness::{StreamWatch, first_dead};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros::{self, LogLevel};
+use softcontact_nodes::writer_pin::WriterPin;
 
 #[derive(Parser)]
 #[command(
@@ -62,18 +63,31 @@ fn main() -> anyhow::Result<()> {
     let mut wrench_watch = StreamWatch::new("/ft_sensor/wrench", 1000.0, p.dead_after);
     let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
     let mut dead = None;
+    // Poses, twists and wrenches each from one writer, the first heard while it is the only one
+    // (softcontact_nodes::writer_pin): a stranger's zero wrenches once kept the estimator from publishing
+    // any model.
+    let (mut pin_poses, mut pin_twists, mut pin_wrenches) = <(WriterPin, WriterPin, WriterPin)>::default();
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         // Pairing by arrival, aged by this process's clock (stamps of other processes may differ).
-        while let Ok(Some((m, _))) = poses.take() {
+        while let Ok(Some((m, info))) = poses.take() {
+            if pin_poses.admit(info.publisher_gid().to_bytes16(), || poses.get_publisher_count(&node)).is_err() {
+                continue;
+            }
             pose_watch.seen(start.elapsed().as_secs_f64());
             let (position, rotation) = geometry::pose_of(&m.pose);
             pairing.pose(start.elapsed().as_secs_f64(), position, rotation);
         }
-        while let Ok(Some((m, _))) = twists.take() {
+        while let Ok(Some((m, info))) = twists.take() {
+            if pin_twists.admit(info.publisher_gid().to_bytes16(), || twists.get_publisher_count(&node)).is_err() {
+                continue;
+            }
             pairing.twist(geometry::vector_of(&m.twist.linear));
         }
-        while let Ok(Some((w, _))) = wrenches.take() {
+        while let Ok(Some((w, info))) = wrenches.take() {
+            if pin_wrenches.admit(info.publisher_gid().to_bytes16(), || wrenches.get_publisher_count(&node)).is_err() {
+                continue;
+            }
             wrench_watch.seen(start.elapsed().as_secs_f64());
             let Some(paired) = pairing.force(start.elapsed().as_secs_f64(), geometry::vector_of(&w.wrench.force))
             else {
@@ -119,7 +133,10 @@ fn main() -> anyhow::Result<()> {
         }
     }
     eprintln!(
-        "contact_estimator: exit: {samples} readings, {unpaired} without a fresh pose, {refits} models published, {refit_failures} refits failed; peak RSS {:.1} MB",
+        "contact_estimator: exit: {samples} readings, {unpaired} without a fresh pose, {refits} models published, {refit_failures} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB",
+        pin_poses.refused,
+        pin_twists.refused,
+        pin_wrenches.refused,
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
     dead.map_or(Ok(()), |d| Err(d.into()))

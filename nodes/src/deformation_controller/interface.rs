@@ -36,6 +36,7 @@ use super::{ControlError, ControllerNode, Notices, Params, Press, PressProgress,
 use crate::contact_estimator::{ModelMsg, model_from_msg};
 use crate::messages;
 use crate::ros::{self, LogLevel};
+use crate::writer_pin::WriterPin;
 
 /// The action's name.
 pub const PRESS_ACTION: &str = "/deformation_controller/press";
@@ -90,6 +91,10 @@ pub struct ControllerInterface {
     retare: Option<RetareCall>,
     commands: Subscription<ForceCommand>,
     models: Subscription<ModelMsg>,
+    /// Models come from one estimator: the first writer heard while it is the only one
+    /// ([`crate::writer_pin`]); a stranger's models are refused (force commands and goals come from any
+    /// client: they are the user's).
+    model_writer: WriterPin,
     server: PressServer,
     goal: Option<Goal>,
     ended: VecDeque<(GoalId, GoalStatusEnum, PressForceResult)>,
@@ -131,6 +136,7 @@ impl ControllerInterface {
             retare: None,
             commands,
             models,
+            model_writer: WriterPin::default(),
             server,
             goal: None,
             ended: VecDeque::new(),
@@ -151,7 +157,14 @@ impl ControllerInterface {
 
     /// Models, force commands, goals, cancel and result requests that arrived (between ticks).
     pub fn take_inputs(&mut self, control: &mut ControllerNode) {
-        while let Ok(Some((m, _))) = self.models.take() {
+        while let Ok(Some((m, info))) = self.models.take() {
+            let writers = || self.models.get_publisher_count(&self.node);
+            if let Err(e) = self.model_writer.admit(info.publisher_gid().to_bytes16(), writers) {
+                if self.model_writer.refused.is_power_of_two() {
+                    self.log(LogLevel::Warn, &format!("model refused {} times so far: {e}", self.model_writer.refused));
+                }
+                continue;
+            }
             let outcome = model_from_msg(&m).map_err(ControlError::from).and_then(|(m, s)| control.on_model(m, s));
             if let Err(e) = outcome {
                 self.log(LogLevel::Warn, &format!("model refused: {e}"));
