@@ -3,21 +3,22 @@
 //! beside the paper's, and what the paper could not model: the spread at the convergence points, as the
 //! Mindlin–Deresiewicz law fitted from the linear paths alone predicts it.
 //!
-//! The stage here is the paper's: an ideal displacement stage (crates/sim `SpecimenBench`). The arm as
-//! the stage (issue 19, must-have 2) is not built yet; its runs will be graded against this one.
+//! The stage is the simulated LWR IV (`--stage arm`, the default: `loading_paths_arm`, the product's
+//! driver and F/T node in lockstep with the simulator, the tool held by a stiff position stage) or the
+//! paper's ideal displacement stage (`--stage ideal`, crates/sim `SpecimenBench`).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use serde::Serialize;
 use softcontact_contact::{
-    ContactModel, Family, FitStatistics, Kind, LoadingPath, PathSample, Tangential, TangentialLaw, dispersion,
-    fit_normal_stiffness, fit_normal_stiffness_and_zero, fit_statistics, fit_tangential_stiffness, identify_tangential,
-    predicted_dispersion, seed_000_experiments, thinned,
+    ContactModel, FINAL_NORMAL_FORCE, Family, FitStatistics, Kind, LoadingPath, PathSample, Tangential, TangentialLaw,
+    dispersion, fit_normal_stiffness, fit_normal_stiffness_and_zero, fit_statistics, fit_tangential_stiffness,
+    identify_tangential, predicted_dispersion, seed_000_experiments, thinned,
 };
 use softcontact_sim::{BenchRun, SpecimenBench, SpecimenConfig};
 
-use crate::{loading_paths_figures, loading_paths_record};
+use crate::{loading_paths_arm, loading_paths_figures, loading_paths_record};
 
 use softcontact_contact::N_PER_MM_1_5 as PER_MM;
 
@@ -47,6 +48,15 @@ pub struct LoadingPathsArgs {
     /// Write every table as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// What moves the plate: the simulated arm, or the paper's ideal displacement stage.
+    #[arg(long, value_enum, default_value_t = StageArg::Arm)]
+    stage: StageArg,
+}
+
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum StageArg {
+    Arm,
+    Ideal,
 }
 
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq)]
@@ -121,6 +131,16 @@ struct SetRow {
 struct Report {
     comparison: &'static str,
     stage: &'static str,
+    /// How far the arm's tool was from its reference along the paths (RMS, largest) [µm]; 0 for the
+    /// ideal stage.
+    tracking_rms_um: f64,
+    tracking_max_um: f64,
+    /// The RMS tracking error as a normal force error at 25 N (times the specimen's tangent stiffness
+    /// there, 1.5 k_n √δ) [N], beside Table I's mean absolute error.
+    tracking_force_equivalent: f64,
+    /// Wall time of the experiments [s], and the simulated time on the arm.
+    wall_seconds: f64,
+    simulated_seconds: f64,
     specimen_law: &'static str,
     seed: u64,
     creep_um: f64,
@@ -179,7 +199,21 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
         noise: args.noise,
         ..SpecimenConfig::seed_000(truth.clone(), args.seed)
     })?;
-    let runs = paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?;
+    let wall = std::time::Instant::now();
+    let (runs, tracking_rms, tracking_max, simulated_seconds) = match args.stage {
+        StageArg::Ideal => (paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?, 0.0, 0.0, 0.0),
+        StageArg::Arm => {
+            let hidden = loading_paths_arm::HiddenErrors {
+                creep_sd: args.creep_um * 1e-6,
+                misalignment: args.misalignment_deg.to_radians(),
+                noise: args.noise,
+                seed: args.seed,
+            };
+            let arm = loading_paths_arm::run(&truth, &paths, &hidden)?;
+            (arm.runs, arm.tracking_rms, arm.tracking_max, arm.simulated)
+        }
+    };
+    let wall_seconds = wall.elapsed().as_secs_f64();
     let of =
         |family: Family| paths.iter().zip(&runs).filter(move |(p, _)| p.family == family).flat_map(|(_, r)| &r.samples);
 
@@ -203,7 +237,8 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
     // the laws fitted from the linear paths (Walton: none).
     let mut fitted = ContactModel::new(Kind::HertzWalton, k_n_linear, 0.0)?;
     // The spread each named error adds: the same experiments with the specimen's law alone, then with
-    // only the creep, then with only the misalignment (same seed).
+    // only the creep, then with only the misalignment (same seed), on the ideal stage (the arm's own
+    // share is its tracking error, reported beside).
     let spread_of = |creep_um: f64, misalignment_deg: f64| -> anyhow::Result<Vec<f64>> {
         let mut bench = SpecimenBench::new(SpecimenConfig {
             creep_sd: creep_um * 1e-6,
@@ -277,7 +312,19 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
     };
     let report = Report {
         comparison: "simulation vs seed 000's bench (real rubber)",
-        stage: "ideal displacement stage (the paper's); the arm as the stage is not built yet",
+        stage: match args.stage {
+            StageArg::Arm => "the simulated LWR IV, stiff position control (computed torque with integral action)",
+            StageArg::Ideal => "ideal displacement stage (the paper's)",
+        },
+        tracking_rms_um: tracking_rms * 1e6,
+        tracking_max_um: tracking_max * 1e6,
+        tracking_force_equivalent: {
+            let k = k_n_normal;
+            let depth = (FINAL_NORMAL_FORCE / k).powf(2.0 / 3.0);
+            tracking_rms * 1.5 * k * depth.sqrt()
+        },
+        wall_seconds,
+        simulated_seconds,
         specimen_law: truth.tangential.map_or(TangentialLaw::Walton, |t| t.law).id(),
         seed: args.seed,
         creep_um: args.creep_um,
@@ -323,6 +370,18 @@ pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
         "Specimen: Hertz + {} (k_n 8.280, k_t 3.7482 N/mm^1.5, μ 0.9), creep sd {} µm, misalignment {}°, noise {} N, seed {}.\n",
         r.specimen_law, r.creep_um, r.misalignment_deg, r.noise, r.seed
     );
+    if r.tracking_max_um > 0.0 {
+        println!(
+            "Stage tracking along the paths: RMS {:.3} µm, largest {:.2} µm (goal ≤ 1 µm RMS); as a normal force at 25 N \
+             {:.4} N RMS, against Table I's mean absolute error {:.4} N. {:.0} s simulated in {:.1} s wall.\n",
+            r.tracking_rms_um,
+            r.tracking_max_um,
+            r.tracking_force_equivalent,
+            r.table_i.mean_abs,
+            r.simulated_seconds,
+            r.wall_seconds
+        );
+    }
     println!("Fitted stiffness [N/mm^1.5]      simulation   paper");
     println!("  k_n, normal loadings           {:>10.3}   {:>6.3}", r.k_n_normal, r.paper_k_n_normal);
     println!("  k_n, linear paths              {:>10.3}   {:>6.3}", r.k_n_linear, r.paper_k_n_linear);
@@ -412,7 +471,16 @@ pub(crate) mod tests {
     use super::*;
 
     pub(crate) fn args(law: LawArg, creep_um: f64, misalignment_deg: f64, noise: f64) -> LoadingPathsArgs {
-        LoadingPathsArgs { seed: 3, law, creep_um, misalignment_deg, noise, out: None, json: None }
+        LoadingPathsArgs {
+            seed: 3,
+            law,
+            creep_um,
+            misalignment_deg,
+            noise,
+            out: None,
+            json: None,
+            stage: StageArg::Ideal,
+        }
     }
 
     #[test]
@@ -492,6 +560,29 @@ pub(crate) mod tests {
         assert!(t.mindlin_deresiewicz_friction.is_some_and(|m| (m / 0.9 - 1.0).abs() < 0.05), "{t:?}");
         assert!((t.zero_depth_um - t.true_zero_depth_um).abs() < 1.0, "{t:?}");
         assert!(t.mindlin_deresiewicz_cv_rms < 0.01 && t.walton_cv_rms > 0.05, "{t:?}");
+    }
+
+    #[test]
+    fn the_arm_as_the_stage_tracks_within_a_micrometre_and_measures_what_the_ideal_stage_does() {
+        let on = |stage| {
+            experiments(&LoadingPathsArgs { stage, ..args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005) })
+                .unwrap()
+                .report
+        };
+        let (arm, ideal) = (on(StageArg::Arm), on(StageArg::Ideal));
+        assert_eq!(arm.experiments, 205);
+        // Seed 000's goal for the stage: ≤ 1 µm RMS along the paths (the narrowest set spreads over a few µm).
+        assert!(arm.tracking_rms_um > 0.0 && arm.tracking_rms_um <= 1.0, "{} µm", arm.tracking_rms_um);
+        assert!(arm.tracking_force_equivalent < 0.1 * arm.table_i.mean_abs, "{arm:?}");
+        assert!((arm.k_n_normal / arm.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", arm.k_n_normal, arm.k_n_linear);
+        // The same specimen, sensor errors and draws measure alike on either stage (the arm finds its zero
+        // a few µm shallower: it moves continuously, the ideal stage in 5 µm steps).
+        assert!((arm.k_t_linear / ideal.k_t_linear - 1.0).abs() < 0.03, "{} vs {}", arm.k_t_linear, ideal.k_t_linear);
+        for (a, i) in arm.table_iii.iter().zip(&ideal.table_iii) {
+            assert!((a.measured_total / i.measured_total - 1.0).abs() < 0.2, "set {}: {a:?} vs {i:?}", a.set);
+        }
+        assert_eq!(arm.tangential_law.selected, "mindlin_deresiewicz", "{:?}", arm.tangential_law);
+        assert!((arm.tangential_law.zero_depth_um - arm.tangential_law.true_zero_depth_um).abs() < 2.0);
     }
 
     #[test]

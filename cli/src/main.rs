@@ -7,6 +7,7 @@ mod discrepancy_cmd;
 mod discrepancy_figures;
 mod force_cmd;
 mod identify_cmd;
+mod loading_paths_arm;
 mod loading_paths_cmd;
 mod loading_paths_figures;
 mod loading_paths_record;

@@ -303,7 +303,7 @@ impl ContactModel {
                 Ok((std::array::from_fn(|i| -ft.abs() * direction[i]), slides))
             }
             TangentialLaw::MindlinDeresiewicz => {
-                if memory.axis.is_none() && magnitude > 0.0 {
+                if memory.axis.is_none() && magnitude >= AXIS_MIN_MOTION {
                     memory.axis = Some(std::array::from_fn(|i| delta[i] / magnitude));
                 }
                 let axis = memory.axis.unwrap_or([0.0; 3]);
@@ -323,6 +323,11 @@ impl ContactModel {
         }
     }
 }
+
+/// The incremental law's axis is the direction of the first tangential motion at least this large [m]: a
+/// stage's sub-micrometre jitter while it presses would otherwise fix the axis in a random direction and
+/// leave the real motion across it, to the path-independent law (the arm as seed 000's stage did that).
+pub const AXIS_MIN_MOTION: f64 = 1e-6;
 
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     (0..3).map(|i| a[i] * b[i]).sum()
@@ -510,6 +515,36 @@ mod tests {
         // Out of contact the memory clears.
         md.tangential_step(&mut mm, [0.0, 0.0, 1.0], normal, 0.0, 0.0).unwrap();
         assert_eq!(mm, TangentialMemory::default());
+    }
+
+    #[test]
+    fn sub_micrometre_jitter_does_not_fix_the_incremental_laws_axis() {
+        // SI units: seed 000's half-ball. Pressed 1 mm with 0.2 µm of sideways jitter across the coming
+        // motion (a stage's tracking noise), then dragged 0.5 mm along x at that depth: the force along x
+        // is the one-axis law's along the same (δ_n, δ_t) path, not Walton's.
+        let (kn, kt) = (8.280 * crate::N_PER_MM_1_5, 3.7482 * crate::N_PER_MM_1_5);
+        let md = ContactModel {
+            tangential: Some(Tangential::mindlin_deresiewicz(kt, 0.9)),
+            ..ContactModel::new(crate::Kind::HertzWalton, kn, 0.0).unwrap()
+        };
+        let law = md.tangential.unwrap();
+        let normal = [0.0, 0.0, -1.0];
+        let mut memory = TangentialMemory::default();
+        let mut reference = MindlinDeresiewicz::default();
+        let (mut f, mut t) = ([0.0; 3], 0.0);
+        for k in 1..=2000 {
+            let (z, x, y) = if k <= 1000 {
+                (1e-3 * k as f64 / 1000.0, 0.0, 0.2e-6 * ((k - 1) as f64 * 0.37).sin())
+            } else {
+                (1e-3, 0.5e-3 * (k - 1000) as f64 / 1000.0, 0.0)
+            };
+            let p = kn * z.powf(1.5);
+            f = md.tangential_step(&mut memory, [x, y, -z], normal, z, p).unwrap().0;
+            t = reference.step(&law, z, x, p).unwrap().0;
+        }
+        let walton = kt * 1e-3f64.sqrt() * 0.5e-3;
+        assert!((-f[0] - t).abs() < 1e-6 * t, "along x {} vs the one-axis law's {t}", -f[0]);
+        assert!((t - walton).abs() > 0.1 * walton, "the path matters here: {t} vs Walton's {walton}");
     }
 
     fn hertz_walton() -> ContactModel {

@@ -1,7 +1,7 @@
 //! The ATI Gamma on the flange: the wrench the hand puts on the sensing frame (contact force and the
 //! hand's weight), plus bias, drift and white noise, quantised to RDT counts.
 
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use softcontact_dynamics::BodyInertia;
@@ -17,6 +17,9 @@ pub struct FtSensorConfig {
     pub bias: [f64; 6],
     /// Offset growth per axis per second (temperature drift).
     pub drift: [f64; 6],
+    /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (seed 000's
+    /// misalignment of the sensor's axes with the pushing axes: a mounting error no tool knows of).
+    pub mounting: UnitQuaternion<f64>,
 }
 
 impl FtSensorConfig {
@@ -27,6 +30,7 @@ impl FtSensorConfig {
             noise: [0.03, 0.03, 0.05, 0.0015, 0.0015, 0.0012],
             bias: [0.4, -0.3, 0.8, 0.01, -0.02, 0.005],
             drift: [0.0; 6],
+            mounting: UnitQuaternion::identity(),
         }
     }
 
@@ -38,7 +42,27 @@ impl FtSensorConfig {
 
     /// No noise, bias or drift: for tests that compare against exact physics.
     pub fn ideal() -> Self {
-        Self { calibration: Calibration::gamma_si_130_10(), noise: [0.0; 6], bias: [0.0; 6], drift: [0.0; 6] }
+        Self { noise: [0.0; 6], bias: [0.0; 6], ..Self::gamma() }
+    }
+
+    /// A Nano17 (SI-25-0.25) as seed 000 read its half-ball: 1/1280 N resolution (counts per newton),
+    /// noise a few resolution steps, no bias. Its ranges are widened (forces 70 N, torques 5 N·m): on the
+    /// product's flange the hand weighs on it and the contact lies 10 cm from its origin, where seed 000's
+    /// plate sat on the sensor itself.
+    pub fn nano17() -> Self {
+        Self {
+            calibration: Calibration {
+                counts_per_force: 1280.0,
+                counts_per_torque: 256_000.0,
+                force_unit: 1.0,
+                torque_unit: 1.0,
+                range: [70.0, 70.0, 70.0, 5.0, 5.0, 5.0],
+            },
+            noise: [0.005, 0.005, 0.005, 1e-5, 1e-5, 1e-5],
+            bias: [0.0; 6],
+            drift: [0.0; 6],
+            mounting: UnitQuaternion::identity(),
+        }
     }
 }
 
@@ -77,7 +101,7 @@ impl FtSensor {
         contact_force: &Vector3<f64>,
         gravity: Vector3<f64>,
     ) -> [f64; 6] {
-        let r = sensor.rotation.to_rotation_matrix();
+        let r = (sensor.rotation * self.config.mounting).to_rotation_matrix();
         let weight = r.inverse() * (self.load.mass * gravity);
         let contact = r.inverse() * contact_force;
         let lever = r.inverse() * (tool.translation.vector - sensor.translation.vector);

@@ -59,6 +59,14 @@ impl Surface {
         &self.config
     }
 
+    /// Moves the undeformed top by `distance` along the normal [m] (seed 000's creep of the specimen's
+    /// zero between and during experiments: a hidden effect, set by the scenario, never read by the tools).
+    pub fn creep(&mut self, distance: f64) {
+        if distance.is_finite() {
+            self.config.point += distance * self.normal;
+        }
+    }
+
     /// Contact of a tool at `position` moving at `velocity`, advancing the surface's memory by dt.
     pub fn contact(&mut self, position: &Vector3<f64>, velocity: &Vector3<f64>, dt: f64) -> Result<Contact, SimError> {
         let n = self.normal;
