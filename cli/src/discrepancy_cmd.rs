@@ -9,14 +9,16 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use softcontact_bag::Recording;
 use softcontact_contact::ContactModel;
-use softcontact_discrepancy::{Options, Report, Series, Wrench, analyse, phases, simulate};
+use softcontact_discrepancy::{
+    Options, PathOptions, PathReport, Report, Series, Wrench, analyse, name_path_effects, phases, simulate,
+};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::geometry;
 
-use crate::discrepancy_figures;
 use crate::identify_cmd::{self, IdentifyArgs, POSE, TF_STATIC, TWIST, WRENCH};
+use crate::{discrepancy_figures, tangential_paths};
 
 #[derive(Debug, clap::Args)]
 pub struct DiscrepancyArgs {
@@ -225,6 +227,20 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
 }
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
+    // A recording of loading paths (contacts that move sideways, each zeroed anew) is analysed as such.
+    let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
+    let (paths, _) = tangential_paths::episodes(&Recording::open(&args.recording.file)?, Vector3::new(x, y, z))?;
+    if paths.len() >= 2 {
+        let report = name_path_effects(&paths, &PathOptions::default())?;
+        print_path_report(&report);
+        if let Some(path) = &args.recording.json {
+            let mut value = serde_json::to_value(&report)?;
+            value["kind"] = serde_json::Value::from("loading_paths");
+            value["named_ids"] = serde_json::to_value(report.names())?;
+            identify_cmd::write_json(path, &value)?;
+        }
+        return Ok(());
+    }
     let Analysis { name, baseline, series, report } = analyse_file(args, true)?;
     let name = name.as_str();
     let id_args = &args.recording;
@@ -252,4 +268,38 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         identify_cmd::write_json(path, &value)?;
     }
     Ok(())
+}
+
+/// The loading-path workflow's answer: what it named, with the parameters and the gap before and after.
+pub fn print_path_report(r: &PathReport) {
+    let per_mm = softcontact_contact::N_PER_MM_1_5;
+    println!(
+        "Loading paths: {} contact episodes with sideways motion ({} samples), each zeroed at the third reading \
+         above 0.03 N; Hertz k_n {:.3} N/mm^1.5 with the zeros {:.1} µm below the surface.",
+        r.episodes,
+        r.samples,
+        r.k_n / per_mm,
+        r.zero_depth * 1e6
+    );
+    println!(
+        "baseline (Hertz + Walton, each episode's zero error): RMS normal {:.4} N, tangential {:.4} N",
+        r.rms_before[0], r.rms_before[1]
+    );
+    if r.named.is_empty() {
+        println!("named: none — Hertz + Walton explain the recording");
+    }
+    for n in &r.named {
+        println!("named: {:<22} residual −{:.1} %, AICc −{:.0}", n.effect.id(), 100.0 * n.gain, n.delta_aicc);
+    }
+    let law = if r.names().contains(&"tangential_history") { "mindlin_deresiewicz" } else { "walton" };
+    println!(
+        "after: RMS normal {:.4} N, tangential {:.4} N; k_t {:.4} N/mm^1.5 ({law}), misalignment {:.3}°, creep \
+         per episode {:.2} ± {:.2} µm",
+        r.rms_after[0],
+        r.rms_after[1],
+        r.k_t / per_mm,
+        r.misalignment.to_degrees(),
+        r.creep_mean * 1e6,
+        r.creep_sd * 1e6
+    );
 }

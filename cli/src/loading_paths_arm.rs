@@ -176,7 +176,7 @@ impl Cell {
 /// Runs `paths` (displacements from each experiment's found zero) with the arm as the stage.
 pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -> anyhow::Result<ArmRuns> {
     let mut cell = Cell::new(truth, hidden)?;
-    let mut rng = SmallRng::seed_from_u64(hidden.seed ^ 0x5eed_000);
+    let mut rng = SmallRng::seed_from_u64(hidden.seed ^ 0x05ee_d000);
     let creep = Normal::new(0.0, hidden.creep_sd).map_err(|e| anyhow::anyhow!("creep: {e}"))?;
     let home = cell.stage.tool_position(cell.sim.q());
     // Until the KRC commands, then still for 0.3 s, then the F/T node tares with the hand free.

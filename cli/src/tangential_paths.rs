@@ -48,8 +48,9 @@ struct Reading {
     force: Vector3<f64>,
 }
 
-/// Reads `recording` for contact episodes; `None` when fewer than two move sideways.
-pub fn from_recording(recording: &Recording, normal: Vector3<f64>) -> anyhow::Result<Option<TangentialReport>> {
+/// The contact episodes of `recording` that move sideways, each from its zero with the measured normal
+/// and tangential forces, thinned; and how many episodes there were in all.
+pub fn episodes(recording: &Recording, normal: Vector3<f64>) -> anyhow::Result<(Vec<Vec<PathSample>>, usize)> {
     let mut tool_to_sensor = geometry::lwr4_tool_to_sensor().rotation;
     if recording.topic(TF_STATIC).is_some() {
         for m in recording.messages() {
@@ -97,9 +98,8 @@ pub fn from_recording(recording: &Recording, normal: Vector3<f64>) -> anyhow::Re
         episodes.push(current);
     }
     let n = geometry.normal();
-    // Each episode from its zero: (δ_n, δ_t along its axis, P measured, T).
+    // Each episode from its zero: (δ_n, δ_t along its axis, P and T measured).
     let mut paths: Vec<Vec<PathSample>> = Vec::new();
-    let mut normal_samples = Vec::new();
     for e in &episodes {
         let origin = e[0].position;
         let across = |r: &Reading| {
@@ -107,46 +107,46 @@ pub fn from_recording(recording: &Recording, normal: Vector3<f64>) -> anyhow::Re
             d - n * d.dot(&n)
         };
         let axis = e.iter().map(across).max_by(|a, b| a.norm().total_cmp(&b.norm())).unwrap_or_default();
-        let sideways = axis.norm() >= MIN_SIDEWAYS;
-        let axis = axis.try_normalize(1e-12).unwrap_or_default();
-        let mut path = Vec::with_capacity(e.len());
-        for r in e {
-            let z = (r.position - origin).dot(&n);
-            normal_samples.push((z, geometry.normal_reading(&r.force)));
-            path.push(PathSample {
-                normal_displacement: z,
+        if axis.norm() < MIN_SIDEWAYS {
+            continue;
+        }
+        let axis = axis.normalize();
+        let path: Vec<PathSample> = e
+            .iter()
+            .map(|r| PathSample {
+                normal_displacement: (r.position - origin).dot(&n),
                 tangential_displacement: across(r).dot(&axis),
-                normal_force: 0.0,
+                normal_force: geometry.normal_reading(&r.force),
                 tangential_force: -r.force.dot(&axis),
-            });
-        }
-        if sideways {
-            paths.push(path);
-        }
+            })
+            .collect();
+        paths.push(thinned(&path, SPACING));
     }
+    Ok((paths, episodes.len()))
+}
+
+/// Reads `recording` for contact episodes and identifies the tangential law; `None` when fewer than two
+/// move sideways.
+pub fn from_recording(recording: &Recording, normal: Vector3<f64>) -> anyhow::Result<Option<TangentialReport>> {
+    let (paths, episodes) = episodes(recording, normal)?;
     if paths.len() < 2 {
         return Ok(None);
     }
-    let (k_n, zero_depth) = fit_normal_stiffness_and_zero(&normal_samples, MAX_ZERO_DEPTH)?;
+    let measured: Vec<(f64, f64)> = paths.iter().flatten().map(|s| (s.normal_displacement, s.normal_force)).collect();
+    let (k_n, zero_depth) = fit_normal_stiffness_and_zero(&measured, MAX_ZERO_DEPTH)?;
+    // The normal force the tangential law sees: Hertz's, from the zero's true depth.
     let paths: Vec<Vec<PathSample>> = paths
         .iter()
         .map(|p| {
-            let with_hertz: Vec<PathSample> = p
-                .iter()
+            p.iter()
                 .map(|s| {
                     let z = s.normal_displacement + zero_depth;
                     PathSample { normal_displacement: z, normal_force: k_n * z.max(0.0).powf(1.5), ..*s }
                 })
-                .collect();
-            thinned(&with_hertz, SPACING)
+                .collect()
         })
         .collect();
-    Ok(Some(TangentialReport {
-        k_n,
-        zero_depth,
-        episodes: episodes.len(),
-        identification: identify_tangential(&paths, 5)?,
-    }))
+    Ok(Some(TangentialReport { k_n, zero_depth, episodes, identification: identify_tangential(&paths, 5)? }))
 }
 
 fn fit_json(f: &softcontact_contact::TangentialFit) -> serde_json::Value {

@@ -256,3 +256,77 @@ fn every_wrench_channel_is_predicted_to_its_noise_with_the_tangential_law() {
         assert!(rms < 1.3 * sigma, "{name}: RMS {rms} against free-space σ {sigma}");
     }
 }
+
+/// Seed 000's loading paths (`softcontact loading-paths --out`) with the paper's two named errors and the
+/// specimen's tangential law hidden case by case; `softcontact discrepancy` reads only the two-segment
+/// recording. Each case: the arguments that hide the effects, and the ids that must be named.
+#[test]
+fn the_loading_path_corpus_names_the_papers_errors_and_the_path_dependence() {
+    let dir = std::env::temp_dir().join(format!("softcontact-path-corpus-{}", std::process::id()));
+    let cases: [(&str, &[&str], &[&str]); 8] = [
+        ("null", &["--stage", "ideal", "--law", "walton", "--creep-um", "0", "--misalignment-deg", "0"], &[]),
+        (
+            "null, seed 7",
+            &["--stage", "ideal", "--law", "walton", "--creep-um", "0", "--misalignment-deg", "0", "--seed", "7"],
+            &[],
+        ),
+        (
+            "creep 5 µm",
+            &["--stage", "ideal", "--law", "walton", "--creep-um", "5", "--misalignment-deg", "0"],
+            &["contact_offset_drift"],
+        ),
+        (
+            "misalignment 0.5°",
+            &["--stage", "ideal", "--law", "walton", "--creep-um", "0", "--misalignment-deg", "0.5"],
+            &["sensor_crosstalk"],
+        ),
+        (
+            "misalignment −0.3°",
+            &["--stage", "ideal", "--law", "walton", "--creep-um", "0", "--misalignment-deg", "-0.3"],
+            &["sensor_crosstalk"],
+        ),
+        (
+            "path dependence",
+            &["--stage", "ideal", "--law", "mindlin-deresiewicz", "--creep-um", "0", "--misalignment-deg", "0"],
+            &["tangential_history"],
+        ),
+        ("arm, null", &["--stage", "arm", "--law", "walton", "--creep-um", "0", "--misalignment-deg", "0"], &[]),
+        (
+            "arm, all three",
+            &["--stage", "arm", "--law", "mindlin-deresiewicz", "--creep-um", "5", "--misalignment-deg", "0.5"],
+            &["contact_offset_drift", "sensor_crosstalk", "tangential_history"],
+        ),
+    ];
+    for (name, hide, expected) in cases {
+        let _ = std::fs::remove_dir_all(&dir);
+        let made = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+            .arg("loading-paths")
+            .args(hide)
+            .arg("--out")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(made.status.success(), "{name}: {}", text(&made));
+        let json = dir.join("discrepancy.json");
+        let out = discrepancy(&[dir.join("two_segment.mcap").as_os_str(), "--json".as_ref(), json.as_os_str()]);
+        assert!(out.status.success(), "{name}: {}", text(&out));
+        let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let mut named: Vec<String> =
+            report["named_ids"].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect();
+        named.sort();
+        eprintln!("{name}: named {named:?}; {}", text(&out).lines().last().unwrap_or(""));
+        assert_eq!(named, expected, "{name}: {}", text(&out));
+        // The parameters of what was named are the hidden ones (k_t 3.7482 N/mm^1.5; ε; creep sd 5 µm).
+        let k_t = report["k_t"].as_f64().unwrap() / softcontact_contact::N_PER_MM_1_5;
+        assert!((k_t / 3.7482 - 1.0).abs() < 0.03, "{name}: k_t {k_t}");
+        let epsilon = report["misalignment"].as_f64().unwrap().to_degrees();
+        let hidden_epsilon: f64 =
+            hide[hide.iter().position(|a| *a == "--misalignment-deg").unwrap() + 1].parse().unwrap();
+        assert!((epsilon - hidden_epsilon).abs() <= 0.05 + 0.25 * hidden_epsilon.abs(), "{name}: ε {epsilon}°");
+        if expected.contains(&"contact_offset_drift") {
+            let sd = report["creep_sd"].as_f64().unwrap() * 1e6;
+            assert!((sd / 5.0 - 1.0).abs() < 0.2, "{name}: creep sd {sd} µm");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -131,7 +131,7 @@ fn fit_stiffness(kind: TangentialLaw, friction: f64, paths: &[&[PathSample]]) ->
         let x = s.normal_displacement.sqrt() * s.tangential_displacement;
         (xy, xx) = (xy + x * finite("T", s.tangential_force)?, xx + x * x);
     }
-    if !(xx > 0.0) {
+    if xx.is_nan() || xx <= 0.0 {
         return Err(ContactError::NotEnoughData { kind: "tangential law (no tangential motion in contact)" });
     }
     let mut law = Tangential { stiffness: (xy / xx).max(0.0), friction, law: kind };
@@ -140,11 +140,11 @@ fn fit_stiffness(kind: TangentialLaw, friction: f64, paths: &[&[PathSample]]) ->
     for _ in 0..8 {
         let (e, tp, pp) = residuals(&law, paths)?;
         sse = e;
-        if !(pp > 0.0) {
+        if pp.is_nan() || pp <= 0.0 {
             break;
         }
         let scale = tp / pp;
-        if (scale - 1.0).abs() < 1e-7 || !(scale > 0.0) {
+        if (scale - 1.0).abs() < 1e-7 || scale.is_nan() || scale <= 0.0 {
             break;
         }
         law.stiffness *= scale;

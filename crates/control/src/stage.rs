@@ -150,7 +150,11 @@ mod tests {
     use super::*;
     use softcontact_dynamics::lwr4;
 
-    const Q: [f64; 7] = [0.0, 0.5236, 0.0, -1.3963, 0.0, 1.2217, 0.0];
+    /// The hand facing down in front of the robot: A2 30°, A4 −80°, A6 70°.
+    const Q: [f64; 7] = {
+        let deg = std::f64::consts::PI / 180.0;
+        [0.0, 30.0 * deg, 0.0, -80.0 * deg, 0.0, 70.0 * deg, 0.0]
+    };
 
     /// Integrates the arm under the stage's torques and a spring pushing the tool back along z (a contact
     /// of `stiffness` N/m below `surface`), semi-implicit Euler at 0.1 ms with the torque held for 1 ms;

@@ -45,6 +45,7 @@
 //! collinearity, refusing out-of-library effects) are summarised in the crate's README.md (crates/discrepancy).
 
 mod fit;
+mod loading_paths;
 #[cfg(test)]
 mod tests;
 mod wrench;
@@ -55,6 +56,7 @@ use serde::Serialize;
 use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, MAX_DELAY, SensorInputs};
 
 use fit::{Data, Fit, Structure, Term};
+pub use loading_paths::{PathEffect, PathNamed, PathOptions, PathReport, name_path_effects};
 pub use wrench::{CHANNELS, Channel, Wrench, predict_wrench};
 
 /// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
