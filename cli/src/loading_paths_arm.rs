@@ -96,14 +96,7 @@ impl Cell {
         let mounting = UnitQuaternion::from_scaled_axis(sensor_rotation.inverse() * across * -hidden.misalignment);
         config.sensor = FtSensorConfig { mounting, ..FtSensorConfig::nano17() };
         config.sensor.noise[..3].fill(hidden.noise);
-        let ft = FtSensorNode::new(FtConfig {
-            calibration: config.sensor.calibration,
-            tool: lwr4::tool_load(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            low_pass: None,
-            sample_rate: 1000.0,
-        })
-        .map_err(anyhow::Error::msg)?;
+        let ft = FtSensorNode::new(FtConfig::lwr4(config.sensor.calibration)).map_err(anyhow::Error::msg)?;
         let tool = model.frame_id(lwr4::TOOL_FRAME)?;
         let stage = PositionStage::new(lwr4::model(), tool, &config.initial_q, BANDWIDTH);
         Ok(Self {

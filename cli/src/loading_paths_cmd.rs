@@ -14,7 +14,7 @@ use serde::Serialize;
 use softcontact_contact::{
     ContactModel, FINAL_NORMAL_FORCE, Family, FitStatistics, Kind, LoadingPath, PathSample, Tangential, TangentialLaw,
     dispersion, fit_normal_stiffness, fit_normal_stiffness_and_zero, fit_statistics, fit_tangential_stiffness,
-    identify_tangential, predicted_dispersion, seed_000_experiments, thinned,
+    identify_tangential, predicted_dispersion, seed_000_experiments, thinned, with_hertz,
 };
 use softcontact_sim::{BenchRun, SpecimenBench, SpecimenConfig};
 
@@ -277,7 +277,7 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
     // The tangential law from the linear and two-segment paths, as a recording would give it: δ from the
     // found zero, deepened by the zero's depth fitted with Hertz's law to the linear paths, P from that fit.
     let (k_n_zero, zero_depth) = fit_normal_stiffness_and_zero(&linear_normal, MAX_ZERO_DEPTH)?;
-    let tangential_paths: Vec<Vec<PathSample>> = paths
+    let measured: Vec<Vec<PathSample>> = paths
         .iter()
         .zip(&runs)
         .filter(|(p, _)| p.family != Family::Normal)
@@ -286,15 +286,16 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
                 .samples
                 .iter()
                 .map(|s| PathSample {
-                    normal_displacement: s.normal_displacement + zero_depth,
+                    normal_displacement: s.normal_displacement,
                     tangential_displacement: s.tangential_displacement,
-                    normal_force: k_n_zero * (s.normal_displacement + zero_depth).max(0.0).powf(1.5),
+                    normal_force: s.normal_force,
                     tangential_force: s.tangential_force,
                 })
                 .collect();
             thinned(&samples, 40e-6)
         })
         .collect();
+    let tangential_paths = with_hertz(&measured, k_n_zero, zero_depth);
     let t = identify_tangential(&tangential_paths, 5)?;
     let md = &t.mindlin_deresiewicz;
     let tangential_law = TangentialLawRow {

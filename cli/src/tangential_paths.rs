@@ -12,7 +12,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::json;
 use softcontact_bag::Recording;
 use softcontact_contact::{
-    PathSample, TangentialIdentification, fit_normal_stiffness_and_zero, identify_tangential, thinned,
+    PathSample, TangentialIdentification, fit_normal_stiffness_and_zero, identify_tangential, thinned, with_hertz,
 };
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
@@ -134,18 +134,7 @@ pub fn from_recording(recording: &Recording, normal: Vector3<f64>) -> anyhow::Re
     }
     let measured: Vec<(f64, f64)> = paths.iter().flatten().map(|s| (s.normal_displacement, s.normal_force)).collect();
     let (k_n, zero_depth) = fit_normal_stiffness_and_zero(&measured, MAX_ZERO_DEPTH)?;
-    // The normal force the tangential law sees: Hertz's, from the zero's true depth.
-    let paths: Vec<Vec<PathSample>> = paths
-        .iter()
-        .map(|p| {
-            p.iter()
-                .map(|s| {
-                    let z = s.normal_displacement + zero_depth;
-                    PathSample { normal_displacement: z, normal_force: k_n * z.max(0.0).powf(1.5), ..*s }
-                })
-                .collect()
-        })
-        .collect();
+    let paths = with_hertz(&paths, k_n, zero_depth);
     Ok(Some(TangentialReport { k_n, zero_depth, episodes, identification: identify_tangential(&paths, 5)? }))
 }
 

@@ -76,15 +76,9 @@ impl Cell {
     pub fn new(sim: SimConfig, law: DeformationController, estimator: ContactEstimatorNode) -> Result<Self, CellError> {
         let model = lwr4::model();
         let ft_params = ft_sensor::Params::default();
-        let ft = FtSensorNode::new(FtConfig {
-            calibration: sim.sensor.calibration,
-            tool: lwr4::tool_load(),
-            gravity: Vector3::new(0.0, 0.0, -9.81),
-            low_pass: None,
-            sample_rate: 1000.0,
-        })
-        .map_err(CellError::Ft)?
-        .with_tare_policy(ft_params.tare_policy());
+        let ft = FtSensorNode::new(FtConfig::lwr4(sim.sensor.calibration))
+            .map_err(CellError::Ft)?
+            .with_tare_policy(ft_params.tare_policy());
         let params = deformation_controller::Params {
             normal: law.config().normal.into(),
             restart_after: law.config().restart_after,

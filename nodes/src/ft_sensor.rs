@@ -32,6 +32,19 @@ pub struct FtConfig {
     pub sample_rate: f64,
 }
 
+impl FtConfig {
+    /// The LWR IV's hand on the sensor (the URDF's load), gravity along −z, 1 kHz records, no filter.
+    pub fn lwr4(calibration: Calibration) -> Self {
+        Self {
+            calibration,
+            tool: softcontact_dynamics::lwr4::tool_load(),
+            gravity: Vector3::new(0.0, 0.0, -9.81),
+            low_pass: None,
+            sample_rate: 1000.0,
+        }
+    }
+}
+
 /// A second-order Butterworth low-pass (bilinear transform with pre-warping), one per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Biquad {

@@ -71,7 +71,9 @@ pub use model::{
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};
 pub use tangential::{MindlinDeresiewicz, Tangential, TangentialLaw, TangentialMemory};
-pub use tangential_fit::{PathSample, TangentialFit, TangentialIdentification, identify_tangential, thinned};
+pub use tangential_fit::{
+    PathSample, TangentialFit, TangentialIdentification, identify_tangential, thinned, with_hertz,
+};
 pub use window::{Estimate, WindowEstimator, estimate};
 
 /// Why a contact computation was refused.

@@ -90,6 +90,17 @@ pub fn predict(law: &Tangential, path: &[PathSample]) -> Result<Vec<f64>, Contac
     Ok(out)
 }
 
+/// `paths` as the tangential law sees them: each δ_n deepened by the found zero's depth below the surface
+/// and the normal force Hertz's, k_n z^{3/2} (a measured force's noise would make the incremental law's
+/// slip test flicker).
+pub fn with_hertz(paths: &[Vec<PathSample>], k_n: f64, zero_depth: f64) -> Vec<Vec<PathSample>> {
+    let sample = |s: &PathSample| {
+        let z = s.normal_displacement + zero_depth;
+        PathSample { normal_displacement: z, normal_force: k_n * z.max(0.0).powf(1.5), ..*s }
+    };
+    paths.iter().map(|p| p.iter().map(sample).collect()).collect()
+}
+
 /// The samples of `path` at least `spacing` [m] apart in the (δ_n, δ_t) plane, and its last: the laws
 /// are exact on straight steps, so a dense recording fits the same with a fraction of its samples.
 pub fn thinned(path: &[PathSample], spacing: f64) -> Vec<PathSample> {

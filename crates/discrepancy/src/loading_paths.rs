@@ -29,7 +29,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use softcontact_contact::{
-    ContactError, MindlinDeresiewicz, PathSample, fit_normal_stiffness_and_zero, identify_tangential,
+    ContactError, MindlinDeresiewicz, PathSample, fit_normal_stiffness_and_zero, identify_tangential, with_hertz,
 };
 
 /// The deepest an episode's zero is searched for below the surface [m].
@@ -154,18 +154,8 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
     // The incremental law's response per unit k_t, with the friction it shows (microslip on the paths'
     // sideways segments): both from the law fitted to these episodes (`identify_tangential`), the
     // response linear in k_t about that fit.
-    let with_hertz: Vec<Vec<PathSample>> = episodes
-        .iter()
-        .map(|e| {
-            e.iter()
-                .map(|s| {
-                    let z = s.normal_displacement + zero_depth;
-                    PathSample { normal_displacement: z, normal_force: k_n * z.max(0.0).powf(1.5), ..*s }
-                })
-                .collect()
-        })
-        .collect();
-    let law = identify_tangential(&with_hertz, 5)?.mindlin_deresiewicz.law;
+    let owned: Vec<Vec<PathSample>> = episodes.iter().map(|e| e.to_vec()).collect();
+    let law = identify_tangential(&with_hertz(&owned, k_n, zero_depth), 5)?.mindlin_deresiewicz.law;
     if law.stiffness.is_nan() || law.stiffness <= 0.0 {
         return Err(ContactError::NotEnoughData { kind: "loading-path discrepancy (no tangential stiffness)" });
     }
