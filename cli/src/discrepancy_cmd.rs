@@ -31,6 +31,10 @@ pub struct DiscrepancyArgs {
     /// Folder for the augmented model (`<name>.augmented.yaml`).
     #[arg(long, default_value = "out/discrepancy")]
     pub out: PathBuf,
+    /// The recording is of loading paths (seed 000's experiments: contacts that move sideways, each zeroed
+    /// anew): name the creep of the zero, a misaligned sensor and the path dependence of the tangential force.
+    #[arg(long)]
+    pub loading_paths: bool,
 }
 
 /// The F/T node's tares (their stamps zero the sensor's drifted offset).
@@ -227,10 +231,16 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
 }
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
-    // A recording of loading paths (contacts that move sideways, each zeroed anew) is analysed as such.
-    let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
-    let (paths, _) = tangential_paths::episodes(&Recording::open(&args.recording.file)?, Vector3::new(x, y, z))?;
-    if paths.len() >= 2 {
+    if args.loading_paths {
+        let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
+        let (paths, episodes) =
+            tangential_paths::episodes(&Recording::open(&args.recording.file)?, Vector3::new(x, y, z))?;
+        anyhow::ensure!(
+            paths.len() >= 2,
+            "--loading-paths needs at least two contacts that move sideways; the recording has {} contacts, {} of them sideways",
+            episodes,
+            paths.len()
+        );
         let report = name_path_effects(&paths, &PathOptions::default())?;
         print_path_report(&report);
         if let Some(path) = &args.recording.json {

@@ -308,7 +308,9 @@ fn the_loading_path_corpus_names_the_papers_errors_and_the_path_dependence() {
             .unwrap();
         assert!(made.status.success(), "{name}: {}", text(&made));
         let json = dir.join("discrepancy.json");
-        let out = discrepancy(&[dir.join("two_segment.mcap").as_os_str(), "--json".as_ref(), json.as_os_str()]);
+        let recording = dir.join("two_segment.mcap");
+        let out =
+            discrepancy(&[recording.as_os_str(), "--loading-paths".as_ref(), "--json".as_ref(), json.as_os_str()]);
         assert!(out.status.success(), "{name}: {}", text(&out));
         let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         let mut named: Vec<String> =
