@@ -57,6 +57,16 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 5)]
         reps: usize,
     },
+    /// Seed 000's 205 loading paths in-process: the arm as the stage (driver, F/T node, stage and simulator
+    /// in lockstep) against the ideal stage in the same run (goal: < 60 s wall), and the stage's update
+    /// per 1 ms tick.
+    LoadingPaths {
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+        /// Stage updates per repetition.
+        #[arg(long, default_value_t = 100_000)]
+        calls: usize,
+    },
     /// The deformation controller's tick in contact: FK, J, J̇q̇, M, M⁻¹, h, the deformation law, eq. 15
     /// and the limiter.
     Controller {
@@ -214,6 +224,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Sim { seconds, reps } => run_sim(seconds, reps),
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
+        BenchCommand::LoadingPaths { reps, calls } => run_loading_paths(reps, calls),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
         BenchCommand::Demo { reps } => crate::demo::bench(reps),
         BenchCommand::Discrepancy { threads, json, timing_only, case, keep } => {
@@ -315,6 +326,56 @@ fn run_recording(seconds: f64, reps: usize) -> anyhow::Result<()> {
 }
 
 /// Times `DeformationController::tick` on states of a hand pressing the simulated sponge.
+fn run_loading_paths(reps: usize, calls: usize) -> anyhow::Result<()> {
+    use crate::loading_paths_arm::{HiddenErrors, run};
+    use crate::loading_paths_cmd::{LawArg, specimen};
+    if calls == 0 || reps == 0 {
+        bail!("--calls and --reps must be positive");
+    }
+    let truth = specimen(LawArg::MindlinDeresiewicz);
+    let paths = softcontact_contact::seed_000_experiments(&truth, 2e-3)?;
+    let hidden = HiddenErrors { creep_sd: 5e-6, misalignment: 0.5f64.to_radians(), noise: 0.005, seed: 0 };
+    let (mut arm, mut ideal, mut simulated) = (f64::INFINITY, f64::INFINITY, 0.0);
+    for _ in 0..reps {
+        let start = Instant::now();
+        simulated = black_box(run(&truth, &paths, &hidden)?).simulated;
+        arm = arm.min(start.elapsed().as_secs_f64());
+        let start = Instant::now();
+        let mut bench = softcontact_sim::SpecimenBench::new(softcontact_sim::SpecimenConfig {
+            creep_sd: hidden.creep_sd,
+            misalignment: hidden.misalignment,
+            noise: hidden.noise,
+            ..softcontact_sim::SpecimenConfig::seed_000(truth.clone(), 0)
+        })?;
+        for p in &paths {
+            black_box(bench.run(p)?);
+        }
+        ideal = ideal.min(start.elapsed().as_secs_f64());
+    }
+    println!(
+        "205 loading paths: arm as the stage {arm:.2} s wall for {simulated:.0} s simulated ({:.0}x real time; goal < 60 s), \
+         ideal stage {:.1} ms: the arm costs {:.0}x the ideal stage",
+        simulated / arm,
+        ideal * 1e3,
+        arm / ideal
+    );
+    // The stage's update alone, the tool moving down 1 µm per tick.
+    let model = softcontact_dynamics::lwr4::model();
+    let tool = model.frame_id(softcontact_dynamics::lwr4::TOOL_FRAME)?;
+    let q = softcontact_sim::DEFAULT_Q;
+    let mut stage = softcontact_control::PositionStage::new(model, tool, &q, 150.0);
+    let start_position = stage.tool_position(&q);
+    let (velocity, force) = (nalgebra::Vector3::new(0.0, 0.0, -1e-3), nalgebra::Vector3::new(0.0, 0.0, 20.0));
+    let ns = best_ns(calls, reps, |i| {
+        let reference = start_position + velocity * (1e-3 * (i % 1000) as f64);
+        black_box(stage.update(&q, &[0.0; 7], &reference, &velocity, &force, 1e-3).ok());
+    });
+    println!(
+        "stage update per tick (inverse kinematics, two Newton steps; inverse dynamics): {ns:.0} ns (goal < 10 µs)"
+    );
+    Ok(())
+}
+
 fn run_controller(calls: usize, reps: usize) -> anyhow::Result<()> {
     use nalgebra::Vector3;
     use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};

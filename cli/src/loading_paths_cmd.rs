@@ -67,7 +67,7 @@ pub(crate) enum LawArg {
 
 /// The specimen's truth (seed 000's linear-path fit, k_n 8.280 and k_t 3.7482 N/mm^{3/2}; μ 0.9 for
 /// rubber on sandpaper) — what the fits are compared with, never read by them.
-fn specimen(law: LawArg) -> ContactModel {
+pub(crate) fn specimen(law: LawArg) -> ContactModel {
     let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * PER_MM, 0.0).expect("a valid model");
     m.tangential = Some(match law {
         LawArg::Walton => Tangential::walton(3.7482 * PER_MM, 0.9),
