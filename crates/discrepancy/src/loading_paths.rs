@@ -195,16 +195,17 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
     let samples: usize = prepared.episodes.iter().map(Vec::len).sum();
     prepared.k_t = prepared.solve(&[])?.beta[1];
     let base = prepared.solve(&[])?;
+    let base_sse = base.sse;
     let mut structure: Vec<PathEffect> = Vec::new();
-    let mut current = base.sse;
+    let mut current = base;
     let mut named = Vec::new();
     loop {
-        let mut best: Option<(PathEffect, f64, f64)> = None;
+        let mut best: Option<(PathEffect, f64, f64, Solved)> = None;
         for candidate in PathEffect::ALL.into_iter().filter(|c| !structure.contains(c)) {
             let mut trial = structure.clone();
             trial.push(candidate);
             let solved = prepared.solve(&trial)?;
-            let (before, after) = (current[0] + current[1], solved.sse[0] + solved.sse[1]);
+            let (before, after) = (current.sse[0] + current.sse[1], solved.sse[0] + solved.sse[1]);
             let gain = 1.0 - after / before;
             let delta_aicc = prepared.aicc(before, &structure) - prepared.aicc(after, &trial);
             let t_ok = match candidate {
@@ -217,17 +218,18 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
             if gain >= options.min_gain
                 && delta_aicc >= options.min_delta_aicc
                 && t_ok
-                && best.is_none_or(|b| delta_aicc > b.2)
+                && best.as_ref().is_none_or(|b| delta_aicc > b.2)
             {
-                best = Some((candidate, gain, delta_aicc));
+                best = Some((candidate, gain, delta_aicc, solved));
             }
         }
-        let Some((effect, gain, delta_aicc)) = best else { break };
+        // The named candidate's fit is the model from now on (its structure adds it last, as tried).
+        let Some((effect, gain, delta_aicc, solved)) = best else { break };
         structure.push(effect);
-        current = prepared.solve(&structure)?.sse;
+        current = solved;
         named.push(PathNamed { effect, gain, delta_aicc });
     }
-    let last = prepared.solve(&structure)?;
+    let last = current;
     let n = episodes.len();
     let creep: Vec<f64> = if structure.contains(&PathEffect::ContactOffsetDrift) {
         let first = prepared.column_of(&structure, PathEffect::ContactOffsetDrift);
@@ -252,7 +254,7 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
         },
         creep_mean: mean,
         creep_sd: sd,
-        rms_before: [(base.sse[0] / per_channel).sqrt(), (base.sse[1] / per_channel).sqrt()],
+        rms_before: [(base_sse[0] / per_channel).sqrt(), (base_sse[1] / per_channel).sqrt()],
         rms_after: [(last.sse[0] / per_channel).sqrt(), (last.sse[1] / per_channel).sqrt()],
     })
 }
