@@ -19,10 +19,12 @@
 mod dynamics;
 mod kinematics;
 pub mod model;
+pub mod planar;
 
 pub use dynamics::{ControlTerms, ExternalWrench};
 pub use kinematics::{Axes, Data};
 pub use model::{BodyInertia, Frame, FrameId, Joint, JointLimits, Model, fixed_subtree_inertia};
+pub use planar::{PlanarChain, PlanarLink};
 
 /// Why a robot description could not be used, or a dynamics query failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
