@@ -404,6 +404,57 @@ pub struct SetPointReport {
     pub sound: bool,
 }
 
+impl SetPointReport {
+    /// Why this set point is not sound, one reason per line (none when it is).
+    pub fn faults(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let st = &self.stability;
+        if !self.settled.at_rest && self.residual > 1e-6 {
+            out.push(format!(
+                "no equilibrium: still moving after {:.1} s, the static balance off by {:.2e}",
+                self.settled.time, self.residual
+            ));
+        }
+        if st.slowest.0 >= stability::STABLE_REAL_PART {
+            out.push(format!(
+                "not asymptotically stable: an eigenvalue {:+.3e} {:+.1}i s⁻¹ (needs < {:.0e})",
+                st.slowest.0,
+                st.slowest.1,
+                stability::STABLE_REAL_PART
+            ));
+        }
+        if st.return_distance > stability::RETURN_TOLERANCE {
+            out.push(format!(
+                "a start perturbed by {:.0e} ends {:.1e} from the equilibrium after {:.1} s",
+                stability::PERTURBATION,
+                st.return_distance,
+                st.return_time
+            ));
+        }
+        for &f in &self.pressed {
+            if self.forces[f].normal <= 0.0 {
+                out.push(format!("foot {f} is meant to press and does not touch its wall"));
+            }
+        }
+        for (f, m) in self.cone_margins.iter().enumerate() {
+            if let Some(m) = m.filter(|m| *m < MIN_MARGIN) {
+                let force = &self.forces[f];
+                out.push(format!(
+                    "foot {f} at the edge of its cone: margin {m:.3} < {MIN_MARGIN} (fₜ {:+.2} N, fₙ {:.2} N)",
+                    force.tangential, force.normal
+                ));
+            }
+        }
+        for &f in &self.unintended_slides {
+            out.push(format!("foot {f}, meant to hold, slid {:.2} mm", self.slip[f] * 1e3));
+        }
+        for &f in &self.unintended_contacts {
+            out.push(format!("foot {f}, meant to be off, touches its wall with {:.2} N", self.forces[f].normal));
+        }
+        out
+    }
+}
+
 /// The least cone margin a sound set point keeps: a tenth of the friction in reserve.
 pub const MIN_MARGIN: f64 = 0.1;
 /// The farthest a foot meant to hold may creep between two set points [m]: as a foot of a tripod lets
@@ -429,21 +480,33 @@ fn com_height(snake: &Snake, q: &[f64]) -> f64 {
     chain.links.iter().enumerate().map(|(k, l)| l.mass * chain.point(q, k, l.com).y).sum::<f64>() / chain.total_mass()
 }
 
-/// Runs the snake through `set_points` from `state` (every transition simulated, every equilibrium
-/// analysed).
-pub fn run(
-    snake: &Snake,
-    config: &ClimbConfig,
-    state: &mut State,
-    set_points: &[SetPoint],
-) -> Result<Vec<SetPointReport>, Error> {
-    let mu = snake.friction();
-    let mut reports: Vec<SetPointReport> = Vec::new();
-    let mut current = state.q[3..].to_vec();
-    let mut previous_pressed: Vec<usize> = Vec::new();
-    for sp in set_points {
+/// The snake on its way through a gait: its state, the set point it is commanded and the feet meant to
+/// press.
+pub struct Climber<'a> {
+    pub snake: Snake,
+    config: &'a ClimbConfig,
+    pub state: State,
+    commanded: Vec<f64>,
+    pressed: Vec<usize>,
+}
+
+impl<'a> Climber<'a> {
+    /// The snake of `config` placed with its feet just touching the walls, at rest, commanded to stay.
+    pub fn new(config: &'a ClimbConfig) -> Result<Self, Error> {
+        let snake = config.snake()?;
+        let state = start(config, &snake)?;
+        let commanded = state.q[3..].to_vec();
+        Ok(Climber { snake, config, state, commanded, pressed: Vec::new() })
+    }
+
+    /// Moves to the set point (smoothly, over `move_time`), lets the snake settle, evens out its feet's
+    /// use of their cones, and analyses the equilibrium it reached.
+    pub fn go(&mut self, sp: &SetPoint) -> Result<SetPointReport, Error> {
+        let (snake, config, state) = (&self.snake, self.config, &mut self.state);
+        let mu = snake.friction();
+        let current = &mut self.commanded;
         // Feet pressed before and after: they must hold (not slide) on the way.
-        let holding: Vec<usize> = sp.pressed.iter().copied().filter(|f| previous_pressed.contains(f)).collect();
+        let holding: Vec<usize> = sp.pressed.iter().copied().filter(|f| self.pressed.contains(f)).collect();
         let mut joints = sp.joints_from(&state.q, &snake.chain);
         let mut min_on_the_way = 1.0f64;
         let mut slip = vec![0.0; state.feet.len()];
@@ -500,7 +563,7 @@ pub fn run(
             && unintended_slides.is_empty()
             && unintended_contacts.is_empty()
             && sp.pressed.iter().all(|&f| forces[f].normal > 0.0);
-        reports.push(SetPointReport {
+        let report = SetPointReport {
             name: sp.name.clone(),
             joints: joints.clone(),
             pressed: sp.pressed.clone(),
@@ -518,23 +581,38 @@ pub fn run(
             q: state.q.clone(),
             forces,
             sound,
-        });
-        previous_pressed.clone_from(&sp.pressed);
+        };
+        self.pressed.clone_from(&sp.pressed);
+        Ok(report)
     }
-    Ok(reports)
 }
 
-/// The gait's set points: the first squeeze, then `cycles` climbing cycles.
-pub fn gait(config: &ClimbConfig, cycles: usize) -> Result<Vec<SetPoint>, Error> {
-    let gap = config.gap();
-    let planner = Planner { config, gap };
-    let n = config.links;
-    let low = low_height(&planner)?;
-    let high = low + config.step;
-    let pose = |bottom, top, height| Pose { bottom, top, height };
-    let mut out = vec![planner.set_point("squeeze".into(), pose(0, 0, low), None)?];
-    let up = format!("{:.0} mm", config.step * 1e3);
-    for c in 1..=cycles {
+/// The gait's designer: the walls' gap and the spine's two heights.
+struct Gait<'a> {
+    planner: Planner<'a>,
+    low: f64,
+    high: f64,
+}
+
+impl<'a> Gait<'a> {
+    fn new(config: &'a ClimbConfig) -> Result<Self, Error> {
+        config.snake()?; // the configuration's checks, before any geometry
+        let planner = Planner { config, gap: config.gap() };
+        let low = low_height(&planner)?;
+        Ok(Gait { planner, low, high: low + config.step })
+    }
+
+    /// The first set point: every foot pressed.
+    fn squeeze(&self) -> Result<SetPoint, Error> {
+        self.planner.set_point("squeeze".into(), Pose { bottom: 0, top: 0, height: self.low }, None)
+    }
+
+    /// The 14 set points of climbing cycle `c` (one step).
+    fn cycle(&self, c: usize) -> Result<Vec<SetPoint>, Error> {
+        let n = self.planner.config.links;
+        let (low, high) = (self.low, self.high);
+        let pose = |bottom, top, height| Pose { bottom, top, height };
+        let up = format!("{:.0} mm", self.planner.config.step * 1e3);
         let mut steps = Vec::new();
         for (i, foot) in [n, n - 2, n - 1].into_iter().enumerate() {
             steps.push((format!("{c}: release foot {foot}"), pose(0, i + 1, low), Tripod::Bottom));
@@ -550,9 +628,16 @@ pub fn gait(config: &ClimbConfig, cycles: usize) -> Result<Vec<SetPoint>, Error>
         for (i, foot) in [1, 0, 2].into_iter().enumerate() {
             steps.push((format!("{c}: press foot {foot}"), pose(2 - i, 0, low), Tripod::Top));
         }
-        for (name, p, holding) in steps {
-            out.push(planner.set_point(name, p, Some(holding))?);
-        }
+        steps.into_iter().map(|(name, p, holding)| self.planner.set_point(name, p, Some(holding))).collect()
+    }
+}
+
+/// The gait's set points: the first squeeze, then `cycles` climbing cycles.
+pub fn gait(config: &ClimbConfig, cycles: usize) -> Result<Vec<SetPoint>, Error> {
+    let gait = Gait::new(config)?;
+    let mut out = vec![gait.squeeze()?];
+    for c in 1..=cycles {
+        out.extend(gait.cycle(c)?);
     }
     Ok(out)
 }
@@ -566,16 +651,141 @@ pub fn start(config: &ClimbConfig, snake: &Snake) -> Result<State, Error> {
     Ok(State::at_rest(snake, Planner::coordinates(&nodes)))
 }
 
-/// Climbs `config.height`: the squeeze, then as many cycles as the height needs.
+/// The first squeeze alone: the snake placed with its feet just touching, squeezed, and its equilibrium
+/// analysed — how a set point (or a configuration) is judged without climbing.
+pub fn squeeze(config: &ClimbConfig) -> Result<SetPointReport, Error> {
+    Climber::new(config)?.go(&Gait::new(config)?.squeeze()?)
+}
+
+/// Climbs `config.height`: the squeeze, then cycles until node 0 has risen that far (each cycle gains
+/// a little less than the step: the snake's compliance takes some back), at most three times the cycles
+/// the step alone would need.
 pub fn climb(config: &ClimbConfig) -> Result<Climb, Error> {
-    let snake = config.snake()?;
-    let cycles = (config.height / config.step).ceil() as usize;
-    let set_points = gait(config, cycles)?;
-    let mut state = start(config, &snake)?;
-    let reports = run(&snake, config, &mut state, &set_points)?;
-    let (first, last) = (&reports[0], reports.last().unwrap());
-    let climbed = last.foot_height - first.foot_height;
-    let com_climbed = last.com_height - first.com_height;
-    let success = reports.iter().all(|r| r.sound) && climbed >= config.height - 1e-3;
-    Ok(Climb { config: config.clone(), gap: snake.gap, set_points: reports, climbed, com_climbed, success })
+    let gait = Gait::new(config)?;
+    let mut climber = Climber::new(config)?;
+    let first = climber.go(&gait.squeeze()?)?;
+    let (start_foot, start_com) = (first.foot_height, first.com_height);
+    let mut reports = vec![first];
+    let most = 3 * (config.height / config.step).ceil() as usize;
+    let mut climbed = 0.0;
+    for c in 1..=most {
+        if climbed >= config.height {
+            break;
+        }
+        for sp in gait.cycle(c)? {
+            reports.push(climber.go(&sp)?);
+        }
+        climbed = reports.last().map_or(0.0, |r| r.foot_height - start_foot);
+    }
+    let com_climbed = reports.last().map_or(0.0, |r| r.com_height - start_com);
+    let success = reports.iter().all(|r| r.sound) && climbed >= config.height;
+    Ok(Climb { config: config.clone(), gap: climber.snake.gap, set_points: reports, climbed, com_climbed, success })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector2;
+
+    /// Newton on the whole snake at every equilibrium, written out from the feet's forces: the walls carry
+    /// the weight (Σ fₜ = m g) and their normal forces cancel (Σ over the left wall = Σ over the right).
+    fn assert_balanced(snake: &Snake, r: &SetPointReport) {
+        let weight = snake.chain.total_mass() * snake.chain.gravity;
+        let carried: f64 = r.forces.iter().map(|f| f.tangential).sum();
+        assert!((carried - weight).abs() < 1e-6, "{}: the walls carry {carried} N of {weight} N", r.name);
+        let push: f64 = r.forces.iter().map(|f| f.wall.map_or(0.0, |w| w.normal()) * f.normal).sum();
+        assert!(push.abs() < 1e-6, "{}: the normal forces leave {push} N", r.name);
+    }
+
+    #[test]
+    fn the_snake_climbs_two_cycles_with_every_set_point_sound() {
+        let config = ClimbConfig { height: 0.016, ..ClimbConfig::default() };
+        let climb = climb(&config).unwrap();
+        let snake = config.snake().unwrap();
+        assert!(climb.set_points.len() >= 1 + 2 * 14 && (climb.set_points.len() - 1) % 14 == 0);
+        for r in &climb.set_points {
+            assert!(r.sound, "{}: {:?}", r.name, r.faults());
+            assert!(r.faults().is_empty());
+            assert!(r.pressed.len() >= 3, "{}: three feet hold at every set point", r.name);
+            assert!(r.residual < 1e-8, "{}: residual {}", r.name, r.residual);
+            assert_balanced(&snake, r);
+        }
+        assert!(climb.climbed >= 0.016, "climbed {} m of 0.016", climb.climbed);
+        assert!(climb.success);
+        assert!((climb.com_climbed - climb.climbed).abs() < 2e-3, "the whole snake rose, not a foot");
+    }
+
+    /// A two-link chain — one tripod — squeezed by its joint: at the equilibrium the joint's PD torque
+    /// balances, about the middle node, the wall's force on the top foot and the top link's weight
+    /// (statics of the top link alone, written out from the geometry).
+    #[test]
+    fn a_tripod_balances_its_joint_torque_against_its_top_foot() {
+        let config = ClimbConfig { links: 6, kp: 20.0, ..ClimbConfig::default() };
+        let mut snake = config.snake().unwrap();
+        snake.chain = softcontact_dynamics::PlanarChain::uniform(2, 0.1, 0.2);
+        snake.feet = vec![0, 1, 2];
+        let a = config.opening_angle;
+        let r = config.foot_radius;
+        let mut state = State::at_rest(&snake, vec![r, 0.0, a, std::f64::consts::PI - 2.0 * a]);
+        let set_point = [std::f64::consts::PI - 2.0 * a + 0.05];
+        stability::settle(&snake, &mut state, &set_point, 3.0).unwrap();
+        let residual = stability::refine(&snake, &mut state, &set_point).unwrap();
+        assert!(residual < 1e-10);
+        let forces = snake.foot_forces(&state, &set_point).unwrap();
+        assert!(forces.iter().all(|f| f.normal > 1.0 && f.cone_margin(snake.friction()).unwrap() > 0.0), "{forces:?}");
+        let nodes = snake.chain.node_positions(&state.q);
+        let top = &forces[2];
+        let wall_force = Vector2::new(top.wall.unwrap().normal() * top.normal, top.tangential);
+        let arm = nodes[2] - nodes[1];
+        let com = (nodes[1] + nodes[2]) / 2.0 - nodes[1];
+        let gravity = Vector2::new(0.0, -0.2 * snake.chain.gravity);
+        let moment = arm.perp(&wall_force) + com.perp(&gravity);
+        let torque = snake.kp * (set_point[0] - state.q[3]);
+        assert!((torque + moment).abs() < 1e-9 * torque.abs().max(1.0), "joint {torque} N m against {moment} N m");
+        let stability = stability::analyse(&snake, &state, &set_point).unwrap();
+        assert!(stability.stable, "{stability:?}");
+    }
+
+    #[test]
+    fn a_squeeze_too_weak_to_hold_is_found_and_explained() {
+        // Set points that put the feet just on the walls: nothing squeezes, and the snake slides down.
+        let config = ClimbConfig { squeeze: 0.0, ..ClimbConfig::default() };
+        let report = squeeze(&config).unwrap();
+        let faults = report.faults();
+        eprintln!("{faults:#?}");
+        assert!(!report.sound && !faults.is_empty(), "{report:?}");
+    }
+
+    /// Without contact damping only the joints' damping reaches the contact modes, through the chain:
+    /// the slowest mode decays many times slower. With the joints' damping gone too, nothing is left.
+    #[test]
+    fn contact_damping_sets_how_fast_the_slowest_mode_decays() {
+        let damped = squeeze(&ClimbConfig::default()).unwrap();
+        let undamped =
+            squeeze(&ClimbConfig { contact_damping: 0.0, tangential_damping: 0.0, ..ClimbConfig::default() }).unwrap();
+        eprintln!(
+            "slowest: {:?} with contact damping, {:?} without",
+            damped.stability.slowest, undamped.stability.slowest
+        );
+        assert!(damped.sound);
+        assert!(undamped.stability.slowest.0 > 10.0 * damped.stability.slowest.0, "{:?}", undamped.stability.slowest);
+        let none =
+            squeeze(&ClimbConfig { contact_damping: 0.0, tangential_damping: 0.0, kd: 0.0, ..ClimbConfig::default() })
+                .unwrap();
+        assert!(!none.stability.stable, "{:?}", none.stability);
+        assert!(none.faults().iter().any(|f| f.starts_with("not asymptotically stable")), "{:?}", none.faults());
+    }
+
+    #[test]
+    fn bad_configurations_are_refused_with_a_reason() {
+        for (config, word) in [
+            (ClimbConfig { links: 4, ..ClimbConfig::default() }, "N ≥ 6"),
+            (ClimbConfig { kp: f64::NAN, ..ClimbConfig::default() }, "kp"),
+            (ClimbConfig { step: 0.05, ..ClimbConfig::default() }, "does not fit"),
+            (ClimbConfig { opening_angle: 0.0, ..ClimbConfig::default() }, "opening angle"),
+        ] {
+            let e = climb(&config).unwrap_err().to_string();
+            assert!(e.contains(word), "{e}");
+        }
+    }
 }
