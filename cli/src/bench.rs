@@ -67,6 +67,12 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 100_000)]
         calls: usize,
     },
+    /// Seed 000's climbing snake: one stability analysis (linearisation, balanced eigenvalues, the run
+    /// from a perturbed start) and the whole default climb.
+    Climb {
+        #[arg(long, default_value_t = 3)]
+        reps: usize,
+    },
     /// The deformation controller's tick in contact: FK, J, J̇q̇, M, M⁻¹, h, the deformation law, eq. 15
     /// and the limiter.
     Controller {
@@ -225,6 +231,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
         BenchCommand::LoadingPaths { reps, calls } => run_loading_paths(reps, calls),
+        BenchCommand::Climb { reps } => crate::climb_cmd::bench(reps),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
         BenchCommand::Demo { reps } => crate::demo::bench(reps),
         BenchCommand::Discrepancy { threads, json, timing_only, case, keep } => {

@@ -2,6 +2,7 @@
 
 mod any_topic;
 mod bench;
+mod climb_cmd;
 mod demo;
 mod discrepancy_cmd;
 mod discrepancy_figures;
@@ -52,6 +53,9 @@ enum Command {
     /// Seed 000's 205 loading-path experiments on the simulated half-ball: Tables I–III beside the
     /// paper's, and the convergence-point spread the Mindlin–Deresiewicz law predicts.
     LoadingPaths(loading_paths_cmd::LoadingPathsArgs),
+    /// Seed 000's climbing snake: a planar chain squeezed between two walls on rubber feet climbs by a
+    /// gait of PD set points, each equilibrium checked stable and inside its friction cones.
+    Climb(climb_cmd::ClimbArgs),
     /// Benchmarks of the product's hot paths.
     Bench {
         #[command(subcommand)]
@@ -69,6 +73,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Model(args) => model_cmd::run(args),
         Command::Force(args) => force_cmd::run(&args),
         Command::LoadingPaths(args) => loading_paths_cmd::run(&args),
+        Command::Climb(args) => climb_cmd::run(&args),
         Command::Bench { what } => bench::run(what),
     }
 }

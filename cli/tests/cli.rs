@@ -106,3 +106,56 @@ fn model_json_agrees_with_pinocchio() {
         .expect("python runs");
     assert!(check.status.success(), "Pinocchio disagrees (pip install pin):\n{}", text(&check));
 }
+
+/// `softcontact climb`: the snake climbs with every set point sound, the JSON carries the contact forces
+/// of every set point in the order of the feet as [fₙ ≥ 0, fₜ], the law-and-damping comparison has its
+/// four rows, the set points chosen badly are judged not sound with reasons, and the figure is written.
+#[test]
+fn climb_climbs_and_writes_its_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("climb.json");
+    let o = softcontact(&[
+        "climb",
+        "--height",
+        "0.008",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--json",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("SUCCESS"), "{}", text(&o));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let set_points = v["climb"]["set_points"].as_array().unwrap();
+    assert!(set_points.len() >= 15);
+    for sp in set_points {
+        assert_eq!(sp["sound"], true, "{}", sp["name"]);
+        let forces = sp["contact_forces"].as_array().unwrap();
+        assert_eq!(forces.len(), 7, "one [fn, ft] per foot of the 6-link snake");
+        let pressed: Vec<u64> = sp["pressed"].as_array().unwrap().iter().map(|p| p.as_u64().unwrap()).collect();
+        assert!(pressed.len() >= 3);
+        for (i, f) in forces.iter().enumerate() {
+            let (n, t) = (f[0].as_f64().unwrap(), f[1].as_f64().unwrap());
+            assert!(n >= 0.0 && t.is_finite());
+            assert_eq!(n > 0.0, pressed.contains(&(i as u64)), "{}: foot {i} touches exactly when pressed", sp["name"]);
+        }
+        assert!(sp["stability"]["slowest"][0].as_f64().unwrap() < -1e-3);
+    }
+    assert!(v["climb"]["climbed"].as_f64().unwrap() >= 0.008);
+    assert_eq!(v["variants"].as_array().unwrap().len(), 4);
+    for bad in v["bad_set_points"].as_array().unwrap() {
+        assert_eq!(bad["sound"], false, "{}", bad["what"]);
+        assert!(!bad["faults"].as_array().unwrap().is_empty());
+    }
+    let svg = std::fs::read_to_string(dir.path().join("climb.svg")).unwrap();
+    assert!(svg.starts_with("<svg") && svg.contains("<circle"));
+}
+
+#[test]
+fn climb_refuses_a_snake_it_cannot_build() {
+    for args in [&["climb", "--links", "4"][..], &["climb", "--height", "nan"], &["climb", "--step", "-1"]] {
+        let o = softcontact(args);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(text(&o).to_lowercase().contains("climb") || text(&o).contains("must"), "{}", text(&o));
+    }
+}

@@ -98,7 +98,7 @@ impl Default for ClimbConfig {
             squeeze: 2e-3,
             clearance: 3e-3,
             step: 0.008,
-            height: 0.1,
+            height: 0.05,
             move_time: 0.3,
             settle_time: 3.0,
             rebalance: true,
@@ -381,6 +381,8 @@ pub struct SetPointReport {
     pub pressed: Vec<usize>,
     /// Each foot's force, in the order of the feet along the chain.
     pub forces: Vec<FootForce>,
+    /// The same as [fₙ ≥ 0, fₜ signed, positive up the wall] [N], in the order of the feet.
+    pub contact_forces: Vec<[f64; 2]>,
     /// Each foot's cone margin 1 − |fₜ|/(μfₙ) (`None` off the walls).
     pub cone_margins: Vec<Option<f64>>,
     pub min_cone_margin: f64,
@@ -411,9 +413,11 @@ impl SetPointReport {
         let st = &self.stability;
         if !self.settled.at_rest && self.residual > 1e-6 {
             out.push(format!(
-                "no equilibrium: still moving after {:.1} s, the static balance off by {:.2e}",
+                "no equilibrium: still moving after {:.1} s (its feet sliding), the static balance off by {:.2e}",
                 self.settled.time, self.residual
             ));
+            // What follows would describe a state in motion.
+            return out;
         }
         if st.slowest.0 >= stability::STABLE_REAL_PART {
             out.push(format!(
@@ -424,12 +428,21 @@ impl SetPointReport {
             ));
         }
         if st.return_distance > stability::RETURN_TOLERANCE {
-            out.push(format!(
-                "a start perturbed by {:.0e} ends {:.1e} from the equilibrium after {:.1} s",
-                stability::PERTURBATION,
-                st.return_distance,
-                st.return_time
-            ));
+            out.push(if st.return_speed < 1e-6 {
+                format!(
+                    "a start perturbed by {:.0e} comes to rest {:.1e} away: at a neighbouring equilibrium (friction \
+                     with memory, as the incremental law's, makes equilibria a continuum)",
+                    stability::PERTURBATION,
+                    st.return_distance
+                )
+            } else {
+                format!(
+                    "a start perturbed by {:.0e} is still {:.1e} from the equilibrium after {:.1} s",
+                    stability::PERTURBATION,
+                    st.return_distance,
+                    st.return_time
+                )
+            });
         }
         for &f in &self.pressed {
             if self.forces[f].normal <= 0.0 {
@@ -437,7 +450,7 @@ impl SetPointReport {
             }
         }
         for (f, m) in self.cone_margins.iter().enumerate() {
-            if let Some(m) = m.filter(|m| *m < MIN_MARGIN) {
+            if let Some(m) = m.filter(|m| *m < MIN_MARGIN && self.forces[f].normal > 1e-6) {
                 let force = &self.forces[f];
                 out.push(format!(
                     "foot {f} at the edge of its cone: margin {m:.3} < {MIN_MARGIN} (fₜ {:+.2} N, fₙ {:.2} N)",
@@ -579,6 +592,7 @@ impl<'a> Climber<'a> {
             foot_height: state.q[1],
             com_height: com_height(snake, &state.q),
             q: state.q.clone(),
+            contact_forces: forces.iter().map(|f| [f.normal, f.tangential]).collect(),
             forces,
             sound,
         };

@@ -212,20 +212,21 @@ pub struct Stability {
     pub eigenvalues: Vec<(f64, f64)>,
     /// Distance [m, rad, infinity norm] from the equilibrium at the end of the run from a perturbed start.
     pub return_distance: f64,
-    /// How long that run was [s].
+    /// How long that run was [s], and its largest speed at the end [m/s, rad/s].
     pub return_time: f64,
+    pub return_speed: f64,
     pub stable: bool,
 }
 
 /// Eigenvalues at the equilibrium and the run from a perturbed start (every coordinate moved by
 /// ±[`PERTURBATION`], signs alternating). The run lasts long enough for the slowest mode to decay by
-/// e⁻¹⁵ (0.5–20 s).
+/// e⁻¹⁵ (0.5–10 s).
 pub fn analyse(snake: &Snake, equilibrium: &State, set_point: &[f64]) -> Result<Stability, Error> {
     let a = linearize(snake, equilibrium, set_point)?;
     let values = eigenvalues(&a)?;
     let slowest = values[0];
     let damping_ratio = if slowest.norm() > 0.0 { -slowest.re / slowest.norm() } else { 0.0 };
-    let return_time = if slowest.re < 0.0 { (15.0 / -slowest.re).clamp(0.5, 20.0) } else { 2.0 };
+    let return_time = if slowest.re < 0.0 { (15.0 / -slowest.re).clamp(0.5, 10.0) } else { 2.0 };
     let mut run = equilibrium.clone();
     for (i, q) in run.q.iter_mut().enumerate() {
         *q += if i % 2 == 0 { PERTURBATION } else { -PERTURBATION };
@@ -242,6 +243,7 @@ pub fn analyse(snake: &Snake, equilibrium: &State, set_point: &[f64]) -> Result<
         eigenvalues: values.iter().map(|v| (v.re, v.im)).collect(),
         return_distance,
         return_time,
+        return_speed: run.dq.iter().fold(0.0f64, |m, v| m.max(v.abs())),
         stable: slowest.re < STABLE_REAL_PART && return_distance <= RETURN_TOLERANCE,
     })
 }
