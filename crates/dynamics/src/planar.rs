@@ -127,9 +127,9 @@ impl PlanarChain {
         j[(1, 1)] = 1.0;
         // Link m turns with every angle coordinate up to its own (θ and q₁ … q_m): each one swings the
         // lever from node m onwards.
-        for m in 0..=link {
+        for (m, angle) in phi.iter().enumerate().take(link + 1) {
             let lever = if m == link { along } else { self.links[m].length };
-            let swing = lever * perp(phi[m]);
+            let swing = lever * perp(*angle);
             for c in THETA..=THETA + m {
                 j[(0, c)] += swing.x;
                 j[(1, c)] += swing.y;
