@@ -153,7 +153,7 @@ fn print_climb(climb: &Climb, wall: f64) {
             .iter()
             .map(|[n, t]| if *n > 0.0 { format!("{n:.1},{t:+.1}") } else { "-".into() })
             .collect();
-        let slip = r.unintended_slides.iter().chain(&r.pressed).map(|&f| r.slip[f]).fold(0.0, f64::max);
+        let slip = r.holding.iter().map(|&f| r.slip[f]).fold(0.0, f64::max);
         let (re, im) = r.stability.slowest;
         println!(
             "{i:>3}  {:<26} {:<16} {:<52} {:>6.3} {:>16} {:>5.2} {:>4.2}mm {:>5.1}mm  {}",
@@ -168,6 +168,7 @@ fn print_climb(climb: &Climb, wall: f64) {
             if r.sound { "sound".to_string() } else { r.faults().join("; ") }
         );
     }
+    println!("¹ the farthest a foot meant to hold through the move slid on the way");
     let sound = climb.set_points.iter().filter(|r| r.sound).count();
     let worst = climb.set_points.iter().map(|r| r.min_cone_margin).fold(1.0, f64::min);
     let slowest = climb.set_points.iter().map(|r| r.stability.slowest.0).fold(f64::NEG_INFINITY, f64::max);
@@ -223,7 +224,7 @@ fn compare(config: &ClimbConfig) -> anyhow::Result<Vec<Variant>> {
 
 fn print_variants(variants: &[Variant]) {
     println!();
-    println!("What the tangential law and contact damping do (the squeeze and one cycle, 15 set points):");
+    println!("What the tangential law and contact damping do (the squeeze and one cycle):");
     println!(
         "  {:<20} {:<16} {:>14} {:>22} {:>8} {:>7}",
         "law", "contact damping", "min margin", "slowest Re λ [1/s] (ζ)", "stable", "sound"

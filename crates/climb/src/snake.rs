@@ -254,23 +254,30 @@ pub(crate) mod tests {
     }
 
     /// The generalized contact force does the work of the foot's forces: along any small motion,
-    /// τᵀ dq = fₙ dx + fₜ dy of the node, written out here from the geometry.
+    /// τᵀ dq = −fₙ dx + fₜ dy of a foot on the right wall, with the node's motion written out from the
+    /// geometry (node 1 = (x + l cos θ, y + l sin θ)).
     #[test]
     fn contact_forces_do_the_work_of_the_foot() {
         let mut snake = one_link(0.01);
         snake.loads.clear();
-        let q = vec![0.009, 0.02, -1.2];
+        snake.feet = vec![1];
+        let (l, theta) = (0.1, 0.3);
+        // Node 1 1 mm into the right wall.
+        snake.gap = l * f64::cos(theta) + 0.01 - 1e-3;
+        let q = vec![0.0, 0.02, theta];
         let mut feet = vec![FootState::default(); 2];
         // Touch first, then displace: the tangential spring is stretched.
-        snake.applied_forces(&[0.0099, 0.0, -1.2], &[0.0; 3], &[], &mut feet).unwrap();
+        snake.applied_forces(&[0.0, 0.0, theta], &[0.0; 3], &[], &mut feet).unwrap();
         let (tau, forces) = snake.applied_forces(&q, &[0.0; 3], &[], &mut feet).unwrap();
-        let f = forces[0];
-        assert_eq!(f.wall, Some(Wall::Left));
+        let f = forces[1];
+        assert_eq!(f.wall, Some(Wall::Right));
         assert!(f.normal > 0.0 && f.tangential < 0.0, "{f:?}");
         let dq = [1e-3, -2e-3, 0.5e-3];
-        let work = f.normal * dq[0] + f.tangential * dq[1];
+        let node = [dq[0] - l * theta.sin() * dq[2], dq[1] + l * theta.cos() * dq[2]];
+        let work = -f.normal * node[0] + f.tangential * node[1];
         let ours: f64 = tau.iter().zip(dq).map(|(t, d)| t * d).sum();
         assert!((ours - work).abs() < 1e-12 * work.abs().max(1.0), "{ours} vs {work}");
+        assert!(tau[2].abs() > 1e-3, "the wall's force turns the link: {tau}");
     }
 
     #[test]

@@ -26,7 +26,9 @@ use crate::snake::{FootForce, Snake, State};
 pub const DT: f64 = 1e-4;
 /// "Stable": the largest real part of the eigenvalues is below this [1/s].
 pub const STABLE_REAL_PART: f64 = -1e-3;
-/// "Stable": a perturbed run ends this close to the equilibrium [m, rad].
+/// "Stable": a perturbed run ends this close to the equilibrium [m, rad]. The run lasts 15 time
+/// constants of the slowest mode but at most 10 s, so a mode decaying slower than about 0.23 1/s cannot
+/// show its return within it and is reported as not back.
 pub const RETURN_TOLERANCE: f64 = 1e-6;
 /// The perturbation of that run [m, rad, infinity norm].
 pub const PERTURBATION: f64 = 1e-5;
@@ -165,13 +167,14 @@ pub fn balance(a: &mut DMatrix<f64>) -> Vec<f64> {
             if c == 0.0 || r == 0.0 {
                 continue;
             }
+            // Scaling row i by 1/f and column i by f turns (c, r) into (c f, r / f): f ≈ √(r / c), a power of two.
             let (mut c2, mut f) = (c, 1.0);
             while c2 < r / 2.0 {
-                c2 *= 2.0;
+                c2 *= 4.0;
                 f *= 2.0;
             }
             while c2 >= r * 2.0 {
-                c2 /= 2.0;
+                c2 /= 4.0;
                 f /= 2.0;
             }
             // The pair's combined norm must fall noticeably, or the loop could go on forever.
@@ -255,8 +258,9 @@ pub const MAX_REBALANCE: f64 = 0.005;
 /// with the feet stuck, a small change of the joint set points moves the snake elastically and shifts
 /// the tangential forces between them. The change Δ minimises Σᵢ uᵢ² + ρ‖Δ‖², uᵢ = fₜᵢ/(μ fₙᵢ), in the
 /// linearisation about the equilibrium (each column by Newton's equilibrium at a set point moved by
-/// 1e-4 rad), with ρ a thousandth of the sensitivities' mean square; at most [`MAX_REBALANCE`] per joint. Returns the corrected
-/// set point.
+/// 1e-4 rad), with ρ a thousandth of the sensitivities' sum of squares; at most [`MAX_REBALANCE`] per
+/// joint. Returns the corrected set point, or the set point as it was where Newton finds no neighbouring
+/// equilibrium.
 pub fn rebalance(snake: &Snake, state: &State, set_point: &[f64], pressed: &[usize]) -> Result<Vec<f64>, Error> {
     let mu = snake.friction();
     let usage = |s: &State, sp: &[f64]| -> Result<DVector<f64>, Error> {
@@ -273,7 +277,9 @@ pub fn rebalance(snake: &Snake, state: &State, set_point: &[f64], pressed: &[usi
         let mut sp = set_point.to_vec();
         sp[j] += h;
         let mut moved = state.clone();
-        refine(snake, &mut moved, &sp)?;
+        if refine(snake, &mut moved, &sp)? > 1e-8 {
+            return Ok(set_point.to_vec());
+        }
         c.set_column(j, &((usage(&moved, &sp)? - &u0) / h));
     }
     let rho = 1e-3 * (c.transpose() * &c).trace().max(1e-12);
@@ -294,6 +300,14 @@ mod tests {
     use crate::snake::tests::one_link;
 
     /// The balancing is a similarity: eigenvalues unchanged, and row and column norms brought together.
+    /// [[0, 1e6], [1, 0]] balances to off-diagonals of 1e3 each (within a power of two).
+    #[test]
+    fn balancing_evens_out_a_row_and_its_column() {
+        let mut a = DMatrix::from_row_slice(2, 2, &[0.0, 1e6, 1.0, 0.0]);
+        balance(&mut a);
+        assert!(a[(0, 1)] <= 2e3 && a[(1, 0)] >= 5e2 && (a[(0, 1)] * a[(1, 0)] - 1e6).abs() < 1e-6, "{a}");
+    }
+
     #[test]
     fn balancing_keeps_the_eigenvalues() {
         let a = DMatrix::from_row_slice(3, 3, &[1.0, 1e6, 0.0, 1e-6, 2.0, 1e4, 0.0, 1e-4, 3.0]);
