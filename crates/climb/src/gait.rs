@@ -368,10 +368,17 @@ fn low_height(planner: &Planner) -> Result<f64, Error> {
         if fits(mid) { hi = mid } else { lo = mid }
     }
     if !fits(hi + planner.config.step) {
+        // The highest fitting height: bisect between the least and the grid's first height above it that
+        // does not fit.
+        let (mut top, mut beyond) = (hi, (0..=1000).map(grid).find(|&r| r > hi && !fits(r)).unwrap_or(longest));
+        for _ in 0..60 {
+            let mid = 0.5 * (top + beyond);
+            if fits(mid) { top = mid } else { beyond = mid }
+        }
         return Err(Error::Config(format!(
-            "a step of {:.1} mm does not fit: the spine reaches {:.1} mm above its least rise at most",
+            "a step of {:.1} mm does not fit this snake between its walls: at most {:.1} mm (--step)",
             planner.config.step * 1e3,
-            ((0..1000).map(grid).filter(|&r| r > hi && fits(r)).fold(hi, f64::max) - hi) * 1e3
+            ((top - hi) * 1e4).floor() / 10.0
         )));
     }
     Ok(hi)
