@@ -110,11 +110,6 @@ impl Snake {
         self.contact.tangential.map_or(0.0, |t| t.friction)
     }
 
-    /// The link carrying node k's ball, and the node's distance along it.
-    fn foot_link(&self, node: usize) -> (usize, f64) {
-        if node == 0 { (0, 0.0) } else { (node - 1, self.chain.links[node - 1].length) }
-    }
-
     /// The generalized forces at (q, q̇) for joint set points `set_point` (one per joint), except
     /// −h(q, q̇): PD torques, loads and contact forces, the feet's memories advanced to q. Also each foot's
     /// force. A non-finite state is an error, never a force.
@@ -134,9 +129,9 @@ impl Snake {
         for (j, target) in set_point.iter().enumerate() {
             tau[3 + j] = self.kp * (target - q[3 + j]) - self.kd * dq[3 + j];
         }
+        let nodes = self.chain.node_positions(q);
         for (node, f) in &self.loads {
-            let (link, along) = self.foot_link(*node);
-            tau += self.chain.point_jacobian(q, link, along).transpose() * f;
+            self.chain.add_node_force(&nodes, *node, *f, &mut tau);
         }
         let mut out = Vec::with_capacity(feet.len());
         for (node, state) in feet.iter_mut().enumerate() {
@@ -144,12 +139,9 @@ impl Snake {
                 out.push(FootForce::default());
                 continue;
             }
-            let (link, along) = self.foot_link(node);
-            let jac = self.chain.point_jacobian(q, link, along);
-            let p = self.chain.point(q, link, along);
-            let v = &jac * DVector::from_column_slice(dq);
-            let (force, world) = self.foot_force(state, p, Vector2::new(v[0], v[1]))?;
-            tau += jac.transpose() * world;
+            let v = self.chain.node_velocity(&nodes, node, dq);
+            let (force, world) = self.foot_force(state, nodes[node], v)?;
+            self.chain.add_node_force(&nodes, node, world, &mut tau);
             out.push(force);
         }
         Ok((tau, out))
@@ -204,8 +196,8 @@ impl Snake {
         feet: &mut [FootState],
     ) -> Result<(DVector<f64>, Vec<FootForce>), ContactError> {
         let (tau, forces) = self.applied_forces(q, dq, set_point, feet)?;
-        let rhs = tau - self.chain.nonlinear_effects(q, dq);
-        let ddq = self.chain.mass_matrix(q).cholesky().expect("links with mass").solve(&rhs);
+        let (m, h) = self.chain.mass_matrix_and_nonlinear_effects(q, dq);
+        let ddq = m.cholesky().expect("links with mass").solve(&(tau - h));
         if ddq.iter().all(|a| a.is_finite()) {
             Ok((ddq, forces))
         } else {

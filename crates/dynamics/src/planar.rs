@@ -150,6 +150,62 @@ impl PlanarChain {
             .sum()
     }
 
+    /// Velocity of node `node` given every node's position (from [`PlanarChain::node_positions`]): the
+    /// base's, plus each upstream link's rate turning the node about that link's proximal node.
+    pub fn node_velocity(&self, nodes: &[Vector2<f64>], node: usize, dq: &[f64]) -> Vector2<f64> {
+        let mut v = Vector2::new(dq[0], dq[1]);
+        for j in 0..node {
+            let r = nodes[node] - nodes[j];
+            v += dq[THETA + j] * Vector2::new(-r.y, r.x);
+        }
+        v
+    }
+
+    /// Adds to `tau` the generalized force of a force `f` [N, world] on node `node` (Jᵀf): `f` on the
+    /// base's x and y, and on the angle of each link upstream of the node, f's moment about that link's
+    /// proximal node.
+    pub fn add_node_force(&self, nodes: &[Vector2<f64>], node: usize, f: Vector2<f64>, tau: &mut DVector<f64>) {
+        tau[0] += f.x;
+        tau[1] += f.y;
+        for j in 0..node {
+            tau[THETA + j] += (nodes[node] - nodes[j]).perp(&f);
+        }
+    }
+
+    /// M(q) and h(q, q̇) together, each link's Jacobian computed once (what a simulation step needs).
+    pub fn mass_matrix_and_nonlinear_effects(&self, q: &[f64], dq: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+        self.check("dq", dq);
+        let (phi, w) = (self.link_angles(q), self.link_rates(dq));
+        let n = self.dof();
+        let (mut m, mut h) = (DMatrix::zeros(n, n), DVector::zeros(n));
+        let mut j = Matrix2xX::zeros(n);
+        for (k, link) in self.links.iter().enumerate() {
+            // The centre of mass's Jacobian (columns of the link angles up to k) and J̇q̇.
+            j.fill(0.0);
+            j[(0, 0)] = 1.0;
+            j[(1, 1)] = 1.0;
+            let mut bias = Vector2::new(0.0, self.gravity);
+            for (mm, angle) in phi.iter().enumerate().take(k + 1) {
+                let lever = if mm == k { link.com } else { self.links[mm].length };
+                let swing = lever * perp(*angle);
+                for c in THETA..=THETA + mm {
+                    j[(0, c)] += swing.x;
+                    j[(1, c)] += swing.y;
+                }
+                bias -= lever * w[mm] * w[mm] * unit(*angle);
+            }
+            m += link.mass * j.transpose() * &j;
+            // The link's angle row aₖ: ones on θ … q_k.
+            for a in THETA..=THETA + k {
+                for b in THETA..=THETA + k {
+                    m[(a, b)] += link.inertia;
+                }
+            }
+            h += link.mass * j.transpose() * bias;
+        }
+        (m, h)
+    }
+
     /// The row aₖ with φ̇ₖ = aₖ q̇.
     fn angle_row(&self, k: usize) -> DVector<f64> {
         DVector::from_fn(self.dof(), |c, _| if (THETA..=THETA + k).contains(&c) { 1.0 } else { 0.0 })
@@ -185,8 +241,8 @@ impl PlanarChain {
 
     /// q̈ = M⁻¹ (τ − h).
     pub fn forward_dynamics(&self, q: &[f64], dq: &[f64], tau: &DVector<f64>) -> DVector<f64> {
-        let m = self.mass_matrix(q);
-        let rhs = tau - self.nonlinear_effects(q, dq);
+        let (m, h) = self.mass_matrix_and_nonlinear_effects(q, dq);
+        let rhs = tau - h;
         m.cholesky().expect("the mass matrix of a chain with massive links is positive definite").solve(&rhs)
     }
 
@@ -250,6 +306,28 @@ mod tests {
                     let fd = (c.node_positions(&a)[link + 1] - c.node_positions(&b)[link + 1]) / (2.0 * h);
                     assert!((fd - j.column(col)).norm() < 1e-8, "link {link} column {col}: {fd} vs {}", j.column(col));
                 }
+            }
+        }
+    }
+
+    /// The one-pass terms, the node forces and velocities agree with M, h and the node Jacobians.
+    #[test]
+    fn the_fast_terms_agree_with_the_jacobians() {
+        let c = chain();
+        for seed in 0..5 {
+            let (q, dq) = state(seed);
+            let (m, h) = c.mass_matrix_and_nonlinear_effects(&q, &dq);
+            assert!((&m - c.mass_matrix(&q)).amax() < 1e-12 && (&h - c.nonlinear_effects(&q, &dq)).amax() < 1e-12);
+            let nodes = c.node_positions(&q);
+            let f = Vector2::new(1.3, -0.7);
+            for node in 0..c.nodes() {
+                let (link, along) = if node == 0 { (0, 0.0) } else { (node - 1, c.links[node - 1].length) };
+                let j = c.point_jacobian(&q, link, along);
+                let mut tau = DVector::zeros(6);
+                c.add_node_force(&nodes, node, f, &mut tau);
+                assert!((&tau - j.transpose() * f).amax() < 1e-12, "node {node}");
+                let v = c.node_velocity(&nodes, node, &dq);
+                assert!((v - &j * DVector::from_column_slice(&dq)).amax() < 1e-12, "node {node}");
             }
         }
     }
