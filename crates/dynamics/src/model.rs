@@ -348,6 +348,20 @@ impl Model {
         self.frames.push(Frame { name: name.to_string(), joint, placement });
     }
 
+    /// This robot carrying `payload` (mass properties in `frame`'s coordinates) rigidly on the body that
+    /// carries `frame`: a load its description does not know — an adapter plate, cables, a tool heavier
+    /// than the URDF says — as a simulator hides one. Fails for a frame fixed to the world.
+    pub fn with_payload(&self, frame: FrameId, payload: &BodyInertia) -> Result<Model, Error> {
+        let f = self.frame(frame);
+        let joint = f.joint.ok_or_else(|| Error::Parse(format!("frame `{}` is fixed to the world", f.name)))?;
+        let (rotation, translation) =
+            (f.placement.rotation.to_rotation_matrix().into_inner(), f.placement.translation.vector);
+        let mut model = self.clone();
+        let body = &mut model.joints[joint].body;
+        *body = body.add(&payload.expressed_in_parent(&rotation, &translation));
+        Ok(model)
+    }
+
     /// Number of degrees of freedom.
     pub fn dof(&self) -> usize {
         self.joints.len()

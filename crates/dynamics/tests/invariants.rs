@@ -258,3 +258,30 @@ fn control_terms_agree_with_the_separate_algorithms() {
         assert!((h - model.nonlinear_effects(&mut other, &q, &dq)).amax() < 1e-12);
     }
 }
+
+/// A point mass carried at the tool frame changes the gravity torques by m Jᵀ(0, 0, g) — the Jacobian of
+/// that frame's origin, world axes — and M by m JᵀJ; a frame fixed to the world carries nothing.
+#[test]
+fn a_payload_adds_its_weight_and_inertia_through_its_frames_jacobian() {
+    use softcontact_dynamics::BodyInertia;
+    let model = model();
+    let tool = model.frame_id(softcontact_dynamics::lwr4::TOOL_FRAME).unwrap();
+    let mass = 0.7;
+    let heavier = model.with_payload(tool, &BodyInertia::from_com(mass, Vector3::zeros(), Matrix3::zeros())).unwrap();
+    let (mut data, mut heavy_data) = (model.data(), heavier.data());
+    let mut rng = SmallRng::seed_from_u64(11);
+    for _ in 0..20 {
+        let (q, _) = random_state(&model, &mut rng);
+        model.forward_kinematics(&mut data, &q);
+        let mut j = Matrix6xX::zeros(7);
+        model.frame_jacobian(&data, tool, Axes::World, &mut j);
+        let lin = j.rows(0, 3).into_owned();
+        let expected = mass * lin.transpose() * Vector3::new(0.0, 0.0, 9.81);
+        let dg = heavier.gravity_torques(&mut heavy_data, &q) - model.gravity_torques(&mut data, &q);
+        assert!((&dg - &expected).amax() < 1e-9, "Δg {dg} vs {expected}");
+        let dm = heavier.mass_matrix(&mut heavy_data, &q) - model.mass_matrix(&mut data, &q);
+        assert!((&dm - mass * lin.transpose() * &lin).amax() < 1e-9);
+    }
+    let world = model.frames.iter().position(|f| f.joint.is_none()).unwrap();
+    assert!(model.with_payload(softcontact_dynamics::FrameId(world), &BodyInertia::ZERO).is_err());
+}

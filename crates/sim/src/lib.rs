@@ -44,6 +44,15 @@ pub struct JointFriction {
     pub coulomb: [f64; 7],
 }
 
+/// A load on the flange the robot's description does not know (an adapter plate, cables): it weighs on
+/// the arm, and the F/T sensor beyond it does not feel it. Hidden: only the simulated physics carries it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Payload {
+    pub mass: f64,
+    /// Centre of mass in the `lwr_flange` frame [m].
+    pub com: [f64; 3],
+}
+
 /// Everything that defines a simulated run.
 #[derive(Debug, Clone)]
 pub struct SimConfig {
@@ -53,6 +62,8 @@ pub struct SimConfig {
     pub cycle: f64,
     pub initial_q: [f64; 7],
     pub friction: Option<JointFriction>,
+    /// A hidden payload on the flange (the KRC, like the product, knows only the URDF's arm).
+    pub payload: Option<Payload>,
     pub krc: KrcConfig,
     pub surface: Option<SurfaceConfig>,
     pub sensor: FtSensorConfig,
@@ -73,6 +84,7 @@ impl SimConfig {
             cycle: 1e-3,
             initial_q: DEFAULT_Q,
             friction: None,
+            payload: None,
             krc: KrcConfig::default(),
             surface: Some(SurfaceConfig { point: sole + 0.04 * normal, normal, model }),
             sensor: FtSensorConfig::gamma(),
@@ -144,8 +156,12 @@ const DEG: f64 = std::f64::consts::PI / 180.0;
 
 /// The simulated robot cell.
 pub struct Simulator {
+    /// The robot as the KRC knows it (the URDF's).
     model: Model,
     data: Data,
+    /// The robot as it moves: the model with the hidden payload, if any.
+    physics: Model,
+    physics_data: Data,
     tool: FrameId,
     sensor_frame: FrameId,
     q: [f64; 7],
@@ -183,8 +199,23 @@ impl Simulator {
         let krc = Krc::new(config.krc.clone(), config.initial_q);
         let sensor = FtSensor::new(config.sensor.clone(), sensed_load(config.surface.as_ref()));
         let data = model.data();
+        let physics = match config.payload {
+            Some(Payload { mass, com }) => {
+                if !(mass.is_finite() && mass >= 0.0 && com.iter().all(|c| c.is_finite())) {
+                    return Err(SimError::Config(
+                        "the payload's mass must be finite and ≥ 0, its centre finite".into(),
+                    ));
+                }
+                let load = softcontact_dynamics::BodyInertia::from_com(mass, com.into(), nalgebra::Matrix3::zeros());
+                model.with_payload(model.frame_id(lwr4::FLANGE_FRAME)?, &load)?
+            }
+            None => model.clone(),
+        };
+        let physics_data = physics.data();
         let mut sim = Self {
             data,
+            physics,
+            physics_data,
             tool,
             sensor_frame,
             q: config.initial_q,
@@ -309,7 +340,7 @@ impl Simulator {
             // Brakes: the KRC holds the arm.
             self.dq = [0.0; 7];
             self.last_torque =
-                self.model.gravity_torques(&mut self.data, &self.q).as_slice().try_into().expect("7 joints");
+                self.physics.gravity_torques(&mut self.physics_data, &self.q).as_slice().try_into().expect("7 joints");
             self.time += h;
             return self.touch(h);
         };
@@ -324,7 +355,7 @@ impl Simulator {
             }
         }
         let wrench = ExternalWrench { frame: self.tool, force: self.last_contact.force, torque: Vector3::zeros() };
-        let ddq = self.model.forward_dynamics(&mut self.data, &self.q, &self.dq, &applied, Some(&wrench))?;
+        let ddq = self.physics.forward_dynamics(&mut self.physics_data, &self.q, &self.dq, &applied, Some(&wrench))?;
         for i in 0..7 {
             self.dq[i] += h * ddq[i];
             self.q[i] += h * self.dq[i];

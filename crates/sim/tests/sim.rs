@@ -309,3 +309,31 @@ fn a_surface_models_crosstalk_reads_tangential_load_as_normal_force() {
     assert!((c.measured_normal_force - (c.normal_force - 0.04)).abs() < 1e-12, "{c:?}");
     assert!((c.sensed_force.z - (c.force.z - 0.04)).abs() < 1e-12 && c.sensed_force.x == c.force.x);
 }
+
+/// A hidden payload on the flange: the KRC compensates the URDF's gravity only, so with no torque
+/// commanded the arm sags under the payload's weight; without one the arm holds.
+#[test]
+fn a_hidden_payload_weighs_on_the_arm_and_only_there() {
+    use softcontact_sim::Payload;
+    let hold = |payload: Option<Payload>| {
+        let mut config = free_config();
+        config.payload = payload;
+        let mut sim = Simulator::new(config).unwrap();
+        let mut seq = enter_command(&mut sim);
+        let q0 = *sim.q();
+        for _ in 0..300 {
+            let m = sim.measurement();
+            seq = seq.wrapping_add(1);
+            sim.command(&answer(&m, seq, true, [0.0; 7]));
+            sim.step_cycle().unwrap();
+        }
+        let moved = sim.q().iter().zip(&q0).fold(0.0f64, |d, (a, b)| d.max((a - b).abs()));
+        moved
+    };
+    let still = hold(None);
+    let sagged = hold(Some(Payload { mass: 1.0, com: [0.0, 0.0, 0.02] }));
+    assert!(still < 1e-6, "without a payload the arm holds: {still} rad");
+    assert!(sagged > 1e-3, "a kilogram the KRC does not know pulls the arm down: {sagged} rad");
+    let bad = SimConfig { payload: Some(Payload { mass: f64::NAN, com: [0.0; 3] }), ..free_config() };
+    assert!(Simulator::new(bad).is_err());
+}
