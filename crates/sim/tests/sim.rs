@@ -327,8 +327,8 @@ fn a_hidden_payload_weighs_on_the_arm_and_only_there() {
             sim.command(&answer(&m, seq, true, [0.0; 7]));
             sim.step_cycle().unwrap();
         }
-        let moved = sim.q().iter().zip(&q0).fold(0.0f64, |d, (a, b)| d.max((a - b).abs()));
-        moved
+        // How far any joint moved.
+        sim.q().iter().zip(&q0).fold(0.0f64, |d, (a, b)| d.max((a - b).abs()))
     };
     let still = hold(None);
     let sagged = hold(Some(Payload { mass: 1.0, com: [0.0, 0.0, 0.02] }));
