@@ -44,6 +44,7 @@
 //! The lessons behind these choices (columns made dimensionless, joint fits, blocked folds, AICc, margins,
 //! collinearity, refusing out-of-library effects) are summarised in the crate's README.md (crates/discrepancy).
 
+mod arm;
 mod fit;
 mod loading_paths;
 #[cfg(test)]
@@ -55,6 +56,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 use softcontact_contact::{ContactError, ContactModel, Effect, Exponents, Kind, MAX_DELAY, SensorInputs};
 
+pub use arm::{ArmEffect, ArmError, ArmOptions, ArmReport, ArmSample, name_arm_effects};
 use fit::{Data, Fit, Structure, Term};
 pub use loading_paths::{PathEffect, PathNamed, PathOptions, PathReport, name_path_effects};
 pub use wrench::{CHANNELS, Channel, Wrench, predict_wrench};
