@@ -35,6 +35,10 @@ pub struct DiscrepancyArgs {
     /// anew): name the creep of the zero, a misaligned sensor and the path dependence of the tangential force.
     #[arg(long)]
     pub loading_paths: bool,
+    /// The recording is of the arm moving in free space: name its own effects (joint friction, a payload
+    /// the URDF does not know) from /lwr/joint_states and /lwr/joint_torque_command.
+    #[arg(long, conflicts_with = "loading_paths")]
+    pub arm: bool,
 }
 
 /// The F/T node's tares (their stamps zero the sensor's drifted offset).
@@ -231,6 +235,16 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
 }
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
+    if args.arm {
+        let report = crate::arm_effects::analyse(&Recording::open(&args.recording.file)?)?;
+        crate::arm_effects::print(&report);
+        if let Some(path) = &args.recording.json {
+            let mut value = serde_json::to_value(&report)?;
+            value["kind"] = serde_json::Value::from("arm");
+            identify_cmd::write_json(path, &value)?;
+        }
+        return Ok(());
+    }
     if args.loading_paths {
         let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
         let (paths, episodes) =

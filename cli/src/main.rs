@@ -1,6 +1,7 @@
 //! `softcontact`: the product's command line (design.md section 6).
 
 mod any_topic;
+mod arm_effects;
 mod bench;
 mod climb_cmd;
 mod demo;

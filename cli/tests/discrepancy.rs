@@ -332,3 +332,68 @@ fn the_loading_path_corpus_names_the_papers_errors_and_the_path_dependence() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A recording of the arm's free-space excitation in the simulator, friction and a flange payload hidden
+/// in its physics: joint states and the torque commands that answered them, as the graph records them.
+fn write_arm_run(path: &Path, hidden: bool) {
+    use softcontact_msgs::builtin_interfaces::Time;
+    use softcontact_msgs::sensor_msgs::JointState;
+    use softcontact_msgs::std_msgs::Header;
+    use softcontact_sim::{FtSensorConfig, JointFriction, Payload, SimConfig, excitation};
+    let config = SimConfig {
+        surface: None,
+        sensor: FtSensorConfig::ideal(),
+        friction: hidden.then_some(JointFriction {
+            viscous: [0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2],
+            coulomb: [0.6, 0.6, 0.4, 0.4, 0.2, 0.1, 0.1],
+        }),
+        payload: hidden.then_some(Payload { mass: 1.2, com: [0.01, -0.02, 0.03] }),
+        ..SimConfig::above_surface(ContactModel::new(Kind::KelvinVoigt, 1.0, 0.0).unwrap(), 5)
+    };
+    let run = excitation::excite(config, 8.0).unwrap();
+    let mut w = BagWriter::create(path).unwrap();
+    let states = w.add_topic::<JointState>("/lwr/joint_states", Qos::SENSOR).unwrap();
+    let commands = w.add_topic::<JointState>("/lwr/joint_torque_command", Qos::RELIABLE).unwrap();
+    for s in &run {
+        let ns = (s.t * 1e9).round() as u64 + 1_000_000_000;
+        let header = Header {
+            stamp: Time { sec: (ns / 1_000_000_000) as i32, nanosec: (ns % 1_000_000_000) as u32 },
+            frame_id: String::new(),
+        };
+        let js = JointState {
+            header: header.clone(),
+            position: s.q.to_vec(),
+            velocity: s.dq.to_vec(),
+            ..Default::default()
+        };
+        w.write(states, ns, &js).unwrap();
+        w.write(commands, ns + 200_000, &JointState { header, effort: s.tau.to_vec(), ..Default::default() }).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+/// `softcontact discrepancy --arm`: the hidden friction and payload named from the recording with their
+/// values; a clean arm names nothing.
+#[test]
+fn the_arms_own_effects_are_named_from_a_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    for hidden in [true, false] {
+        let file = dir.path().join(format!("arm_{hidden}.mcap"));
+        let json = dir.path().join(format!("arm_{hidden}.json"));
+        write_arm_run(&file, hidden);
+        let out = discrepancy(&[file.as_os_str(), "--arm".as_ref(), "--json".as_ref(), json.as_os_str()]);
+        assert!(out.status.success(), "{}", text(&out));
+        let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(report["kind"], "arm");
+        let named: Vec<&str> = report["named"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();
+        if hidden {
+            assert_eq!(named, ["joint_friction", "payload_mass"], "{}", text(&out));
+            let mass = report["named"][1]["mass"].as_f64().unwrap();
+            assert!((mass - 1.2).abs() < 0.03, "payload {mass} kg");
+            let b0 = report["named"][0]["viscous"][0].as_f64().unwrap();
+            assert!((b0 - 0.8).abs() < 0.04, "viscous {b0}");
+        } else {
+            assert!(named.is_empty(), "{}", text(&out));
+        }
+    }
+}

@@ -322,6 +322,7 @@ fn args(file: &Path, out: &Path, sample_period: f64) -> DiscrepancyArgs {
         model: None,
         out: out.to_path_buf(),
         loading_paths: false,
+        arm: false,
     }
 }
 

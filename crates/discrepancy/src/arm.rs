@@ -237,23 +237,9 @@ mod tests {
     //! its physics (the code under test sees only joint states and commanded torques).
     use super::*;
     use softcontact_contact::{ContactModel, Kind};
-    use softcontact_sim::{FtSensorConfig, JointFriction, Payload, SimConfig, Simulator};
-    use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
+    use softcontact_sim::{FtSensorConfig, JointFriction, Payload, SimConfig, excitation};
 
-    fn answer(m: &fri::Measurement, seq: u16, start: bool, torque: [f64; 7]) -> fri::Command {
-        let mut c = fri::Command::default();
-        c.header.send_seq = seq;
-        c.header.refl_seq = m.header.send_seq;
-        c.krl.int[0] = 30;
-        c.krl.int[1] = i32::from(start);
-        c.flags = flags::JOINT_IMPEDANCE;
-        c.jnt_pos = m.data.msr_jnt_pos;
-        c.add_jnt_trq = torque.map(|t| t as f32);
-        c
-    }
-
-    /// 8 s of each joint following its own sine (0.3 rad, 0.23–0.71 Hz) under a joint PD, recorded as the
-    /// product would: the joint state and the total torque commanded (the URDF's gravity plus the PD's).
+    /// 8 s of the simulator's free-space excitation, with what it hides.
     fn excite(friction: Option<JointFriction>, payload: Option<Payload>) -> Vec<ArmSample> {
         let config = SimConfig {
             surface: None,
@@ -262,37 +248,8 @@ mod tests {
             payload,
             ..SimConfig::above_surface(ContactModel::new(Kind::KelvinVoigt, 1.0, 0.0).unwrap(), 3)
         };
-        let model = lwr4::model();
-        let mut data = model.data();
-        let mut sim = Simulator::new(config).unwrap();
-        let mut seq = 0u16;
-        while sim.krc.state() != InterfaceState::Command {
-            let m = sim.measurement();
-            seq = seq.wrapping_add(1);
-            sim.command(&answer(&m, seq, m.intf.quality == Quality::Perfect, [0.0; 7]));
-            sim.step_cycle().unwrap();
-        }
-        let q0 = *sim.q();
-        let freq = [0.23, 0.31, 0.37, 0.43, 0.53, 0.61, 0.71];
-        let mut out = Vec::new();
-        for i in 0..8000 {
-            let t = i as f64 * 1e-3;
-            let m = sim.measurement();
-            let (q, dq) = (*sim.q(), *sim.dq());
-            let pd: [f64; 7] = std::array::from_fn(|j| {
-                let w = std::f64::consts::TAU * freq[j];
-                let (target, rate) = (q0[j] + 0.3 * (w * t).sin(), 0.3 * w * (w * t).cos());
-                let gain = [300.0, 300.0, 150.0, 150.0, 20.0, 10.0, 5.0][j];
-                gain * (target - q[j]) + 0.05 * gain * (rate - dq[j])
-            });
-            let g = model.gravity_torques(&mut data, &q);
-            out.push(ArmSample { t, q, dq, tau: std::array::from_fn(|j| g[j] + pd[j]) });
-            seq = seq.wrapping_add(1);
-            sim.command(&answer(&m, seq, true, pd));
-            sim.step_cycle().unwrap();
-            assert_eq!(sim.krc.state(), InterfaceState::Command, "the excitation stays within the arm's limits");
-        }
-        out
+        let run = excitation::excite(config, 8.0).expect("the excitation stays within the arm's limits");
+        run.iter().map(|s| ArmSample { t: s.t, q: s.q, dq: s.dq, tau: s.tau }).collect()
     }
 
     fn friction() -> JointFriction {

@@ -9,6 +9,7 @@
 //! dice ≈ 2 kN/m, ω ≈ 25 rad/s) and the wrist under a joint spring (≈ 100–300 rad/s), all below
 //! ω·dt = 0.3 at 1 ms: a margin of more than 6. `SimConfig::step` can be made finer.
 
+pub mod excitation;
 mod krc;
 mod sensor;
 mod specimen;
