@@ -2,7 +2,8 @@
 //! recording of free-space motion — /lwr/joint_states (position, velocity) paired by stamp with the
 //! /lwr/joint_torque_command that answered it (each command carries the stamp of its joint state).
 //! Samples while the F/T sensor reads more than [`CONTACT`] are left out: a contact's torque is not the
-//! arm's.
+//! arm's. The first [`MAX_SAMPLES`] free-space samples are analysed (20 s at 1 kHz, far more than the
+//! 18 parameters need), so that memory stays bounded whatever the file.
 
 use std::collections::BTreeMap;
 
@@ -18,6 +19,8 @@ pub const JOINT_STATES: &str = "/lwr/joint_states";
 pub const TORQUE_COMMAND: &str = "/lwr/joint_torque_command";
 /// A force reading above this means contact [N].
 pub const CONTACT: f64 = 1.0;
+/// The most samples analysed.
+pub const MAX_SAMPLES: usize = 20_000;
 /// Joint states waiting for their command are kept this long [ns]: memory stays bounded.
 const PAIRING_WINDOW: i64 = 1_000_000_000;
 
@@ -57,6 +60,9 @@ pub fn samples(recording: &Recording) -> anyhow::Result<Vec<ArmSample>> {
                     continue;
                 };
                 out.push(ArmSample { t: cmd.header.stamp.as_secs_f64(), q, dq, tau });
+                if out.len() >= MAX_SAMPLES {
+                    break;
+                }
             }
             WRENCH => {
                 let f = m.decode::<WrenchStamped>()?.wrench.force;
