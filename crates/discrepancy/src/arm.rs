@@ -123,7 +123,16 @@ pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOption
     let mut data = model.data();
     let mut loaded_data: Vec<Data> = loaded.iter().map(Model::data).collect();
     // Rows: 7 per used sample. Columns: 14 friction (b_i, c_i), then 4 payload.
-    let used: Vec<usize> = (k..samples.len() - k).collect();
+    // A difference must not reach across a gap (samples left out in contact, a dropped stretch): only
+    // windows as short as 2k of the recording's usual sample period, and a half, are used.
+    let mut periods: Vec<f64> = samples.windows(2).map(|w| w[1].t - w[0].t).collect();
+    periods.sort_by(f64::total_cmp);
+    let period = periods[periods.len() / 2];
+    let used: Vec<usize> =
+        (k..samples.len() - k).filter(|&i| samples[i + k].t - samples[i - k].t <= 3.0 * k as f64 * period).collect();
+    if used.len() < 50 {
+        return Err(ArmError::TooFew(used.len(), 50));
+    }
     let rows = 7 * used.len();
     let (mut r, mut friction, mut payload) = (DVector::zeros(rows), DMatrix::zeros(rows, 14), DMatrix::zeros(rows, 4));
     for (u, &i) in used.iter().enumerate() {
@@ -334,6 +343,19 @@ mod tests {
     fn nothing_hidden_names_nothing() {
         let report = name(&excite(None, None));
         assert!(report.named.is_empty(), "{report:?}");
+    }
+
+    /// Samples with a stretch left out (as in contact) give the same answer: no difference reaches
+    /// across the gap.
+    #[test]
+    fn a_gap_in_the_samples_is_not_differentiated_across() {
+        let mut samples = excite(Some(friction()), Some(payload()));
+        samples.drain(3000..3500);
+        let report = name(&samples);
+        assert_eq!(report.named.len(), 2, "{report:?}");
+        assert_friction(&report, &samples);
+        assert_payload(&report);
+        assert_eq!(report.samples, samples.len() - 2 * 2 * 5, "the window's ends and both sides of the gap");
     }
 
     #[test]
