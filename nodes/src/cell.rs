@@ -154,6 +154,9 @@ impl Cell {
             None => self.driver.clear_command(),
         }
         let driver = self.write(measured)?;
+        if self.pending_tare.is_some() {
+            self.controller.law.sensor_tared();
+        }
         Ok(Some(Tick {
             time,
             driver,

@@ -20,7 +20,7 @@
 use nalgebra::{DVector, Matrix3, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
-    Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque, TorqueLimiter,
+    AugmentedInverse, Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque, TorqueLimiter,
     Trajectory, deformation_acceleration,
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
@@ -247,6 +247,13 @@ fn left_jacobian(theta: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() + a * k + b * k * k
 }
 
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct ForceHold {
+    since: f64,
+    /// The deformation held now; `None` until the move has ended.
+    z: Option<f64>,
+}
+
 pub struct DeformationController {
     config: ControllerConfig,
     model: Model,
@@ -279,6 +286,13 @@ pub struct DeformationController {
     /// The driver's KRC session the contact state belongs to.
     session: Option<u32>,
     limiter: TorqueLimiter,
+    /// The contact model with its effects' states, when it has effects (an augmented model): force
+    /// commands and their holds go through it, and the sensor's named bias and drift come out of the
+    /// reading.
+    inverse: Option<AugmentedInverse>,
+    /// The standing force command's hold through the augmented model: from `since` (the end of its move)
+    /// the deformation held is re-solved every tick, so the force stays while the surface relaxes.
+    force_hold: Option<ForceHold>,
     /// Buffers of eq. 15 and of the posture torque: the tick allocates nothing.
     torque: TaskTorque,
     tau0: DVector<f64>,
@@ -288,6 +302,7 @@ impl DeformationController {
     pub fn new(config: ControllerConfig, contact_model: ContactModel) -> Result<Self, ControlError> {
         let model = lwr4::model();
         let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::ZeroNormal)?;
+        let inverse = AugmentedInverse::needed(&contact_model).then(|| AugmentedInverse::new(contact_model.clone()));
         Ok(Self {
             data: model.data(),
             tool: model.frame_id(lwr4::TOOL_FRAME)?,
@@ -310,6 +325,8 @@ impl DeformationController {
             force_trend: None,
             session: None,
             limiter: TorqueLimiter::new(),
+            inverse,
+            force_hold: None,
             torque: TaskTorque::new(7),
             tau0: DVector::zeros(7),
         })
@@ -320,9 +337,21 @@ impl DeformationController {
     /// An implausible model or offset is refused and the present one kept.
     pub fn set_contact_model(&mut self, model: ContactModel, offset: f64) -> Result<(), ControlError> {
         self.check_plausible(&model, offset)?;
+        match (self.inverse.as_mut(), AugmentedInverse::needed(&model)) {
+            (Some(inverse), true) => inverse.adopt(model.clone()),
+            (None, true) => self.inverse = Some(AugmentedInverse::new(model.clone())),
+            (_, false) => self.inverse = None,
+        }
         self.contact_model = model;
         self.offset = offset;
         Ok(())
+    }
+
+    /// The F/T sensor was tared: a named sensor drift counts from now.
+    pub fn sensor_tared(&mut self) {
+        if let Some(inverse) = self.inverse.as_mut() {
+            inverse.tared();
+        }
     }
 
     fn check_plausible(&self, model: &ContactModel, offset: f64) -> Result<(), ControlError> {
@@ -435,9 +464,16 @@ impl DeformationController {
         self.back_off_since = None;
         self.force_trend = None;
         self.limiter.reset();
+        self.force_hold = None;
+        if let Some(inverse) = self.inverse.as_mut() {
+            inverse.reset();
+        }
     }
 
     fn reference(&self) -> Reference {
+        if let Some(ForceHold { z: Some(z), .. }) = self.force_hold {
+            return Reference { position: z, ..Default::default() };
+        }
         self.plan.as_ref().map(|(q, t0)| q.at(self.time - t0)).unwrap_or_default()
     }
 
@@ -445,7 +481,26 @@ impl DeformationController {
     fn follow(&mut self, segments: Vec<Segment>) -> Result<(), ControlError> {
         self.plan = Some((Trajectory::new(segments).ok_or(ControlError::Duration)?, self.time));
         self.back_off_since = None;
+        self.force_hold = None;
         Ok(())
+    }
+
+    /// After the standing force command's move: the deformation that keeps its force through the
+    /// augmented model now, at most `max_deformation_rate` from the last one and within the limits
+    /// (else the last one is kept). Allocates nothing.
+    fn update_force_hold(&mut self, dt: f64) {
+        let (Some(inverse), Some(hold)) = (self.inverse.as_ref(), self.force_hold) else { return };
+        if self.f_cmd <= 0.0 || self.time < hold.since {
+            return;
+        }
+        let last = hold.z.unwrap_or_else(|| self.reference().position);
+        let limits = &self.config.limits;
+        let step = limits.max_deformation_rate * dt;
+        let z = match inverse.hold(self.f_cmd, last, dt) {
+            Ok(z) => limits.check_deformation(z.clamp(last - step, last + step)).unwrap_or(last),
+            Err(_) => last,
+        };
+        self.force_hold = Some(ForceHold { z: Some(z), ..hold });
     }
 
     /// Holds deformation z from now on.
@@ -507,9 +562,16 @@ impl DeformationController {
         if self.contact_level.is_none() {
             return Err(ControlError::NoContact);
         }
-        let z = self.config.limits.check_deformation(self.contact_model.deformation_for_force(force)?)?;
+        let z = match &self.inverse {
+            Some(inverse) => inverse.end_of_move(&self.reference(), force, duration)?,
+            None => self.contact_model.deformation_for_force(force)?,
+        };
+        let z = self.config.limits.check_deformation(z)?;
         let to = self.move_to(Reference { position: z, ..Default::default() }, duration)?;
         self.follow(vec![to])?;
+        if self.inverse.is_some() {
+            self.force_hold = Some(ForceHold { since: self.time + duration, z: None });
+        }
         self.f_cmd = force;
         self.contact_lost = false;
         self.force_limited = false;
@@ -642,6 +704,8 @@ impl DeformationController {
         self.last_tick = Some(time);
         self.time += dt;
         let force_rate = self.force_rate(normal_force, dt);
+        // The surface's force as the reading says it: without the sensor's named bias and drift.
+        let surface_force = self.inverse.as_ref().map_or(normal_force, |i| i.surface_reading(normal_force));
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -684,6 +748,9 @@ impl DeformationController {
                 state.in_contact = true;
                 state.z = along - level - self.offset;
                 state.zdot = v.dot(&n);
+                if let Some(inverse) = self.inverse.as_mut() {
+                    inverse.observe(state.z, state.zdot, dt)?;
+                }
                 // The surface is gone while we push: the model expects a clear force at this deformation
                 // (four times the threshold) and the sensor reads less than the threshold. (At the start
                 // of a push from a light touch the force may legitimately read below the threshold.)
@@ -705,17 +772,20 @@ impl DeformationController {
                 let backing_off =
                     self.force_limited && self.back_off_since.is_some_and(|t| self.time - t < BACK_OFF_DURATION);
                 let too_much = if self.force_limited { limits.max_force } else { limits.force_limit };
-                if normal_force + force_rate.max(0.0) * FORCE_LOOKAHEAD > too_much && !backing_off {
+                // (The reading as it is and without a named sensor bias or drift: whichever is larger.)
+                let guarded = normal_force.max(surface_force);
+                if guarded + force_rate.max(0.0) * FORCE_LOOKAHEAD > too_much && !backing_off {
                     self.force_limited = true;
                     self.f_cmd = 0.0;
                     let from_onset = along - level;
-                    let lift = from_onset.max(0.0) * (1.0 - limits.max_force / normal_force);
+                    let lift = from_onset.max(0.0) * (1.0 - limits.max_force / guarded);
                     let from = Reference { position: state.z, ..Default::default() };
                     let to = Reference { position: state.z - lift.max(BACK_OFF_MIN_STEP), ..Default::default() };
                     let back_off = Quintic::new(from, to, BACK_OFF_DURATION).ok_or(ControlError::Duration)?;
                     self.follow(vec![Segment::Move(back_off)])?;
                     self.back_off_since = Some(self.time);
                 }
+                self.update_force_hold(dt);
                 let reference = self.reference();
                 state.z_cmd = reference.position;
                 state.zdot_cmd = reference.velocity;
@@ -751,7 +821,7 @@ impl DeformationController {
         // deformation gains cannot hold: the force runs away to the limit, and with the reading fed
         // forward in full the back-off could not pull the hand out (an adversarial run held 350 N, over
         // the 300 N limit, with a sensor reading 10 % high).
-        let mut feed_forward = *contact_force;
+        let mut feed_forward = *contact_force + (normal_force - surface_force) * n;
         let cap = state.f_predicted.clamp(0.0, self.config.limits.max_force);
         if self.force_limited && normal_force > cap {
             feed_forward += (normal_force - cap) * n;

@@ -307,6 +307,7 @@ const PLAN: Plan = Plan {
     move_duration: 2.0,
     across: false,
     start_pressed: None,
+    augmented: false,
 };
 
 /// `softcontact discrepancy FILE --out DIR --sample-period P` with the cell's normal (down).

@@ -51,6 +51,9 @@ pub struct Plan {
     /// takes the contact force for the sensor's zero, and control starts without a second tare: the
     /// whole recording then reads a constant offset (a sensor bias, as after a tare taken touching).
     pub start_pressed: Option<f64>,
+    /// After identification, run the discrepancy workflow on its runs and the control experiment a
+    /// second time through the augmented model.
+    pub augmented: bool,
 }
 
 impl Plan {
@@ -61,6 +64,7 @@ impl Plan {
         move_duration: 2.0,
         across: false,
         start_pressed: None,
+        augmented: true,
     };
 }
 
@@ -132,17 +136,36 @@ pub struct Series {
     pub command: Vec<f64>,
 }
 
+/// One control experiment: the force over it (every 10 ms) and the times [s] its commands were sent.
+#[derive(Debug, Clone, Default)]
+pub struct Control {
+    pub series: Series,
+    pub command_times: Vec<f64>,
+}
+
+/// What the discrepancy workflow found in the identification runs.
+#[derive(Debug, Clone)]
+pub struct Found {
+    pub report: softcontact_discrepancy::Report,
+    /// The augmented model and where it places the surface in the world.
+    pub model: ContactModel,
+    pub contact_position: Vector3<f64>,
+}
+
 /// Everything one surface's experiments produced.
 pub struct SurfaceRun {
     pub spec: SurfaceSpec,
     pub identified: ModelOut,
     pub identification_samples: usize,
     pub max_force: f64,
+    /// Every command of both control experiments (`model` tells them apart).
     pub commands: Vec<CommandResult>,
     pub identification: Series,
-    pub control: Series,
-    /// Times [s] at which the control commands were sent.
-    pub command_times: Vec<f64>,
+    /// The control experiment through the identified model.
+    pub control: Control,
+    /// What the discrepancy workflow named in the identification runs, and the control experiment
+    /// through the augmented model.
+    pub augmented: Option<(Found, Control)>,
     /// Simulated seconds of the whole run.
     pub simulated: f64,
 }
@@ -282,16 +305,23 @@ pub fn run_surface(
     // The controller knows nothing of the surface yet: it only moves the hand during identification.
     let guess = ContactModel::new(Kind::KelvinVoigt, 5000.0, 0.0)?;
     let mut r = start(spec, sim, guess, identification, observer)?;
+    let tared_at = r.last.time;
     r.approach(spec.name)?;
 
     // Identification: ramp into the lowest push point, 1 Hz pushes, retreat, rest; 10 times.
     let mut id_series = Series::default();
+    // (t, z from the onset, ż, f) every 10 ms of every run, for the discrepancy workflow.
+    let mut recorded = Vec::new();
     let mut max_force: f64 = 0.0;
     let (low, high) = spec.push;
     for run in 0..plan.identification_runs {
         let mut k = 0usize;
         let mut watch = |t: &Tick| {
             max_force = max_force.max(t.controller.f);
+            if k.is_multiple_of(10) {
+                let c = &t.controller;
+                recorded.push((t.time, c.z, c.zdot, c.f));
+            }
             if run == 0 && k.is_multiple_of(10) {
                 id_series.time.push(t.time);
                 id_series.z_cmd.push(t.controller.z_cmd);
@@ -320,21 +350,93 @@ pub fn run_surface(
     let identification_samples = r.cell.estimator.samples();
     let identified = r.cell.estimator.refit().context("identification fit")?;
     r.observer.model(r.last.time, &identified)?;
+    let found = if plan.augmented {
+        let normal = r.cell.controller.law.config().normal;
+        Some(discrepancy(&recorded, tared_at, &identified, &normal).with_context(|| format!("{}: discrepancy", spec.name))?)
+    } else {
+        None
+    };
 
     // Control: a fresh estimator (its window: the last 1200 samples of the control run), the sensor
     // tared out of contact, and the identified model for cycle 1.
+    let (control, mut commands) = run_control(
+        &mut r,
+        plan,
+        max_force,
+        (&identified.model, &identified.contact_position),
+        ModelUse::Identified,
+    )?;
+    let augmented = match found {
+        Some(found) => {
+            // The same experiment again, cycle 1 through the augmented model.
+            let (run, more) = run_control(
+                &mut r,
+                plan,
+                max_force,
+                (&found.model, &found.contact_position),
+                ModelUse::Augmented,
+            )?;
+            commands.extend(more);
+            Some((found, run))
+        }
+        None => None,
+    };
+    Ok(SurfaceRun {
+        spec: spec.clone(),
+        identified,
+        identification_samples,
+        max_force,
+        commands,
+        identification: id_series,
+        control,
+        augmented,
+        simulated: r.last.time,
+    })
+}
+
+/// The discrepancy workflow on the identification runs (10 ms samples, deformation from the identified
+/// surface): what the identified model misses, named, and the model augmented with it.
+fn discrepancy(
+    recorded: &[(f64, f64, f64, f64)],
+    tared_at: f64,
+    identified: &ModelOut,
+    normal: &Vector3<f64>,
+) -> anyhow::Result<Found> {
+    let column = |i: usize| recorded.iter().map(|s| [s.0, s.1, s.2, s.3][i]).collect::<Vec<f64>>();
+    let z = recorded.iter().map(|s| s.1 - identified.offset).collect();
+    let series = softcontact_discrepancy::Series::new(column(0), z, column(2), column(3))?.with_tares(vec![tared_at])?;
+    let report = softcontact_discrepancy::analyse(&series, &identified.model, &Default::default())?;
+    Ok(Found {
+        model: report.model.clone(),
+        contact_position: identified.contact_position + report.contact_shift * normal,
+        report,
+    })
+}
+
+/// One control experiment of `plan.commands` force commands on the running cell: a fresh estimator (its
+/// window: the last 1200 samples of this experiment), the sensor tared out of contact, `model` (placing
+/// the surface at the given point) for cycle 1 and the estimator's newest model at each command after.
+fn run_control<O: Observer>(
+    r: &mut Runner<'_, O>,
+    plan: Plan,
+    max_force: f64,
+    (model, surface): (&ContactModel, &Vector3<f64>),
+    use_: ModelUse,
+) -> anyhow::Result<(Control, Vec<CommandResult>)> {
+    let params = contact_estimator::Params::default();
     if plan.start_pressed.is_none() {
+        r.cell.controller.law.command_deformation(RETREAT, 1.0)?;
+        r.run(1.5, |_| {})?;
         r.cell.tare()?;
     }
     r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?.with_refits(&params, r.last.time);
     r.newest = None;
-    r.cell.controller.law.adopt_estimate(identified.model.clone(), &identified.contact_position, None)?;
+    r.cell.controller.law.adopt_estimate(model.clone(), surface, None)?;
     r.cell.controller.law.command_deformation(0.005, 2.0)?;
     r.run(3.0, |_| {})?;
 
-    let mut control = Series::default();
+    let mut run = Control::default();
     let mut commands = Vec::with_capacity(plan.commands);
-    let mut command_times = Vec::with_capacity(plan.commands);
     let mut k = 0usize;
     for i in 0..plan.commands {
         let (cycle, _, command) = CommandResult::planned(i, max_force);
@@ -351,16 +453,17 @@ pub fn run_surface(
             r.cell.controller.law.command_across(Vector3::new(sway, 0.0, 0.0), Vector3::zeros(), plan.move_duration)?;
         }
         r.observer.force_command(r.last.time, command, plan.move_duration)?;
-        command_times.push(r.last.time);
+        run.command_times.push(r.last.time);
         let cycles = (plan.move_duration / CYCLE).round() as usize;
         let (mut end, mut end_true) = (Vec::with_capacity(10), Vec::with_capacity(10));
         for j in 0..cycles {
             let t = r.tick()?;
             if k.is_multiple_of(10) {
-                control.time.push(t.time);
-                control.force.push(t.controller.f);
-                control.predicted.push(t.controller.f_predicted);
-                control.command.push(t.controller.f_cmd);
+                let s = &mut run.series;
+                s.time.push(t.time);
+                s.force.push(t.controller.f);
+                s.predicted.push(t.controller.f_predicted);
+                s.command.push(t.controller.f_cmd);
             }
             k += 1;
             if j + 10 >= cycles {
@@ -370,17 +473,8 @@ pub fn run_surface(
         }
         // The force at the end of the move (the last 10 ms, one sample of seed 001's 100 Hz).
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-        commands.push(CommandResult::new(i, max_force, mean(&end_true), mean(&end), stiffness));
+        let result = CommandResult::new(i, max_force, mean(&end_true), mean(&end), stiffness);
+        commands.push(CommandResult { model: use_, ..result });
     }
-    Ok(SurfaceRun {
-        spec: spec.clone(),
-        identified,
-        identification_samples,
-        max_force,
-        commands,
-        identification: id_series,
-        control,
-        command_times,
-        simulated: r.last.time,
-    })
+    Ok((run, commands))
 }

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use super::experiment::SurfaceRun;
+use super::experiment::{ModelUse, SurfaceRun};
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;
 
@@ -62,19 +62,26 @@ pub fn identification(runs: &[&SurfaceRun], out: &Path) -> Result<PathBuf> {
     Ok(path.clone())
 }
 
-/// Figs. 3 and 4: actual, predicted and commanded normal force over the control experiment, the five
+/// Figs. 3 and 4: actual, predicted and commanded normal force over the control experiment through
+/// the model `use_` (the identified one: seed 001's figure; the augmented one: `_augmented`), the five
 /// cycles separated by dashed red lines.
-pub fn control(run: &SurfaceRun, figure: u32, out: &Path) -> Result<PathBuf> {
-    let path = out.join(format!("fig{figure}_control_{}.svg", run.spec.name));
+pub fn control(run: &SurfaceRun, use_: ModelUse, figure: u32, out: &Path) -> Result<PathBuf> {
+    let (control, suffix, which) = match (use_, &run.augmented) {
+        (ModelUse::Augmented, Some((_, control))) => (control, "_augmented", "cycle 1 through the augmented model"),
+        _ => (&run.control, "", "cycle 1 through the identified model"),
+    };
+    let path = out.join(format!("fig{figure}_control_{}{suffix}.svg", run.spec.name));
     let root = SVGBackend::new(&path, (1200, 450)).into_drawing_area();
     root.fill(&WHITE)?;
-    let s = &run.control;
-    let t0 = run.command_times.first().copied().unwrap_or(0.0);
+    let s = &control.series;
+    let command_times = &control.command_times;
+    let commands: Vec<_> = run.commands.iter().filter(|c| c.model == use_).collect();
+    let t0 = command_times.first().copied().unwrap_or(0.0);
     let t1 = s.time.last().map_or(1.0, |t| t - t0);
     let y = range(s.force.iter().chain(&s.predicted).copied().chain([0.0]));
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            format!("{}: actual, predicted and command normal force (simulation)", run.spec.name),
+            format!("{}: actual, predicted and command normal force, {which} (simulation)", run.spec.name),
             ("sans-serif", 18),
         )
         .margin(10)
@@ -82,7 +89,7 @@ pub fn control(run: &SurfaceRun, figure: u32, out: &Path) -> Result<PathBuf> {
         .y_label_area_size(55)
         .build_cartesian_2d(0.0..t1, y.clone())?;
     chart.configure_mesh().x_desc("time [s]").y_desc("normal force [N]").draw()?;
-    for (i, t) in run.command_times.iter().enumerate().filter(|(i, _)| i % 6 == 0 && *i > 0) {
+    for (i, t) in command_times.iter().enumerate().filter(|(i, _)| i % 6 == 0 && *i > 0) {
         let _ = i;
         chart.draw_series(DashedLineSeries::new(
             vec![(t - t0, y.start), (t - t0, y.end)],
@@ -106,9 +113,9 @@ pub fn control(run: &SurfaceRun, figure: u32, out: &Path) -> Result<PathBuf> {
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
     chart
         .draw_series(
-            run.command_times
+            command_times
                 .iter()
-                .zip(&run.commands)
+                .zip(&commands)
                 .map(|(t, c)| Circle::new((t - t0 + 2.0, c.command), 4, GREEN.stroke_width(2))),
         )?
         .label("command (end of each move)")

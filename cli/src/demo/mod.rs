@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use softcontact_sim::FtSensorConfig;
 
-use experiment::{Plan, SurfaceRun, SurfaceSpec};
+use experiment::{ModelUse, Plan, SurfaceRun, SurfaceSpec};
 use report::{Report, SurfaceReport};
 
 #[derive(clap::Args, Debug)]
@@ -121,7 +121,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let figure = |r: Result<PathBuf, Box<dyn std::error::Error>>| r.map_err(|e| anyhow::anyhow!("figure: {e}"));
     let mut written = vec![figure(figures::identification(&runs, &args.out))?];
     for (i, run) in runs.iter().enumerate() {
-        written.push(figure(figures::control(run, 3 + i as u32, &args.out))?);
+        written.push(figure(figures::control(run, ModelUse::Identified, 3 + i as u32, &args.out))?);
+        if run.augmented.is_some() {
+            written.push(figure(figures::control(run, ModelUse::Augmented, 3 + i as u32, &args.out))?);
+        }
     }
     println!("recordings (ROS 2 MCAP: open in Foxglove, `softcontact identify`, `softcontact replay`):");
     for (_, path, stats) in &results {

@@ -422,17 +422,7 @@ impl ContactModel {
         let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
         state.time += dt;
         state.since_tare += dt;
-        let mut z_eff = z;
-        let mut scale = 1.0;
-        for e in &self.effects {
-            match *e {
-                Effect::ContactOffsetDrift { rate } => z_eff -= rate * state.time,
-                Effect::Hysteresis { fraction, velocity_scale } => {
-                    scale *= 1.0 + fraction * (zdot / velocity_scale).tanh()
-                }
-                _ => {}
-            }
-        }
+        let (z_eff, scale) = self.effective(state.time, z, zdot);
         let mut surface = 0.0;
         if z_eff > 0.0 {
             let (elastic, rate) = self.parts(z_eff, zdot);
@@ -453,6 +443,61 @@ impl ContactModel {
             }
         }
         Ok(surface.max(0.0))
+    }
+
+    /// The deformation the law sees at `time` (the surface moved by its offset drift) and the factor of
+    /// the elastic force (hysteresis by the direction of motion).
+    #[inline]
+    fn effective(&self, time: f64, z: f64, zdot: f64) -> (f64, f64) {
+        let mut z_eff = z;
+        let mut scale = 1.0;
+        for e in &self.effects {
+            match *e {
+                Effect::ContactOffsetDrift { rate } => z_eff -= rate * time,
+                Effect::Hysteresis { fraction, velocity_scale } => {
+                    scale *= 1.0 + fraction * (zdot / velocity_scale).tanh()
+                }
+                _ => {}
+            }
+        }
+        (z_eff, scale)
+    }
+
+    /// The surface force and its derivative along z [N/m] after the deformation went from the state's
+    /// last one to z over the next dt seconds and stopped there: [`ContactModel::step_surface`] with ż = 0
+    /// (dt = 0: at once, every relaxation branch takes the change through its spring), without changing
+    /// the state. Allocates nothing: the hold of an augmented model solves it every control tick.
+    pub fn force_at_rest(&self, state: &EffectState, z: f64, dt: f64) -> Result<(f64, f64), ContactError> {
+        let (z, dt) = (finite("z", z)?, finite("dt", dt)?);
+        let (z_eff, _) = self.effective(state.time + dt, z, 0.0);
+        if z_eff <= 0.0 {
+            return Ok((0.0, 0.0));
+        }
+        let a = self.exponents.a;
+        let (mut force, mut slope) = (self.stiffness * pow(z_eff, a), self.stiffness * a * pow(z_eff, a - 1.0));
+        let change = z_eff - state.last_deformation.unwrap_or(z_eff).max(0.0);
+        for (i, e) in self.effects.iter().enumerate() {
+            if let Effect::ViscoelasticRelaxation { stiffness, time_constant } = *e {
+                let s = state.branch_force.get(i).copied().unwrap_or(0.0);
+                force += maxwell_step(s, stiffness * change, dt, time_constant);
+                slope += maxwell_step(0.0, stiffness, dt, time_constant);
+            }
+        }
+        Ok((force.max(0.0), slope))
+    }
+
+    /// What the named sensor effects add to a reading now [N]: the bias, and the drift since the last
+    /// tare. A reading minus it is the surface force (the effects that need the tangential force, the
+    /// orientation or the past are not in it).
+    pub fn sensor_offset(&self, state: &EffectState) -> f64 {
+        self.effects
+            .iter()
+            .map(|e| match *e {
+                Effect::SensorBias { offset } => offset,
+                Effect::SensorDrift { rate } => rate * state.since_tare,
+                _ => 0.0,
+            })
+            .sum()
     }
 
     /// What the sensor reads along the normal of the surface force of this step (after
