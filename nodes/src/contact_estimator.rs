@@ -7,8 +7,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::geometry::ContactGeometry;
 use softcontact_contact::{
-    ContactError, ContactModel, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample, WindowEstimator,
-    estimate_contact_offset,
+    ContactError, ContactModel, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample, TimedSample,
+    WindowEstimator, estimate_contact_offset, fit_with_effects, fit_with_effects_at,
 };
 
 #[derive(Debug, Clone, PartialEq)]
@@ -71,6 +71,10 @@ pub struct ContactEstimatorNode {
     window: WindowEstimator,
     next_sample: f64,
     refits: Option<RefitSchedule>,
+    /// The named effects carried in every refit (a model the discrepancy workflow augmented): its kind,
+    /// exponents and effects' shapes are kept, their amplitudes refitted ([`fit_with_effects`]); and
+    /// where it places the surface in the world, if the window is not to move it.
+    structure: Option<(ContactModel, Option<Vector3<f64>>)>,
 }
 
 /// When the node refits on its own: every `period` [s] of reading time, once the window is at least
@@ -98,6 +102,7 @@ impl ContactEstimatorNode {
             contact: None,
             next_sample: 0.0,
             refits: None,
+            structure: None,
             normal,
             config,
         })
@@ -109,6 +114,23 @@ impl ContactEstimatorNode {
         self.refits =
             Some(RefitSchedule { period: p.refit_period, min_window_fill: p.min_window_fill.max(1e-9), next: from });
         self
+    }
+
+    /// Carries the effects of `structure` (a model with named effects) in every refit. With `surface`
+    /// (a point of the undeformed surface in the world) the refits hold the surface there: a window that
+    /// never leaves the surface cannot tell its place from a sensor offset, and the workflow placed it
+    /// with free space in view. A model without effects is the plain estimator's choice of kind.
+    pub fn with_effects(
+        mut self,
+        structure: ContactModel,
+        surface: Option<Vector3<f64>>,
+    ) -> Result<Self, ContactError> {
+        structure.validate()?;
+        if surface.is_some_and(|p| !p.iter().all(|v| v.is_finite())) {
+            return Err(ContactError::InvalidConfig("the surface point must be finite".into()));
+        }
+        self.structure = (!structure.effects.is_empty()).then_some((structure, surface));
+        Ok(self)
     }
 
     /// The refit due at reading time `t` on the schedule, if one is: the model, or why it failed.
@@ -152,7 +174,7 @@ impl ContactEstimatorNode {
         if t >= self.next_sample {
             self.next_sample = t + self.config.sample_period;
             if out.in_contact && normal_force > self.config.onset.threshold {
-                self.window.push(Sample::new(out.deformation, out.deformation_rate, normal_force)?)?;
+                self.window.push_at(t, Sample::new(out.deformation, out.deformation_rate, normal_force)?)?;
             }
         }
         Ok(out)
@@ -180,10 +202,30 @@ impl ContactEstimatorNode {
         let chosen = estimate.selected_fit().clone();
         let samples: Vec<Sample> = self.window.samples().copied().collect();
         let prior = Some((chosen.stiffness, chosen.damping));
-        let (offset, fit) =
-            estimate_contact_offset(&samples, chosen.exponents, self.config.offset_range, prior, &self.config.fit)?;
+        let (offset, model) = match &self.structure {
+            Some((structure, surface)) => {
+                let timed: Vec<TimedSample> = self.window.timed_samples().collect();
+                match surface {
+                    Some(p) => {
+                        let offset = (p - onset_point).dot(&self.normal);
+                        (offset, fit_with_effects_at(&timed, structure, offset)?)
+                    }
+                    None => fit_with_effects(&timed, structure, self.config.offset_range)?,
+                }
+            }
+            None => {
+                let (offset, fit) = estimate_contact_offset(
+                    &samples,
+                    chosen.exponents,
+                    self.config.offset_range,
+                    prior,
+                    &self.config.fit,
+                )?;
+                (offset, fit.model()?)
+            }
+        };
         Ok(ModelOut {
-            model: fit.model()?,
+            model,
             offset,
             contact_position: onset_point + offset * self.normal,
             window_fill: self.window_fill(),

@@ -20,8 +20,8 @@
 use nalgebra::{DVector, Matrix3, UnitQuaternion, Vector3, Vector6};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
-    AugmentedInverse, Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque, TorqueLimiter,
-    Trajectory, deformation_acceleration,
+    AugmentedInverse, Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment,
+    TaskTorque, TorqueLimiter, Trajectory, deformation_acceleration,
 };
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 

@@ -310,8 +310,10 @@ pub fn run_surface(
 
     // Identification: ramp into the lowest push point, 1 Hz pushes, retreat, rest; 10 times.
     let mut id_series = Series::default();
-    // (t, z from the onset, ż, f) every 10 ms of every run, for the discrepancy workflow.
+    // (t, z from the onset, ż, the reading along n, unclamped) every 10 ms of every run, for the
+    // discrepancy workflow (in free space the reading is the sensor's noise, bias and drift).
     let mut recorded = Vec::new();
+    let geometry = r.cell.controller.geometry().clone();
     let mut max_force: f64 = 0.0;
     let (low, high) = spec.push;
     for run in 0..plan.identification_runs {
@@ -320,7 +322,7 @@ pub fn run_surface(
             max_force = max_force.max(t.controller.f);
             if k.is_multiple_of(10) {
                 let c = &t.controller;
-                recorded.push((t.time, c.z, c.zdot, c.f));
+                recorded.push((t.time, c.z, c.zdot, geometry.normal_reading(&t.force_world)));
             }
             if run == 0 && k.is_multiple_of(10) {
                 id_series.time.push(t.time);
@@ -352,30 +354,23 @@ pub fn run_surface(
     r.observer.model(r.last.time, &identified)?;
     let found = if plan.augmented {
         let normal = r.cell.controller.law.config().normal;
-        Some(discrepancy(&recorded, tared_at, &identified, &normal).with_context(|| format!("{}: discrepancy", spec.name))?)
+        Some(
+            discrepancy(&recorded, tared_at, &identified, &normal)
+                .with_context(|| format!("{}: discrepancy", spec.name))?,
+        )
     } else {
         None
     };
 
     // Control: a fresh estimator (its window: the last 1200 samples of the control run), the sensor
     // tared out of contact, and the identified model for cycle 1.
-    let (control, mut commands) = run_control(
-        &mut r,
-        plan,
-        max_force,
-        (&identified.model, &identified.contact_position),
-        ModelUse::Identified,
-    )?;
+    let (control, mut commands) =
+        run_control(&mut r, plan, max_force, (&identified.model, &identified.contact_position), ModelUse::Identified)?;
     let augmented = match found {
         Some(found) => {
             // The same experiment again, cycle 1 through the augmented model.
-            let (run, more) = run_control(
-                &mut r,
-                plan,
-                max_force,
-                (&found.model, &found.contact_position),
-                ModelUse::Augmented,
-            )?;
+            let (run, more) =
+                run_control(&mut r, plan, max_force, (&found.model, &found.contact_position), ModelUse::Augmented)?;
             commands.extend(more);
             Some((found, run))
         }
@@ -404,8 +399,10 @@ fn discrepancy(
 ) -> anyhow::Result<Found> {
     let column = |i: usize| recorded.iter().map(|s| [s.0, s.1, s.2, s.3][i]).collect::<Vec<f64>>();
     let z = recorded.iter().map(|s| s.1 - identified.offset).collect();
-    let series = softcontact_discrepancy::Series::new(column(0), z, column(2), column(3))?.with_tares(vec![tared_at])?;
+    let series =
+        softcontact_discrepancy::Series::new(column(0), z, column(2), column(3))?.with_tares(vec![tared_at])?;
     let report = softcontact_discrepancy::analyse(&series, &identified.model, &Default::default())?;
+
     Ok(Found {
         model: report.model.clone(),
         contact_position: identified.contact_position + report.contact_shift * normal,
@@ -429,7 +426,13 @@ fn run_control<O: Observer>(
         r.run(1.5, |_| {})?;
         r.cell.tare()?;
     }
-    r.cell.estimator = ContactEstimatorNode::new(params.estimator_config())?.with_refits(&params, r.last.time);
+    let mut estimator = ContactEstimatorNode::new(params.estimator_config())?.with_refits(&params, r.last.time);
+    if use_ == ModelUse::Augmented {
+        // The estimator carries the named effects in its window fits, the surface where the workflow
+        // placed it.
+        estimator = estimator.with_effects(model.clone(), Some(*surface))?;
+    }
+    r.cell.estimator = estimator;
     r.newest = None;
     r.cell.controller.law.adopt_estimate(model.clone(), surface, None)?;
     r.cell.controller.law.command_deformation(0.005, 2.0)?;

@@ -243,6 +243,7 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
         max_force,
         commands: results,
         simulated_surface: spec.truth.clone(),
+        discrepancy: None,
     };
     let path = client_report(out, spec.name);
     std::fs::write(&path, serde_json::to_string_pretty(&report)?).with_context(|| path.display().to_string())?;

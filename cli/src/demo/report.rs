@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 use softcontact_contact::{ContactModel, Effect, Exponents};
 
-use super::experiment::{CYCLES, CommandResult, RATIOS, SurfaceRun};
+use super::experiment::{CYCLES, CommandResult, ModelUse, RATIOS, SurfaceRun};
 use super::paper::{self, PaperSurface};
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -44,8 +44,33 @@ pub struct SurfaceReport {
     pub identified: Identified,
     /// The largest normal force of the identification [N]: commands are ratios of it.
     pub max_force: f64,
+    /// Both control experiments' commands: `model` is `identified` or `augmented`.
     pub commands: Vec<CommandResult>,
     pub simulated_surface: ContactModel,
+    /// What the discrepancy workflow named in the identification runs (absent when it was not run).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discrepancy: Option<Discrepancy>,
+}
+
+/// The discrepancy workflow on the identification runs.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Discrepancy {
+    /// The effects named, with their parameters (SI units), in the order they were added.
+    pub named: Vec<NamedEffect>,
+    /// `none`, `unexplained` or `ambiguous`: what is left after them.
+    pub remaining: String,
+    /// In-contact RMS of the identified model and of the augmented one [N], and the noise floor.
+    pub rms_before: f64,
+    pub rms_after: f64,
+    pub noise_floor: f64,
+    /// The model cycle 1 of the second control experiment went through.
+    pub augmented_model: ContactModel,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct NamedEffect {
+    pub id: String,
+    pub parameters: BTreeMap<String, f64>,
 }
 
 impl SurfaceReport {
@@ -71,6 +96,24 @@ impl SurfaceReport {
             max_force: run.max_force,
             commands: run.commands.clone(),
             simulated_surface: run.spec.truth.clone(),
+            discrepancy: run.augmented.as_ref().map(|(found, _)| {
+                let r = &found.report;
+                Discrepancy {
+                    named: r
+                        .effects
+                        .iter()
+                        .map(|e| NamedEffect { id: e.id.clone(), parameters: e.parameters.clone() })
+                        .collect(),
+                    remaining: serde_json::to_value(r.remaining)
+                        .ok()
+                        .and_then(|v| v.as_str().map(String::from))
+                        .unwrap_or_default(),
+                    rms_before: r.refit.rms,
+                    rms_after: r.final_rms,
+                    noise_floor: r.noise_floor,
+                    augmented_model: found.model.clone(),
+                }
+            }),
         }
     }
 
@@ -78,11 +121,15 @@ impl SurfaceReport {
         if self.name == "dice" { &paper::DICE } else { &paper::SPONGE }
     }
 
-    /// The largest relative error of each cycle.
-    pub fn worst_per_cycle(&self) -> Vec<f64> {
+    /// The largest relative error of each cycle of the control experiment through `model`.
+    pub fn worst_per_cycle(&self, model: ModelUse) -> Vec<f64> {
         (1..=CYCLES)
             .map(|c| {
-                self.commands.iter().filter(|x| x.cycle == c).map(|x| x.error / x.command).fold(f64::NAN, f64::max)
+                self.commands
+                    .iter()
+                    .filter(|x| x.cycle == c && x.model == model)
+                    .map(|x| x.error / x.command)
+                    .fold(f64::NAN, f64::max)
             })
             .collect()
     }
@@ -94,11 +141,13 @@ pub fn describe(model: &ContactModel) -> String {
     for e in &model.effects {
         parts.push(match *e {
             Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
-                format!("viscoelastic relaxation ({stiffness:.0} N/m, τ {time_constant} s)")
+                format!("viscoelastic relaxation ({stiffness:.0} N/m, τ {time_constant:.3} s)")
             }
             Effect::Hysteresis { fraction, velocity_scale } => {
-                format!("hysteresis (±{:.0} % of the elastic force at {velocity_scale} m/s)", fraction * 100.0)
+                format!("hysteresis (±{:.1} % of the elastic force at {velocity_scale:.3} m/s)", fraction * 100.0)
             }
+            Effect::SensorBias { offset } => format!("sensor bias ({offset:+.3} N)"),
+            Effect::SensorDrift { rate } => format!("sensor drift ({:+.2} mN/s)", rate * 1e3),
             ref other => other.id().to_string(),
         });
     }
@@ -176,12 +225,20 @@ pub fn print_errors(s: &SurfaceReport, table: &str, source: &str) {
         row("commands ours", &mut ratios.iter().map(|r| format!("{:.1}", r * s.max_force)));
         row("commands paper", &mut ratios.iter().map(|r| format!("{:.1}", r * paper.max_force)));
         for cycle in cycles {
-            let ours: Vec<_> = s.commands.iter().filter(|c| c.cycle == cycle).collect();
+            let of = |model: ModelUse| -> Vec<&CommandResult> {
+                s.commands.iter().filter(|c| c.cycle == cycle && c.model == model).collect()
+            };
+            let ours = of(ModelUse::Identified);
             if ours.is_empty() {
                 continue;
             }
             let pct = |e: f64, c: f64| format!("{e:.2} ({:.1}%)", e / c * 100.0);
             row(&format!("cycle #{cycle} ours"), &mut ours.iter().map(|c| pct(c.error, c.command)));
+            let augmented = of(ModelUse::Augmented);
+            if !augmented.is_empty() {
+                let pct = |e: f64, c: f64| format!("{e:.2} ({:.2}%)", e / c * 100.0);
+                row(&format!("cycle #{cycle} augm."), &mut augmented.iter().map(|c| pct(c.error, c.command)));
+            }
             let paper_ratios = RATIOS[usize::from(cycle == CYCLES)];
             row(
                 &format!("cycle #{cycle} paper"),
@@ -190,13 +247,39 @@ pub fn print_errors(s: &SurfaceReport, table: &str, source: &str) {
         }
     }
     print!("largest error per cycle:");
-    for (i, w) in s.worst_per_cycle().iter().enumerate().filter(|(_, w)| w.is_finite()) {
+    for (i, w) in s.worst_per_cycle(ModelUse::Identified).iter().enumerate().filter(|(_, w)| w.is_finite()) {
         let paper_ratios = RATIOS[usize::from(i + 1 == CYCLES)];
         let paper_worst =
             paper.errors[i].iter().zip(paper_ratios).map(|(e, r)| e / (r * paper.max_force)).fold(0.0, f64::max);
         print!("  #{} {:.1} % (paper {:.0} %)", i + 1, w * 100.0, paper_worst * 100.0);
     }
-    println!("\n");
+    let augmented = s.worst_per_cycle(ModelUse::Augmented);
+    if augmented.iter().any(|w| w.is_finite()) {
+        print!("\n  through the augmented model:");
+        for (i, w) in augmented.iter().enumerate().filter(|(_, w)| w.is_finite()) {
+            print!("  #{} {:.2} %", i + 1, w * 100.0);
+        }
+    }
+    println!(
+        "\n  ours: the error on the simulator's true contact force (`error` in the JSON; the sensor's reading: `error_measured`)"
+    );
+    println!();
+}
+
+/// What the discrepancy workflow named in a surface's identification runs, beside what the simulated
+/// surface and sensor really hide.
+pub fn print_discrepancy(s: &SurfaceReport) {
+    let Some(d) = &s.discrepancy else { return };
+    println!(
+        "DISCREPANCY — {}: the identified model against its own identification runs, in-contact RMS {:.3} N → {:.3} N (noise floor {:.3} N; remaining: {})",
+        s.name, d.rms_before, d.rms_after, d.noise_floor, d.remaining
+    );
+    for e in &d.named {
+        let parameters: Vec<String> = e.parameters.iter().map(|(k, v)| format!("{k} {v:.4}")).collect();
+        println!("  named  {:<26}{}", e.id, parameters.join(", "));
+    }
+    println!("  hidden {} (+ the sensor's drift since its tare)", describe(&s.simulated_surface));
+    println!("  augmented model for cycle 1: {}\n", describe(&d.augmented_model));
 }
 
 /// Both tables for every surface.
@@ -207,6 +290,9 @@ pub fn print(report: &Report) {
         "simulation, in-process lockstep"
     };
     print_table_one(&report.surfaces, source);
+    for s in &report.surfaces {
+        print_discrepancy(s);
+    }
     for s in &report.surfaces {
         print_errors(s, if s.name == "dice" { "III" } else { "II" }, source);
     }

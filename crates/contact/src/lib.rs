@@ -44,6 +44,7 @@
 //! - Reporting as seed 000 does: [`fit_statistics`] and [`dispersion`]; its 205 loading paths and what a
 //!   model predicts at their ends: [`seed_000_experiments`], [`predicted_dispersion`].
 
+mod effect_fit;
 mod exponent;
 mod fit;
 mod loading_paths;
@@ -54,6 +55,7 @@ mod tangential;
 mod tangential_fit;
 mod window;
 
+pub use effect_fit::{MIN_EFFECT_SAMPLES, TimedSample, fit_with_effects, fit_with_effects_at};
 pub use exponent::{DampingExponent, estimate_contact_offset, estimate_exponent, minimize_scalar};
 pub use fit::{
     Fit, FitConfig, Moments, Prior, Sample, fit, fit_folds, fitness, fold_moments, fold_of, least_squares_qr,

@@ -60,7 +60,8 @@ fn columns(s: &Sample) -> Columns {
 #[derive(Debug, Clone)]
 pub struct WindowEstimator {
     capacity: usize,
-    samples: VecDeque<(Sample, Columns)>,
+    /// (time [s] or NaN when pushed without one, sample, its regressors).
+    samples: VecDeque<(f64, Sample, Columns)>,
     moments: [Moments; 3],
     since_resync: usize,
     config: FitConfig,
@@ -103,7 +104,12 @@ impl WindowEstimator {
 
     /// Samples, oldest first.
     pub fn samples(&self) -> impl Iterator<Item = &Sample> {
-        self.samples.iter().map(|(s, _)| s)
+        self.samples.iter().map(|(_, s, _)| s)
+    }
+
+    /// Samples with their times, oldest first (NaN for a sample pushed without one).
+    pub fn timed_samples(&self) -> impl Iterator<Item = crate::TimedSample> + '_ {
+        self.samples.iter().map(|&(t, sample, _)| crate::TimedSample { t, sample })
     }
 
     pub fn clear(&mut self) {
@@ -121,9 +127,14 @@ impl WindowEstimator {
 
     /// Adds a sample, dropping the oldest when full. O(1); a non-finite sample is refused.
     pub fn push(&mut self, sample: Sample) -> Result<(), ContactError> {
+        self.push_at(f64::NAN, sample)
+    }
+
+    /// [`WindowEstimator::push`] with the sample's time [s] (a fit with named effects needs it).
+    pub fn push_at(&mut self, t: f64, sample: Sample) -> Result<(), ContactError> {
         let sample = Sample::new(sample.z, sample.zdot, sample.f)?;
         if self.samples.len() == self.capacity
-            && let Some((old, cols)) = self.samples.pop_front()
+            && let Some((_, old, cols)) = self.samples.pop_front()
         {
             for (m, (x1, x2)) in self.moments.iter_mut().zip(cols) {
                 m.remove(x1, x2, old.f);
@@ -133,7 +144,7 @@ impl WindowEstimator {
         for (m, (x1, x2)) in self.moments.iter_mut().zip(cols) {
             m.add(x1, x2, sample.f, 1.0);
         }
-        self.samples.push_back((sample, cols));
+        self.samples.push_back((t, sample, cols));
         self.since_resync += 1;
         if self.since_resync >= self.capacity {
             self.resync();
@@ -144,7 +155,7 @@ impl WindowEstimator {
     /// Recomputes the running moments exactly from the stored regressors.
     fn resync(&mut self) {
         self.moments = [Moments::default(); 3];
-        for (s, cols) in &self.samples {
+        for (_, s, cols) in &self.samples {
             for (m, (x1, x2)) in self.moments.iter_mut().zip(cols) {
                 m.add(*x1, *x2, s.f, 1.0);
             }
@@ -171,7 +182,7 @@ impl WindowEstimator {
             return Err(ContactError::NotEnoughData { kind: "window" });
         }
         let mut fold_moments = vec![[Moments::default(); 3]; folds];
-        for (i, (s, cols)) in self.samples.iter().enumerate() {
+        for (i, (_, s, cols)) in self.samples.iter().enumerate() {
             let fold = fold_of(i, n, folds);
             for (m, (x1, x2)) in fold_moments[fold].iter_mut().zip(cols) {
                 m.add(*x1, *x2, s.f, 1.0);
