@@ -8,17 +8,25 @@
 //! moved their reference), and eq. 15 turns the task acceleration into joint torques with a
 //! null-space joint impedance holding the initial posture. Every output passes the torque limiter.
 //!
+//! A contact model with named effects (one the discrepancy workflow augmented) is inverted with its
+//! effects' states ([`AugmentedInverse`]): a force command's move ends where the model gives the force
+//! with its relaxation branches as the move leaves them, and the hold is re-solved every tick as they
+//! fade (at most `max_deformation_rate` from the last, within `max_deformation`); the sensor's named bias
+//! and drift come out of the reading (at most [`MAX_SENSOR_CORRECTION`] of `max_force`), and the force
+//! guard watches the larger of the reading and the corrected force.
+//!
 //! What it refuses (the safety contract, README "Safety"): a command whose force, deformation, lift or
 //! move duration lies outside the configured limits; a move across the surface or a tilt beyond
 //! [`MAX_LATERAL`], [`MAX_TILT`] or their speed limits; a contact model that is not plausible (exponents
-//! outside [`EXPONENT_RANGE`], a surface placed further than `max_surface_offset` from the measured
+//! outside [`EXPONENT_RANGE`], a sensor bias beyond [`MAX_SENSOR_CORRECTION`] or a surface drift beyond
+//! [`MAX_SURFACE_DRIFT`], a surface placed further than `max_surface_offset` from the measured
 //! onset); a tick whose measurements are not finite numbers. A tick that cannot produce finite torques
 //! returns an error and re-plans a hold where the hand is: the node then sends the driver a hold
 //! request, never an older torque. After the joint states were interrupted (a new KRC session) the
 //! controller forgets the contact and approaches again.
 
 use nalgebra::{DVector, Matrix3, UnitQuaternion, Vector3, Vector6};
-use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector, OnsetEvent};
+use softcontact_contact::{ContactModel, Effect, OnsetConfig, OnsetDetector, OnsetEvent};
 use softcontact_control::{
     AugmentedInverse, Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment,
     TaskTorque, TorqueLimiter, Trajectory, deformation_acceleration,
@@ -148,6 +156,13 @@ pub struct ControllerState {
     /// The model's force at the commanded deformation and rate.
     pub f_predicted: f64,
 }
+
+/// The largest correction of a reading by a named sensor bias or drift, as a share of `max_force`: a
+/// tare zeroes the offset, so what is left is small, and a model claiming more is refused (a bias) or
+/// cut to it (a drift, which grows with the time since the tare).
+pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
+/// The fastest surface offset drift [m/s] an augmented model may name: the hold follows it.
+pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
 
 /// How fast the controller backs off after passing the force limit [s].
 const BACK_OFF_DURATION: f64 = 0.2;
@@ -362,6 +377,22 @@ impl DeformationController {
         let e = model.exponents;
         if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
             return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
+        }
+        let max_force = self.config.limits.max_force;
+        for effect in &model.effects {
+            match *effect {
+                Effect::SensorBias { offset } if offset.abs() > MAX_SENSOR_CORRECTION * max_force => {
+                    return implausible(format!(
+                        "a sensor bias of {offset} N, beyond {MAX_SENSOR_CORRECTION} of max_force (a tare zeroes it)"
+                    ));
+                }
+                Effect::ContactOffsetDrift { rate } if rate.abs() > MAX_SURFACE_DRIFT => {
+                    return implausible(format!(
+                        "a surface drifting {rate} m/s, beyond {MAX_SURFACE_DRIFT} m/s (not a surface at rest)"
+                    ));
+                }
+                _ => {}
+            }
         }
         if !(offset.is_finite() && offset.abs() <= self.config.max_surface_offset) {
             return implausible(format!(
@@ -705,7 +736,10 @@ impl DeformationController {
         self.time += dt;
         let force_rate = self.force_rate(normal_force, dt);
         // The surface's force as the reading says it: without the sensor's named bias and drift.
-        let surface_force = self.inverse.as_ref().map_or(normal_force, |i| i.surface_reading(normal_force));
+        let most = MAX_SENSOR_CORRECTION * self.config.limits.max_force;
+        let surface_force = self.inverse.as_ref().map_or(normal_force, |i| {
+            normal_force - (normal_force - i.surface_reading(normal_force)).clamp(-most, most)
+        });
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -1310,6 +1344,103 @@ mod tests {
         assert!(p < 1e-3 && o < 0.005, "{:.2} mm, {o:.4} rad", p * 1e3);
         // The normal part is left as it was: the force holds.
         assert!((f - before).abs() < 3.0 && peak < before + 3.0, "{before} N before, {f} N after, peak {peak} N");
+    }
+
+    /// The lockstep cell on the relaxing lab sponge, in contact, the controller given `model` placed at
+    /// the simulator's true surface.
+    fn lab_sponge_cell(model: ContactModel) -> Cell {
+        let config = SimConfig::above_surface(softcontact_sim::lab_sponge(), 43);
+        let surface = config.surface.as_ref().unwrap().point;
+        let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+        let mut cell = Cell::new(config, controller(), estimator).unwrap();
+        let mut cycles = 0;
+        while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
+            cycles += 1;
+            assert!(cycles < 10_000, "no contact");
+        }
+        cell.controller.law.adopt_estimate(model, &surface, None).unwrap();
+        cell
+    }
+
+    /// The true contact force at the end of a 2 s move to `force` and its range over the next `hold`
+    /// seconds.
+    fn press_and_hold(cell: &mut Cell, force: f64, hold: f64) -> (f64, f64, f64) {
+        cell.controller.law.command_force(force, 2.0).unwrap();
+        for _ in 0..2000 {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(tick.refused.is_none(), "{tick:?}");
+        }
+        let end = cell.sim.contact().normal_force;
+        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for _ in 0..(hold * 1e3) as usize {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(tick.refused.is_none() && !tick.controller.force_limited, "{tick:?}");
+            let f = cell.sim.contact().normal_force;
+            (low, high) = (low.min(f), high.max(f));
+        }
+        (end, low, high)
+    }
+
+    #[test]
+    fn through_the_augmented_model_the_force_is_reached_and_kept_on_a_relaxing_surface() {
+        // The surface's own model, effects and all: the move ends at the force and the hold keeps it
+        // while the 0.15 s and 5 s branches fade.
+        let mut cell = lab_sponge_cell(softcontact_sim::lab_sponge());
+        let (end, low, high) = press_and_hold(&mut cell, 100.0, 8.0);
+        eprintln!("augmented: {end:.3} N at the end of the move, {low:.3}–{high:.3} N over the hold");
+        assert!((end - 100.0).abs() < 0.5 && (low - 100.0).abs() < 0.5 && (high - 100.0).abs() < 0.5);
+        // The same law without its effects (as identified by seed 001's kinds): the force fades with
+        // the branches during the hold.
+        let mut plain = softcontact_sim::lab_sponge();
+        plain.effects.clear();
+        let mut cell = lab_sponge_cell(plain);
+        let (end, low, _) = press_and_hold(&mut cell, 100.0, 8.0);
+        eprintln!("plain: {end:.3} N at the end of the move, down to {low:.3} N over the hold");
+        assert!(end > 102.0 && end - low > 2.0, "the plain model overshoots, then relaxes: {end} N, {low} N");
+    }
+
+    #[test]
+    fn augmented_models_that_would_push_harder_are_refused_or_bounded() {
+        let sponge = softcontact_sim::lab_sponge();
+        let with = |effect: Effect| {
+            let mut m = sponge.clone();
+            m.effects.push(effect);
+            m
+        };
+        let mut c = controller();
+        let surface = Vector3::zeros();
+        // Not finite, or beyond what a tared sensor or a surface at rest can have: refused, and the
+        // model in use kept.
+        for bad in [
+            with(Effect::ViscoelasticRelaxation { stiffness: f64::NAN, time_constant: 0.1 }),
+            with(Effect::ViscoelasticRelaxation { stiffness: 1e3, time_constant: f64::INFINITY }),
+            with(Effect::ViscoelasticRelaxation { stiffness: -1e3, time_constant: 0.1 }),
+            with(Effect::Hysteresis { fraction: 1.5, velocity_scale: 0.05 }),
+            with(Effect::SensorBias { offset: 1e300 }),
+            with(Effect::SensorBias { offset: -40.0 }),
+            with(Effect::ContactOffsetDrift { rate: 0.01 }),
+            with(Effect::SensorDrift { rate: f64::NAN }),
+        ] {
+            assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
+            assert_eq!(c.contact_model(), &softcontact_sim::sponge());
+        }
+
+        // Plausible but wrong: the model says the surface sinks away at 1 mm/s, and the sensor drifts
+        // at 1 N/s. The hold follows the wrong surface down, but within max_deformation and below the
+        // force limit; the correction of the reading is cut at MAX_SENSOR_CORRECTION of max_force.
+        let mut wrong = with(Effect::ContactOffsetDrift { rate: MAX_SURFACE_DRIFT });
+        wrong.effects.push(Effect::SensorDrift { rate: 1.0 });
+        let mut cell = lab_sponge_cell(wrong);
+        cell.controller.law.command_force(150.0, 2.0).unwrap();
+        let limits = cell.controller.law.config.limits.clone();
+        let mut peak: f64 = 0.0;
+        for _ in 0..40_000 {
+            let tick = cell.cycle().unwrap().unwrap();
+            peak = peak.max(cell.sim.contact().normal_force);
+            assert!(tick.controller.z_cmd <= limits.max_deformation + 1e-12, "{tick:?}");
+        }
+        eprintln!("a wrong augmented model: true force at most {peak:.1} N (limit {} N)", limits.force_limit);
+        assert!(peak <= limits.force_limit, "{peak} N");
     }
 
     #[test]

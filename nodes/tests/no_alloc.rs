@@ -80,6 +80,38 @@ fn the_controller_tick_does_not_allocate() {
     assert_eq!(allocations(), 1, "the counter counts");
 }
 
+/// Through an augmented model (relaxation branches, hysteresis): the effects' states advance every
+/// tick, and after the move the hold is re-solved every tick — without an allocation.
+#[test]
+fn the_controller_tick_through_an_augmented_model_does_not_allocate() {
+    let model = softcontact_sim::lab_sponge();
+    assert!(!model.effects.is_empty());
+    let mut controller = DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), model).unwrap();
+    let mut q = softcontact_sim::DEFAULT_Q;
+    let dq = [0.0, 0.01, 0.0, -0.02, 0.0, 0.01, 0.0];
+    let mut time = 100.0;
+    for i in 0..600 {
+        q[1] += 1e-5;
+        time += 1e-3;
+        let f = if i > 300 { (i - 300) as f64 * 0.1 } else { 0.0 };
+        controller.tick(time, &q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+    }
+    controller.command_force(120.0, 1.0).unwrap();
+    COUNTING.with(|c| c.set(true));
+    let mut sum = 0.0;
+    // The 1 s move and 2 s of the hold.
+    for i in 0..3000 {
+        q[3] -= 1e-6;
+        time += 1e-3;
+        let f = 30.0 + i as f64 * 0.01;
+        let (tau, state) = controller.tick(time, &q, &dq, f, &Vector3::new(0.0, 0.0, f)).unwrap();
+        sum += tau[1] + state.z_cmd;
+    }
+    COUNTING.with(|c| c.set(false));
+    assert!(sum.is_finite());
+    assert_eq!(allocations(), 0, "allocations in 3000 ticks through the augmented model");
+}
+
 /// The in-process hand-over on the FRI thread allocates nothing: the driver reads a measurement, the
 /// torque for it is handed over, and the driver answers with it.
 #[test]
