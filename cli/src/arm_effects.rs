@@ -7,9 +7,10 @@
 
 use std::collections::BTreeMap;
 
+use anyhow::Context;
 use softcontact_bag::Recording;
 use softcontact_discrepancy::{ArmEffect, ArmOptions, ArmReport, ArmSample, name_arm_effects};
-use softcontact_dynamics::lwr4;
+use softcontact_dynamics::{ArmEffects, lwr4};
 use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::sensor_msgs::JointState;
 
@@ -80,6 +81,25 @@ pub fn samples(recording: &Recording) -> anyhow::Result<Vec<ArmSample>> {
 pub fn analyse(recording: &Recording) -> anyhow::Result<ArmReport> {
     let samples = samples(recording)?;
     Ok(name_arm_effects(&lwr4::model(), &samples, ArmOptions::default())?)
+}
+
+/// The file the arm's compensation is read from: `DIR/arm_effects.yaml`, the deformation controller's
+/// `arm_effects` parameter as an overlay for `--params-file` (launch-scripts/sim.sh and the node take it).
+pub const OVERLAY: &str = "arm_effects.yaml";
+
+/// Writes `effects` as the controller's parameter overlay into `dir`; returns its path.
+pub fn write_overlay(effects: &ArmEffects, dir: &std::path::Path) -> anyhow::Result<std::path::PathBuf> {
+    effects.validate()?;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(OVERLAY);
+    let body: String = effects.to_yaml().lines().map(|l| format!("      {l}\n")).collect();
+    let text = format!(
+        "# The arm's own effects named by `softcontact discrepancy --arm`, compensated by the deformation\n\
+         # controller: joint friction fed forward, the payload carried in its dynamics.\n\
+         deformation_controller:\n  ros__parameters:\n    arm_effects:\n{body}"
+    );
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
 }
 
 pub fn print(report: &ArmReport) {

@@ -238,9 +238,12 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     if args.arm {
         let report = crate::arm_effects::analyse(&Recording::open(&args.recording.file)?)?;
         crate::arm_effects::print(&report);
+        let overlay = crate::arm_effects::write_overlay(&report.effects(), &args.out)?;
+        println!("compensation (a --params-file overlay of the deformation controller): {}", overlay.display());
         if let Some(path) = &args.recording.json {
             let mut value = serde_json::to_value(&report)?;
             value["kind"] = serde_json::Value::from("arm");
+            value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
             identify_cmd::write_json(path, &value)?;
         }
         return Ok(());

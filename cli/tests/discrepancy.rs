@@ -381,8 +381,27 @@ fn the_arms_own_effects_are_named_from_a_recording() {
         let file = dir.path().join(format!("arm_{hidden}.mcap"));
         let json = dir.path().join(format!("arm_{hidden}.json"));
         write_arm_run(&file, hidden);
-        let out = discrepancy(&[file.as_os_str(), "--arm".as_ref(), "--json".as_ref(), json.as_os_str()]);
+        let folder = dir.path().join(format!("out_{hidden}"));
+        let out = discrepancy(&[
+            file.as_os_str(),
+            "--arm".as_ref(),
+            "--json".as_ref(),
+            json.as_os_str(),
+            "--out".as_ref(),
+            folder.as_os_str(),
+        ]);
         assert!(out.status.success(), "{}", text(&out));
+        // The compensation file is the controller's parameter overlay, read as the node reads it.
+        let overlay = folder.join("arm_effects.yaml");
+        let args = softcontact_nodes::params::ParamArgs { files: vec![overlay], overrides: vec![], ros_args: false };
+        let (params, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
+            "deformation_controller",
+            &args,
+        )
+        .unwrap();
+        let compensated = params.arm_effects;
+        assert_eq!(compensated.joint_friction.is_some(), hidden);
+        assert_eq!(compensated.payload.map(|p| (p.mass - 1.2).abs() < 0.03), hidden.then_some(true));
         let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         assert_eq!(report["kind"], "arm");
         let named: Vec<&str> = report["named"].as_array().unwrap().iter().map(|e| e["id"].as_str().unwrap()).collect();

@@ -31,7 +31,7 @@ use softcontact_control::{
     AugmentedInverse, Damping, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment,
     TaskTorque, TorqueLimiter, Trajectory, deformation_acceleration,
 };
-use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+use softcontact_dynamics::{ArmEffects, Data, FrameId, Model, lwr4};
 
 pub mod component;
 pub mod interface;
@@ -69,6 +69,10 @@ pub struct ControllerConfig {
     /// Nominal control period [s]: the step of the first tick after a (re)start; later ticks step by the
     /// time between their joint states.
     pub period: f64,
+    /// The arm's own effects beyond the URDF to compensate (`softcontact discrepancy --arm` names them):
+    /// the payload is carried in the model whose gravity and inertia eq. 15 compensates, the joint
+    /// friction is added to the torque before the limiter.
+    pub arm: ArmEffects,
 }
 
 /// Exponents a, b, c of a plausible contact law (the seeds' models use 1 to 2).
@@ -102,6 +106,7 @@ impl ControllerConfig {
             max_surface_offset: 0.01,
             restart_after: 0.1,
             period: 1e-3,
+            arm: ArmEffects::default(),
         }
     }
 }
@@ -315,7 +320,7 @@ pub struct DeformationController {
 
 impl DeformationController {
     pub fn new(config: ControllerConfig, contact_model: ContactModel) -> Result<Self, ControlError> {
-        let model = lwr4::model();
+        let model = config.arm.model(&lwr4::model())?;
         let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::ZeroNormal)?;
         let inverse = AugmentedInverse::needed(&contact_model).then(|| AugmentedInverse::new(contact_model.clone()));
         Ok(Self {
@@ -863,7 +868,10 @@ impl DeformationController {
         let wrench = Vector6::new(feed_forward.x, feed_forward.y, feed_forward.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
-        let mut tau: [f64; 7] = std::array::from_fn(|i| self.torque.tau[i]);
+        // The joint friction named for this arm, fed forward (bounded by the file's checks and the limiter).
+        let friction = self.config.arm.joint_friction;
+        let mut tau: [f64; 7] =
+            std::array::from_fn(|i| self.torque.tau[i] + friction.map_or(0.0, |f| f.torque(i, dq[i])));
         if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, dt) {
             // Nothing to send this tick; the next one holds the hand where it is (across the surface:
             // where its reference is now).
@@ -923,6 +931,7 @@ pub struct Params {
     pub force_check_impulse: f64,
     pub dead_after: f64,
     pub service_mapping: String,
+    pub arm_effects: ArmEffects,
     pub use_sim_time: bool,
 }
 
@@ -961,6 +970,7 @@ impl Default for Params {
             force_check_impulse: 0.5,
             dead_after: 2.0,
             service_mapping: "cyclone".into(),
+            arm_effects: ArmEffects::default(),
             use_sim_time: false,
         }
     }
@@ -986,6 +996,7 @@ impl Params {
         c.limits.move_duration = self.move_duration.into();
         c.max_surface_offset = self.max_surface_offset;
         c.restart_after = self.restart_after;
+        c.arm = self.arm_effects;
         c
     }
 }
@@ -1110,6 +1121,12 @@ impl crate::params::NodeParams for Params {
             model,
             "a valid contact model",
             "the model used until the estimator has one (a rough guess is enough to start identification)",
+        );
+        d.rule(
+            "arm_effects",
+            self.arm_effects.validate().map_err(|e| e.to_string()),
+            "{joint_friction: {viscous: [7], coulomb: [7]}, payload: {mass, com: [3]}}, each optional and bounded",
+            "the arm's own effects beyond the URDF to compensate, as `softcontact discrepancy --arm --out` writes them: joint friction fed forward, a flange payload carried in the dynamics",
         );
         d.use_sim_time();
     }

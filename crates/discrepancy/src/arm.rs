@@ -22,7 +22,8 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use serde::Serialize;
-use softcontact_dynamics::{BodyInertia, Data, Model, lwr4};
+use softcontact_dynamics::arm_effects::COULOMB_VELOCITY_SCALE;
+use softcontact_dynamics::{ArmEffects, BodyInertia, Data, JointFriction, Model, Payload, lwr4};
 
 /// One joint-state sample with the torque commanded for it (total, gravity included, as
 /// /lwr/joint_torque_command carries it).
@@ -58,6 +59,25 @@ impl Default for ArmOptions {
 pub enum ArmEffect {
     JointFriction { viscous: [f64; 7], coulomb: [f64; 7] },
     PayloadMass { mass: f64, com: [f64; 3] },
+}
+
+impl ArmReport {
+    /// What was named, as the file the controller compensates from (a friction coefficient fitted
+    /// below zero is noise about a joint without it: zero).
+    pub fn effects(&self) -> ArmEffects {
+        let mut out = ArmEffects::default();
+        for e in &self.named {
+            match *e {
+                ArmEffect::JointFriction { viscous, coulomb } => {
+                    let zero_or_more = |v: [f64; 7]| v.map(|x| x.max(0.0));
+                    out.joint_friction =
+                        Some(JointFriction { viscous: zero_or_more(viscous), coulomb: zero_or_more(coulomb) })
+                }
+                ArmEffect::PayloadMass { mass, com } => out.payload = Some(Payload { mass, com }),
+            }
+        }
+        out
+    }
 }
 
 /// The answer: what was named, and the residual per joint before and after [N m, RMS].
@@ -144,7 +164,7 @@ pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOption
             r[row] = s.tau[j] - nominal[j];
             // The friction torque the commanded torque had to overcome: b q̇ + c tanh(q̇ / 0.01).
             friction[(row, 2 * j)] = s.dq[j];
-            friction[(row, 2 * j + 1)] = (s.dq[j] / 0.01).tanh();
+            friction[(row, 2 * j + 1)] = (s.dq[j] / COULOMB_VELOCITY_SCALE).tanh();
         }
         for (c, (m, d)) in loaded.iter().zip(loaded_data.iter_mut()).enumerate() {
             let with = m.rnea(d, &s.q, &s.dq, &ddq, None);

@@ -16,11 +16,13 @@
 //!
 //! No call allocates after [`Model::data`], so everything here may run in a 1 kHz loop.
 
+pub mod arm_effects;
 mod dynamics;
 mod kinematics;
 pub mod model;
 pub mod planar;
 
+pub use arm_effects::{ArmEffects, JointFriction, Payload};
 pub use dynamics::{ControlTerms, ExternalWrench};
 pub use kinematics::{Axes, Data};
 pub use model::{BodyInertia, Frame, FrameId, Joint, JointLimits, Model, fixed_subtree_inertia};

@@ -38,21 +38,10 @@ pub enum SimError {
     Contact(#[from] softcontact_contact::ContactError),
 }
 
-/// Viscous and Coulomb joint friction (τ_f = −b q̇ − c tanh(q̇ / 0.01)).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JointFriction {
-    pub viscous: [f64; 7],
-    pub coulomb: [f64; 7],
-}
-
-/// A load on the flange the robot's description does not know (an adapter plate, cables): it weighs on
-/// the arm, and the F/T sensor beyond it does not feel it. Hidden: only the simulated physics carries it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Payload {
-    pub mass: f64,
-    /// Centre of mass in the `lwr_flange` frame [m].
-    pub com: [f64; 3],
-}
+/// The arm's own effects the simulator can hide (crates/dynamics arm_effects.rs): joint friction, and
+/// a load on the flange the robot's description does not know (an adapter plate, cables) that weighs on
+/// the arm while the F/T sensor beyond it does not feel it. Only the simulated physics carries them.
+pub use softcontact_dynamics::{JointFriction, Payload};
 
 /// Everything that defines a simulated run.
 #[derive(Debug, Clone)]
@@ -200,16 +189,8 @@ impl Simulator {
         let krc = Krc::new(config.krc.clone(), config.initial_q);
         let sensor = FtSensor::new(config.sensor.clone(), sensed_load(config.surface.as_ref()));
         let data = model.data();
-        let physics = match config.payload {
-            Some(Payload { mass, com }) => {
-                if !(mass.is_finite() && mass >= 0.0 && com.iter().all(|c| c.is_finite())) {
-                    return Err(SimError::Config(
-                        "the payload's mass must be finite and ≥ 0, its centre finite".into(),
-                    ));
-                }
-                let load = softcontact_dynamics::BodyInertia::from_com(mass, com.into(), nalgebra::Matrix3::zeros());
-                model.with_payload(model.frame_id(lwr4::FLANGE_FRAME)?, &load)?
-            }
+        let physics = match &config.payload {
+            Some(payload) => payload.carried_by(&model).map_err(|e| SimError::Config(e.to_string()))?,
             None => model.clone(),
         };
         let physics_data = physics.data();
@@ -352,7 +333,7 @@ impl Simulator {
         let mut applied = tau;
         if let Some(f) = &self.config.friction {
             for (i, t) in applied.iter_mut().enumerate() {
-                *t -= f.viscous[i] * self.dq[i] + f.coulomb[i] * (self.dq[i] / 0.01).tanh();
+                *t -= f.torque(i, self.dq[i]);
             }
         }
         let wrench = ExternalWrench { frame: self.tool, force: self.last_contact.force, torque: Vector3::zeros() };
