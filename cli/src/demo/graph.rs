@@ -74,7 +74,7 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
         let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
         surfaces.push(serde_json::from_str(&text).with_context(|| path.display().to_string())?);
     }
-    Ok(Report { simulation: true, mode: "graph".into(), surfaces })
+    Ok(Report { simulation: true, mode: "graph".into(), surfaces, arm: None })
 }
 
 /// `softcontact record` beside the client: stopped with SIGINT (as Ctrl-C) at the end, or when the

@@ -1,6 +1,7 @@
 //! `softcontact demo`: seed 001's identification and control experiments on a simulated LWR IV, for a
 //! sponge and a dice, printed in the paper's table layouts beside the paper's numbers.
 
+mod arm;
 pub mod corpus;
 mod experiment;
 mod figures;
@@ -111,10 +112,12 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     })?;
     let wall = started.elapsed().as_secs_f64();
     let runs: Vec<&SurfaceRun> = results.iter().map(|(r, _, _)| r).collect();
+    let arm = arm::run(&specs[0], 7, &args.out).context("the arm's own effects")?;
     let report = Report {
         simulation: true,
         mode: "in-process".into(),
         surfaces: runs.iter().map(|r| SurfaceReport::of(r)).collect(),
+        arm: Some(arm),
     };
     report::print(&report);
     println!("simulated {:.0} s per surface in {wall:.1} s wall (both surfaces in parallel)\n", runs[0].simulated);

@@ -16,6 +16,9 @@ pub struct Report {
     /// `in-process` (lockstep) or `graph` (node processes over DDS).
     pub mode: String,
     pub surfaces: Vec<SurfaceReport>,
+    /// The arm's own effects named and compensated (in-process runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arm: Option<super::arm::ArmReport>,
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
@@ -295,5 +298,8 @@ pub fn print(report: &Report) {
     }
     for s in &report.surfaces {
         print_errors(s, if s.name == "dice" { "III" } else { "II" }, source);
+    }
+    if let Some(arm) = &report.arm {
+        super::arm::print(arm);
     }
 }

@@ -61,6 +61,16 @@ pub enum ArmEffect {
     PayloadMass { mass: f64, com: [f64; 3] },
 }
 
+impl ArmEffect {
+    /// The workflow's canonical id: `joint_friction` or `payload_mass`.
+    pub fn id(&self) -> &'static str {
+        match self {
+            ArmEffect::JointFriction { .. } => "joint_friction",
+            ArmEffect::PayloadMass { .. } => "payload_mass",
+        }
+    }
+}
+
 impl ArmReport {
     /// What was named, as the file the controller compensates from (a friction coefficient fitted
     /// below zero is noise about a joint without it: zero).
