@@ -169,6 +169,15 @@ pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
 /// The fastest surface offset drift [m/s] an augmented model may name: the hold follows it.
 pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
 
+/// The share of the named Coulomb friction fed forward: an estimate a little high would otherwise push
+/// the joint along its motion (the light wrist first), one a little low is taken up by the feedback.
+pub const FRICTION_COMPENSATED: f64 = 0.8;
+
+/// The velocity over which the compensation's Coulomb torque changes sign [rad/s]: wider than the
+/// friction's own (0.01 rad/s), whose slope c/v_s about rest would be a large negative damping wherever
+/// the file overestimates c.
+pub const FRICTION_COMPENSATION_SCALE: f64 = 0.1;
+
 /// How fast the controller backs off after passing the force limit [s].
 const BACK_OFF_DURATION: f64 = 0.2;
 /// How far ahead the force guard looks [s]: the hand needs a few ticks to turn around.
@@ -868,10 +877,14 @@ impl DeformationController {
         let wrench = Vector6::new(feed_forward.x, feed_forward.y, feed_forward.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
-        // The joint friction named for this arm, fed forward (bounded by the file's checks and the limiter).
+        // The Coulomb friction named for this arm, fed forward in part (bounded by the file's checks and the
+        // limiter). Its viscous part is left to damp: compensating more of it than a joint has is negative
+        // damping, and at the light wrist the control's own damping is smaller than a file's error.
         let friction = self.config.arm.joint_friction;
-        let mut tau: [f64; 7] =
-            std::array::from_fn(|i| self.torque.tau[i] + friction.map_or(0.0, |f| f.torque(i, dq[i])));
+        let mut tau: [f64; 7] = std::array::from_fn(|i| {
+            self.torque.tau[i]
+                + friction.map_or(0.0, |f| FRICTION_COMPENSATED * f.coulomb_part(i, dq[i], FRICTION_COMPENSATION_SCALE))
+        });
         if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, dt) {
             // Nothing to send this tick; the next one holds the hand where it is (across the surface:
             // where its reference is now).
@@ -1458,6 +1471,75 @@ mod tests {
         }
         eprintln!("a wrong augmented model: true force at most {peak:.1} N (limit {} N)", limits.force_limit);
         assert!(peak <= limits.force_limit, "{peak} N");
+    }
+
+    /// The cell on the sponge with the arm's true friction `truth` and the controller compensating `file`.
+    fn friction_cell(truth: softcontact_dynamics::JointFriction, file: softcontact_dynamics::JointFriction) -> Cell {
+        let arm = ArmEffects { joint_friction: Some(file), payload: None };
+        arm.validate().unwrap();
+        let config = SimConfig { friction: Some(truth), ..SimConfig::above_surface(softcontact_sim::sponge(), 44) };
+        let config_c = ControllerConfig { arm, ..ControllerConfig::lwr4(250.0, 0.06) };
+        let controller = DeformationController::new(config_c, softcontact_sim::sponge()).unwrap();
+        Cell::new(config, controller, ContactEstimatorNode::new(EstimatorConfig::default()).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn friction_compensation_half_again_too_high_still_presses_in_place() {
+        // The arm's friction, and a file that says half as much again at every joint.
+        let truth = softcontact_dynamics::JointFriction {
+            viscous: [0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2],
+            coulomb: [0.6, 0.6, 0.4, 0.4, 0.2, 0.1, 0.1],
+        };
+        let high = softcontact_dynamics::JointFriction {
+            viscous: truth.viscous.map(|v| 1.5 * v),
+            coulomb: truth.coulomb.map(|c| 1.5 * c),
+        };
+        let mut cell = friction_cell(truth, high);
+        let start = cell.sim.tool_pose().translation.vector;
+        let mut cycles = 0;
+        while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
+            cycles += 1;
+            assert!(cycles < 10_000, "no contact");
+        }
+        cell.controller.law.command_force(60.0, 1.0).unwrap();
+        let (mut across, mut peak) = (0.0_f64, 0.0_f64);
+        for _ in 0..5000 {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(!tick.driver.holding && tick.refused.is_none(), "{tick:?}");
+            let away = cell.sim.tool_pose().translation.vector - start;
+            across = across.max((away - away.dot(&Vector3::z()) * Vector3::z()).norm());
+            peak = peak.max(cell.sim.contact().normal_force);
+        }
+        let f = cell.sim.contact().normal_force;
+        eprintln!(
+            "friction compensated half again too high: {:.2} mm across, {f:.1} N (peak {peak:.1} N)",
+            across * 1e3
+        );
+        // (The uncompensated viscous friction and what Coulomb friction is left still cost a few per cent.)
+        assert!(across < 3e-3 && (f - 60.0).abs() < 6.0 && peak < 66.0, "{across} m, {f} N, peak {peak} N");
+    }
+
+    #[test]
+    fn friction_compensation_at_its_bounds_on_a_smooth_arm_keeps_every_joint_near_its_start() {
+        // The most a file may say, on an arm with almost no friction: the compensation pushes each joint
+        // along its motion, and no joint goes far (the driver's overspeed and limit guards stand behind).
+        let (viscous, coulomb) = softcontact_dynamics::JointFriction::bounds();
+        let smooth = softcontact_dynamics::JointFriction { viscous: [0.01; 7], coulomb: [0.005; 7] };
+        let mut cell = friction_cell(smooth, softcontact_dynamics::JointFriction { viscous, coulomb });
+        let start = softcontact_sim::DEFAULT_Q;
+        let model = lwr4::model();
+        let mut furthest = 0.0_f64;
+        for _ in 0..5000 {
+            let Some(tick) = cell.cycle().unwrap() else { continue };
+            for (i, (q, j)) in tick.driver.q.iter().zip(&model.joints).enumerate() {
+                furthest = furthest.max((q - start[i]).abs());
+                assert!(q.abs() < j.limits.upper.max(-j.limits.lower), "joint {i} at {q}");
+            }
+        }
+        eprintln!(
+            "friction compensation at its bounds on a smooth arm: joints at most {furthest:.3} rad from the start"
+        );
+        assert!(furthest < 0.1, "{furthest} rad");
     }
 
     #[test]

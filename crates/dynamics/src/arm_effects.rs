@@ -13,11 +13,12 @@ use crate::{BodyInertia, Error, Model, lwr4};
 
 /// The velocity over which Coulomb friction's sign is smoothed [rad/s].
 pub const COULOMB_VELOCITY_SCALE: f64 = 0.01;
-/// The largest viscous friction a file may give a joint [N m s/rad]: far above the LWR's own (below
-/// 1), far below what would make a compensation push the arm.
-pub const MAX_VISCOUS: f64 = 20.0;
-/// The largest Coulomb friction a file may give a joint [N m].
-pub const MAX_COULOMB: f64 = 10.0;
+/// The largest viscous friction a file may give a joint, as a share of the joint's effort limit per
+/// rad/s: compensating more friction than the joint has is negative damping, and the light wrist joints
+/// (38 N m) cannot take what the shoulder's (176 N m) can. The LWR's own lie well below.
+pub const MAX_VISCOUS_SHARE: f64 = 0.01;
+/// The largest Coulomb friction a file may give a joint, as a share of its effort limit.
+pub const MAX_COULOMB_SHARE: f64 = 0.01;
 /// The heaviest payload a file may give [kg] (the LWR IV carries 7 kg, 14 kg near the body).
 pub const MAX_PAYLOAD_MASS: f64 = 14.0;
 /// The farthest a payload's centre may lie from the flange [m].
@@ -37,16 +38,30 @@ impl JointFriction {
     /// The torque friction takes from joint `i` moving at `dq` [rad/s]: b q̇ + c tanh(q̇ / v_s).
     #[inline]
     pub fn torque(&self, i: usize, dq: f64) -> f64 {
-        self.viscous[i] * dq + self.coulomb[i] * (dq / COULOMB_VELOCITY_SCALE).tanh()
+        self.viscous[i] * dq + self.coulomb_part(i, dq, COULOMB_VELOCITY_SCALE)
+    }
+
+    /// The Coulomb part alone with its sign smoothed over `velocity_scale` [rad/s]: c tanh(q̇ / v).
+    #[inline]
+    pub fn coulomb_part(&self, i: usize, dq: f64, velocity_scale: f64) -> f64 {
+        self.coulomb[i] * (dq / velocity_scale).tanh()
+    }
+
+    /// The largest coefficients a file may give the LWR IV's joints: viscous [N m s/rad] and Coulomb [N m].
+    pub fn bounds() -> ([f64; 7], [f64; 7]) {
+        let model = lwr4::model();
+        let effort: [f64; 7] = std::array::from_fn(|i| model.joints[i].limits.effort);
+        (effort.map(|e| MAX_VISCOUS_SHARE * e), effort.map(|e| MAX_COULOMB_SHARE * e))
     }
 
     pub fn validate(&self) -> Result<(), Error> {
-        let bad = |what: &str, v: &[f64; 7], max: f64| {
-            (!v.iter().all(|x| x.is_finite() && (0.0..=max).contains(x)))
-                .then(|| Error::Parse(format!("joint friction: every {what} must be in [0, {max}] (got {v:?})")))
+        let (viscous, coulomb) = Self::bounds();
+        let bad = |what: &str, v: &[f64; 7], max: &[f64; 7]| {
+            (!v.iter().zip(max).all(|(x, m)| x.is_finite() && (0.0..=*m).contains(x)))
+                .then(|| Error::Parse(format!("joint friction: each {what} must be in [0, {max:.2?}] (got {v:?})")))
         };
-        match bad("viscous coefficient [N m s/rad]", &self.viscous, MAX_VISCOUS)
-            .or_else(|| bad("Coulomb torque [N m]", &self.coulomb, MAX_COULOMB))
+        match bad("viscous coefficient [N m s/rad]", &self.viscous, &viscous)
+            .or_else(|| bad("Coulomb torque [N m]", &self.coulomb, &coulomb))
         {
             Some(e) => Err(e),
             None => Ok(()),
@@ -132,7 +147,7 @@ mod tests {
     #[test]
     fn a_file_round_trips_and_bad_ones_are_refused() {
         let effects = ArmEffects {
-            joint_friction: Some(JointFriction { viscous: [0.8; 7], coulomb: [0.5; 7] }),
+            joint_friction: Some(JointFriction { viscous: [0.3; 7], coulomb: [0.5; 7] }),
             payload: Some(Payload { mass: 1.2, com: [0.01, -0.02, 0.03] }),
         };
         assert_eq!(ArmEffects::from_yaml(&effects.to_yaml()).unwrap(), effects);
@@ -141,6 +156,7 @@ mod tests {
             "joint_friction: {viscous: [.nan, 0, 0, 0, 0, 0, 0], coulomb: [0, 0, 0, 0, 0, 0, 0]}",
             "joint_friction: {viscous: [1e300, 0, 0, 0, 0, 0, 0], coulomb: [0, 0, 0, 0, 0, 0, 0]}",
             "joint_friction: {viscous: [0, 0, 0, 0, 0, 0, 0], coulomb: [-1, 0, 0, 0, 0, 0, 0]}",
+            "joint_friction: {viscous: [0, 0, 0, 0, 0, 0, 0.5], coulomb: [0, 0, 0, 0, 0, 0, 0]}",
             "joint_friction: {viscous: [0, 0, 0], coulomb: [0, 0, 0]}",
             "payload: {mass: .inf, com: [0, 0, 0]}",
             "payload: {mass: -1, com: [0, 0, 0]}",
