@@ -39,6 +39,11 @@ pub struct DiscrepancyArgs {
     /// the URDF does not know) from /lwr/joint_states and /lwr/joint_torque_command.
     #[arg(long, conflicts_with = "loading_paths")]
     pub arm: bool,
+    /// Replay the recording's force commands through the simulated cell (the product's nodes in lockstep
+    /// with the simulator) on the baseline model and on the augmented one, and compare force, deformation
+    /// and joints with the recording: RMS per signal before and after the named effects, and a figure.
+    #[arg(long, conflicts_with_all = ["loading_paths", "arm"])]
+    pub closed_loop: bool,
 }
 
 /// The F/T node's tares (their stamps zero the sensor's drifted offset).
@@ -199,6 +204,8 @@ fn print_report(report: &Report, name: &str) {
 pub struct Analysis {
     pub name: String,
     pub baseline: ContactModel,
+    /// Where identify placed the undeformed surface in the world (the baseline's zero of deformation).
+    pub surface: Vector3<f64>,
     /// The recording along the normal from identify's contact position.
     pub series: Series,
     pub report: Report,
@@ -231,7 +238,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
     let series = series(&recording, id_args, &surface)?;
     let report = analyse(&series, &baseline, &Options::default())?;
     let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording").to_string();
-    Ok(Analysis { name, baseline, series, report })
+    Ok(Analysis { name, baseline, surface, series, report })
 }
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
@@ -268,7 +275,11 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let Analysis { name, baseline, series, report } = analyse_file(args, true)?;
+    let analysis = analyse_file(args, true)?;
+    if args.closed_loop {
+        return crate::closed_loop::run(args, &analysis);
+    }
+    let Analysis { name, baseline, series, report, .. } = analysis;
     let name = name.as_str();
     let id_args = &args.recording;
     print_report(&report, name);

@@ -4,6 +4,7 @@ mod any_topic;
 mod arm_effects;
 mod bench;
 mod climb_cmd;
+mod closed_loop;
 mod demo;
 mod discrepancy_cmd;
 mod discrepancy_figures;

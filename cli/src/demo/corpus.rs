@@ -324,6 +324,7 @@ fn args(file: &Path, out: &Path, sample_period: f64) -> DiscrepancyArgs {
         out: out.to_path_buf(),
         loading_paths: false,
         arm: false,
+        closed_loop: false,
     }
 }
 

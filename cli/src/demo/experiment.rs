@@ -313,7 +313,7 @@ pub fn run_surface(
     // (t, z from the onset, ż, the reading along n, unclamped) every 10 ms of every run, for the
     // discrepancy workflow (in free space the reading is the sensor's noise, bias and drift).
     let mut recorded = Vec::new();
-    let geometry = r.cell.controller.geometry().clone();
+    let geometry = *r.cell.controller.geometry();
     let mut max_force: f64 = 0.0;
     let (low, high) = spec.push;
     for run in 0..plan.identification_runs {

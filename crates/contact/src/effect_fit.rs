@@ -201,7 +201,7 @@ pub fn fit_with_effects_at(
     let (x, _, _) = fit_at(samples, &cols, structure, offset)
         .ok_or(ContactError::NotEnoughData { kind: "the window with named effects" })?;
     let k = x[0];
-    if !(k > 0.0) {
+    if k.is_nan() || k <= 0.0 {
         return Err(ContactError::NotEnoughData { kind: "the window with named effects: stiffness" });
     }
     let mut model = structure.clone();
@@ -239,7 +239,7 @@ fn check(samples: &[TimedSample], structure: &ContactModel) -> Result<(), Contac
     if samples.len() < MIN_EFFECT_SAMPLES {
         return Err(ContactError::NotEnoughData { kind: "the window with named effects" });
     }
-    if samples.windows(2).any(|w| !(w[1].t > w[0].t)) || samples.iter().any(|s| !s.t.is_finite()) {
+    if samples.iter().any(|s| !s.t.is_finite()) || samples.windows(2).any(|w| w[1].t <= w[0].t) {
         return Err(ContactError::InvalidConfig("window samples need increasing, finite times".into()));
     }
     Ok(())
