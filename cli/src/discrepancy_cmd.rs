@@ -215,7 +215,8 @@ pub struct Analysis {
 pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<Analysis> {
     let baseline = match &args.model {
         Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let text =
+                softcontact_nodes::params::read_small(path).with_context(|| format!("reading {}", path.display()))?;
             Some(ContactModel::from_yaml(&text).with_context(|| format!("{} is not a contact model", path.display()))?)
         }
         None => None,

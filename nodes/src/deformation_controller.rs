@@ -166,8 +166,17 @@ pub struct ControllerState {
 /// tare zeroes the offset, so what is left is small, and a model claiming more is refused (a bias) or
 /// cut to it (a drift, which grows with the time since the tare).
 pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
-/// The fastest surface offset drift [m/s] an augmented model may name: the hold follows it.
-pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
+
+/// How far above the command the surface's measured force may be before the hold of an augmented model
+/// stops going deeper (a share of the command; above the sensor's noise at the forces commanded).
+pub const HOLD_FORCE_MARGIN: f64 = 0.02;
+
+/// How far the hold of an augmented model may lead the measured deformation [m].
+pub const HOLD_LEAD: f64 = 1e-3;
+
+/// The joints whose Coulomb friction is fed forward: A1–A5 (efforts of 100 N m and more), not the
+/// light wrist.
+pub const FRICTION_COMPENSATED_JOINTS: usize = 5;
 
 /// The share of the named Coulomb friction fed forward: an estimate a little high would otherwise push
 /// the joint along its motion (the light wrist first), one a little low is taken up by the feedback.
@@ -283,6 +292,29 @@ struct ForceHold {
     z: Option<f64>,
 }
 
+/// What the controller takes as a contact model under `config`: a plausible one
+/// ([`ContactModel::plausible`]) with exponents in [`EXPONENT_RANGE`] and a named sensor bias within
+/// [`MAX_SENSOR_CORRECTION`] of `max_force`.
+fn plausible_for(model: &ContactModel, config: &ControllerConfig) -> Result<(), ControlError> {
+    let implausible = |why: String| Err(ControlError::ImplausibleModel(why));
+    if let Err(e) = model.plausible() {
+        return implausible(e.to_string());
+    }
+    let e = model.exponents;
+    if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
+        return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
+    }
+    let bias: f64 =
+        model.effects.iter().map(|e| if let Effect::SensorBias { offset } = *e { offset } else { 0.0 }).sum();
+    let most = MAX_SENSOR_CORRECTION * config.limits.max_force;
+    if bias.abs() > most {
+        return implausible(format!(
+            "a sensor bias of {bias} N, beyond {most} N ({MAX_SENSOR_CORRECTION} of max_force)"
+        ));
+    }
+    Ok(())
+}
+
 pub struct DeformationController {
     config: ControllerConfig,
     model: Model,
@@ -331,6 +363,7 @@ impl DeformationController {
     pub fn new(config: ControllerConfig, contact_model: ContactModel) -> Result<Self, ControlError> {
         let model = config.arm.model(&lwr4::model())?;
         let normal = config.normal.try_normalize(1e-9).ok_or(ControlError::ZeroNormal)?;
+        plausible_for(&contact_model, &config)?;
         let inverse = AugmentedInverse::needed(&contact_model).then(|| AugmentedInverse::new(contact_model.clone()));
         Ok(Self {
             data: model.data(),
@@ -385,29 +418,7 @@ impl DeformationController {
 
     fn check_plausible(&self, model: &ContactModel, offset: f64) -> Result<(), ControlError> {
         let implausible = |why: String| Err(ControlError::ImplausibleModel(why));
-        if let Err(e) = model.validate() {
-            return implausible(e.to_string());
-        }
-        let e = model.exponents;
-        if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
-            return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
-        }
-        let max_force = self.config.limits.max_force;
-        for effect in &model.effects {
-            match *effect {
-                Effect::SensorBias { offset } if offset.abs() > MAX_SENSOR_CORRECTION * max_force => {
-                    return implausible(format!(
-                        "a sensor bias of {offset} N, beyond {MAX_SENSOR_CORRECTION} of max_force (a tare zeroes it)"
-                    ));
-                }
-                Effect::ContactOffsetDrift { rate } if rate.abs() > MAX_SURFACE_DRIFT => {
-                    return implausible(format!(
-                        "a surface drifting {rate} m/s, beyond {MAX_SURFACE_DRIFT} m/s (not a surface at rest)"
-                    ));
-                }
-                _ => {}
-            }
-        }
+        plausible_for(model, &self.config)?;
         if !(offset.is_finite() && offset.abs() <= self.config.max_surface_offset) {
             return implausible(format!(
                 "surface {offset} m from the onset, beyond {} m",
@@ -532,8 +543,11 @@ impl DeformationController {
 
     /// After the standing force command's move: the deformation that keeps its force through the
     /// augmented model now, at most `max_deformation_rate` from the last one and within the limits
-    /// (else the last one is kept). Allocates nothing.
-    fn update_force_hold(&mut self, dt: f64) {
+    /// (else the last one is kept). It goes no deeper while the surface's measured force is above the
+    /// command by [`HOLD_FORCE_MARGIN`], or while it leads the measured deformation by [`HOLD_LEAD`]: a
+    /// model whose surface relaxes or sinks where the real one does not can neither walk the force up
+    /// nor wind the reference up ahead of the hand. Allocates nothing.
+    fn update_force_hold(&mut self, dt: f64, measured: f64, z_measured: f64) {
         let (Some(inverse), Some(hold)) = (self.inverse.as_ref(), self.force_hold) else { return };
         if self.f_cmd <= 0.0 || self.time < hold.since {
             return;
@@ -541,8 +555,10 @@ impl DeformationController {
         let last = hold.z.unwrap_or_else(|| self.reference().position);
         let limits = &self.config.limits;
         let step = limits.max_deformation_rate * dt;
+        let pressed = measured > self.f_cmd * (1.0 + HOLD_FORCE_MARGIN) || last - z_measured > HOLD_LEAD;
+        let deeper = if pressed { 0.0 } else { step };
         let z = match inverse.hold(self.f_cmd, last, dt) {
-            Ok(z) => limits.check_deformation(z.clamp(last - step, last + step)).unwrap_or(last),
+            Ok(z) => limits.check_deformation(z.clamp(last - step, last + deeper)).unwrap_or(last),
             Err(_) => last,
         };
         self.force_hold = Some(ForceHold { z: Some(z), ..hold });
@@ -833,7 +849,8 @@ impl DeformationController {
                     self.follow(vec![Segment::Move(back_off)])?;
                     self.back_off_since = Some(self.time);
                 }
-                self.update_force_hold(dt);
+                // (Whichever of the reading and the corrected force is larger, as the guard.)
+                self.update_force_hold(dt, guarded, state.z);
                 let reference = self.reference();
                 state.z_cmd = reference.position;
                 state.zdot_cmd = reference.velocity;
@@ -877,13 +894,19 @@ impl DeformationController {
         let wrench = Vector6::new(feed_forward.x, feed_forward.y, feed_forward.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
         self.torque.compute(&terms, &acceleration, &wrench, &self.tau0, &Damping::default());
-        // The Coulomb friction named for this arm, fed forward in part (bounded by the file's checks and the
-        // limiter). Its viscous part is left to damp: compensating more of it than a joint has is negative
-        // damping, and at the light wrist the control's own damping is smaller than a file's error.
+        // The Coulomb friction named for this arm, fed forward in part at the heavy joints (bounded by the
+        // file's checks and the limiter). Its viscous part is left to damp: compensating more of it than a
+        // joint has is negative damping. The wrist's is left to the feedback: there the controller's own
+        // torque per radian is smaller than a file's error, and an overestimate spun joint 7.
         let friction = self.config.arm.joint_friction;
         let mut tau: [f64; 7] = std::array::from_fn(|i| {
-            self.torque.tau[i]
-                + friction.map_or(0.0, |f| FRICTION_COMPENSATED * f.coulomb_part(i, dq[i], FRICTION_COMPENSATION_SCALE))
+            let compensation = match friction {
+                Some(f) if i < FRICTION_COMPENSATED_JOINTS => {
+                    FRICTION_COMPENSATED * f.coulomb_part(i, dq[i], FRICTION_COMPENSATION_SCALE)
+                }
+                _ => 0.0,
+            };
+            self.torque.tau[i] + compensation
         });
         if let Err(e) = self.limiter.apply(&self.config.limits, &mut tau, dt) {
             // Nothing to send this tick; the next one holds the hand where it is (across the surface:
@@ -1125,7 +1148,7 @@ impl crate::params::NodeParams for Params {
         d.any("model_update", "on_command (seed 001: the newest model is adopted at each force command) or continuous (each model on arrival, the standing command re-planned through it)");
         let e = self.initial_model.exponents;
         let model = if [e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
-            self.initial_model.validate().map_err(|e| e.to_string())
+            self.initial_model.plausible().map_err(|e| e.to_string())
         } else {
             Err(format!("exponents outside {EXPONENT_RANGE:?}"))
         };
@@ -1449,28 +1472,68 @@ mod tests {
             with(Effect::SensorBias { offset: 1e300 }),
             with(Effect::SensorBias { offset: -40.0 }),
             with(Effect::ContactOffsetDrift { rate: 0.01 }),
+            with(Effect::SensorDrift { rate: 10.0 }),
+            with(Effect::ViscoelasticRelaxation { stiffness: 1e300, time_constant: 0.15 }),
+            with(Effect::ViscoelasticRelaxation { stiffness: 1e3, time_constant: 1e-300 }),
+            with(Effect::Hysteresis { fraction: 0.999999, velocity_scale: 0.05 }),
+            // Each within its bound, together beyond it.
+            {
+                let mut m = with(Effect::SensorBias { offset: 10.0 });
+                m.effects.push(Effect::SensorBias { offset: 10.0 });
+                m
+            },
+            {
+                let mut m = with(Effect::ContactOffsetDrift { rate: 0.8e-3 });
+                m.effects.push(Effect::ContactOffsetDrift { rate: 0.8e-3 });
+                m
+            },
+            {
+                let mut m = sponge.clone();
+                m.effects = vec![Effect::ViscoelasticRelaxation { stiffness: 1e5, time_constant: 0.1 }; 1000];
+                m
+            },
             with(Effect::SensorDrift { rate: f64::NAN }),
         ] {
             assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
             assert_eq!(c.contact_model(), &softcontact_sim::sponge());
+            // As the initial model (a node's start-up): refused too.
+            assert!(DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), bad.clone()).is_err(), "{bad:?}");
         }
 
-        // Plausible but wrong: the model says the surface sinks away at 1 mm/s, and the sensor drifts
-        // at 1 N/s. The hold follows the wrong surface down, but within max_deformation and below the
-        // force limit; the correction of the reading is cut at MAX_SENSOR_CORRECTION of max_force.
-        let mut wrong = with(Effect::ContactOffsetDrift { rate: MAX_SURFACE_DRIFT });
-        wrong.effects.push(Effect::SensorDrift { rate: 1.0 });
+        // Plausible but wrong: the model says the surface sinks away at 1 mm/s, and the sensor drifts at
+        // 0.1 N/s. The hold would follow the wrong surface down; it goes no deeper once the surface's force
+        // is above the command, and the force guard stands behind.
+        let mut wrong = with(Effect::ContactOffsetDrift { rate: softcontact_contact::MAX_SURFACE_DRIFT });
+        wrong.effects.push(Effect::SensorDrift { rate: softcontact_contact::MAX_SENSOR_DRIFT });
         let mut cell = lab_sponge_cell(wrong);
         cell.controller.law.command_force(150.0, 2.0).unwrap();
         let limits = cell.controller.law.config.limits.clone();
-        let mut peak: f64 = 0.0;
-        for _ in 0..40_000 {
+        let (mut peak, mut lead, mut start_lead) = (0.0_f64, 0.0_f64, 0.0_f64);
+        for k in 0..40_000 {
             let tick = cell.cycle().unwrap().unwrap();
+            if k == 2100 {
+                // Where the hold starts: the move's end, which the hand trails by its tracking lag.
+                start_lead = tick.controller.z_cmd - tick.controller.z;
+            }
+            if k > 2100 {
+                lead = lead.max(tick.controller.z_cmd - tick.controller.z);
+            }
             peak = peak.max(cell.sim.contact().normal_force);
             assert!(tick.controller.z_cmd <= limits.max_deformation + 1e-12, "{tick:?}");
         }
-        eprintln!("a wrong augmented model: true force at most {peak:.1} N (limit {} N)", limits.force_limit);
-        assert!(peak <= limits.force_limit, "{peak} N");
+        let end = cell.sim.contact().normal_force;
+        eprintln!(
+            "a wrong augmented model: true force at most {peak:.1} N for 150 N (the move's end; limit {} N), \
+             {end:.1} N after 40 s; the reference at most {:.2} mm ahead of the hand",
+            limits.force_limit,
+            lead * 1e3
+        );
+        // The move ends where the wrong model says (the surface it thinks sank over the move); the hold
+        // then keeps the force within its margin, and its reference does not run away from the hand.
+        assert!(peak <= 1.15 * 150.0 && end <= (1.0 + HOLD_FORCE_MARGIN) * 150.0 + 1.0, "{peak} N, {end} N");
+        // (What the reference leads by is the feed-forward's share of the drift correction, capped at
+        // MAX_SENSOR_CORRECTION of max_force: bounded, not wound up towards max_deformation.)
+        assert!(lead < 5e-3, "{lead} m, {start_lead} m at the hold's start");
     }
 
     /// The cell on the sponge with the arm's true friction `truth` and the controller compensating `file`.
@@ -1488,7 +1551,7 @@ mod tests {
         // The arm's friction, and a file that says half as much again at every joint.
         let truth = softcontact_dynamics::JointFriction {
             viscous: [0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2],
-            coulomb: [0.6, 0.6, 0.4, 0.4, 0.2, 0.1, 0.1],
+            coulomb: [0.3, 0.3, 0.18, 0.18, 0.15, 0.05, 0.05],
         };
         let high = softcontact_dynamics::JointFriction {
             viscous: truth.viscous.map(|v| 1.5 * v),
@@ -1515,31 +1578,66 @@ mod tests {
             "friction compensated half again too high: {:.2} mm across, {f:.1} N (peak {peak:.1} N)",
             across * 1e3
         );
-        // (The uncompensated viscous friction and what Coulomb friction is left still cost a few per cent.)
-        assert!(across < 3e-3 && (f - 60.0).abs() < 6.0 && peak < 66.0, "{across} m, {f} N, peak {peak} N");
+        // (The uncompensated viscous and wrist friction and what Coulomb friction is left cost a few per cent.)
+        assert!(across < 5e-3 && (f - 60.0).abs() < 6.0 && peak < 66.0, "{across} m, {f} N, peak {peak} N");
     }
 
     #[test]
-    fn friction_compensation_at_its_bounds_on_a_smooth_arm_keeps_every_joint_near_its_start() {
-        // The most a file may say, on an arm with almost no friction: the compensation pushes each joint
-        // along its motion, and no joint goes far (the driver's overspeed and limit guards stand behind).
+    fn compensation_at_its_bounds_on_an_arm_without_the_effects_keeps_it_slow_and_in_place() {
+        // The most a file may say — friction at every joint's bound, a payload at the largest mass and
+        // moment, turned each of three ways — on an arm with almost no friction and no payload: the
+        // compensation pushes the arm with all of it. It presses where it should, no joint goes fast.
+        use softcontact_dynamics::arm_effects::{MAX_PAYLOAD_MASS, MAX_PAYLOAD_MOMENT};
         let (viscous, coulomb) = softcontact_dynamics::JointFriction::bounds();
-        let smooth = softcontact_dynamics::JointFriction { viscous: [0.01; 7], coulomb: [0.005; 7] };
-        let mut cell = friction_cell(smooth, softcontact_dynamics::JointFriction { viscous, coulomb });
-        let start = softcontact_sim::DEFAULT_Q;
         let model = lwr4::model();
-        let mut furthest = 0.0_f64;
-        for _ in 0..5000 {
-            let Some(tick) = cell.cycle().unwrap() else { continue };
-            for (i, (q, j)) in tick.driver.q.iter().zip(&model.joints).enumerate() {
-                furthest = furthest.max((q - start[i]).abs());
-                assert!(q.abs() < j.limits.upper.max(-j.limits.lower), "joint {i} at {q}");
+        let reach = MAX_PAYLOAD_MOMENT / MAX_PAYLOAD_MASS;
+        let friction = Some(softcontact_dynamics::JointFriction { viscous, coulomb });
+        let payload = |com| Some(softcontact_dynamics::Payload { mass: MAX_PAYLOAD_MASS, com });
+        for most in [
+            ArmEffects { joint_friction: friction, payload: None },
+            ArmEffects { joint_friction: None, payload: payload([reach, 0.0, 0.0]) },
+            ArmEffects { joint_friction: friction, payload: payload([reach, 0.0, 0.0]) },
+            ArmEffects { joint_friction: friction, payload: payload([0.0, reach, 0.0]) },
+            ArmEffects { joint_friction: friction, payload: payload([0.0, 0.0, reach]) },
+        ] {
+            most.validate().unwrap();
+            let smooth = softcontact_dynamics::JointFriction { viscous: [0.01; 7], coulomb: [0.005; 7] };
+            let config =
+                SimConfig { friction: Some(smooth), ..SimConfig::above_surface(softcontact_sim::sponge(), 45) };
+            let controller = DeformationController::new(
+                ControllerConfig { arm: most, ..ControllerConfig::lwr4(250.0, 0.06) },
+                softcontact_sim::sponge(),
+            )
+            .unwrap();
+            let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
+            let mut cell = Cell::new(config, controller, estimator).unwrap();
+            let start = cell.sim.tool_pose().translation.vector;
+            let (mut speed, mut across, mut contact) = (0.0_f64, 0.0_f64, None);
+            for k in 0..8000 {
+                let Some(tick) = cell.cycle().unwrap() else { continue };
+                assert!(cell.driver.fault().is_none(), "the driver faulted at {k}: {:?}", cell.driver.fault());
+                for (v, j) in tick.driver.dq.iter().zip(&model.joints) {
+                    speed = speed.max(v.abs() / j.limits.velocity);
+                }
+                let away = cell.sim.tool_pose().translation.vector - start;
+                across = across.max((away - away.dot(&Vector3::z()) * Vector3::z()).norm());
+                if tick.controller.in_contact && contact.is_none() {
+                    contact = Some(k);
+                    cell.controller.law.command_force(60.0, 1.0).unwrap();
+                }
             }
+            let f = cell.sim.contact().normal_force;
+            eprintln!(
+                "compensation at its bounds {most:?}:\n  joints at most {:.1} % of their velocity limits, \
+                 the hand {:.2} mm across, {f:.1} N for 60 N",
+                speed * 100.0,
+                across * 1e3
+            );
+            assert!(contact.is_some(), "no contact");
+            // (A payload the arm does not carry pushes the hand with its weight: the force falls short by it,
+            // and the soft task-space control lets the hand give way across.)
+            assert!(speed < 0.3 && across < 15e-3 && f < 1.2 * 60.0, "{speed}, {across} m, {f} N");
         }
-        eprintln!(
-            "friction compensation at its bounds on a smooth arm: joints at most {furthest:.3} rad from the start"
-        );
-        assert!(furthest < 0.1, "{furthest} rad");
     }
 
     #[test]

@@ -326,6 +326,10 @@ fn set_path(into: &mut Mapping, name: &str, value: Value) {
 fn flatten(prefix: &str, value: &Value, out: &mut Vec<(String, ParameterValue)>) {
     let name = |k: &str| if prefix.is_empty() { k.to_string() } else { format!("{prefix}.{k}") };
     match value {
+        // A structured parameter with nothing set (`arm_effects: {}`) is still a parameter.
+        Value::Mapping(m) if m.is_empty() && !prefix.is_empty() => {
+            out.push((prefix.to_string(), ParameterValue::NotSet))
+        }
         Value::Mapping(m) => {
             for (k, v) in m {
                 let key = k.as_str().map(str::to_string).unwrap_or_else(|| format!("{k:?}"));

@@ -264,6 +264,21 @@ pub(crate) fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
     if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 
+/// The most effects a plausible model names ([`ContactModel::plausible`]).
+pub const MAX_EFFECTS: usize = 8;
+/// The stiffest relaxation branch of a plausible model [N/m].
+pub const MAX_BRANCH_STIFFNESS: f64 = 1e7;
+/// The time constants of a plausible model's relaxation branches [s].
+pub const TIME_CONSTANT_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
+/// The largest hysteresis of a plausible model (a share of the elastic force).
+pub const MAX_HYSTERESIS: f64 = 0.5;
+/// The fastest surface offset drift of a plausible model [m/s]: a surface at rest.
+pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
+/// The fastest sensor drift of a plausible model [N/s] (a warming F/T sensor drifts mN/s).
+pub const MAX_SENSOR_DRIFT: f64 = 0.1;
+/// The largest sensor bias of a plausible model [N].
+pub const MAX_SENSOR_BIAS: f64 = 20.0;
+
 /// State of the effects that have memory (see [`ContactModel::step`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EffectState {
@@ -349,6 +364,50 @@ impl ContactModel {
             t.validate()?;
         }
         self.effects.iter().try_for_each(Effect::validate)
+    }
+
+    /// Checks what a surface next to a robot can be, beyond [`ContactModel::validate`]'s physics: at most
+    /// [`MAX_EFFECTS`] effects; relaxation branches of at most [`MAX_BRANCH_STIFFNESS`] with time constants
+    /// in [`TIME_CONSTANT_RANGE`]; hysteresis of at most [`MAX_HYSTERESIS`]; a surface drifting (all drift
+    /// effects together) at most [`MAX_SURFACE_DRIFT`]; a sensor drifting at most [`MAX_SENSOR_DRIFT`] and
+    /// biased at most [`MAX_SENSOR_BIAS`]. The controller and the simulator refuse a model beyond them:
+    /// such numbers are a mistake, not a surface.
+    pub fn plausible(&self) -> Result<(), ContactError> {
+        self.validate()?;
+        let bad = |why: String| Err(ContactError::InvalidModel(format!("implausible: {why}")));
+        if self.effects.len() > MAX_EFFECTS {
+            return bad(format!("{} effects, more than {MAX_EFFECTS}", self.effects.len()));
+        }
+        let (mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64);
+        for e in &self.effects {
+            match *e {
+                Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
+                    if stiffness > MAX_BRANCH_STIFFNESS || !TIME_CONSTANT_RANGE.contains(&time_constant) {
+                        return bad(format!(
+                            "a relaxation branch of {stiffness} N/m at {time_constant} s (at most \
+                             {MAX_BRANCH_STIFFNESS} N/m, τ in {TIME_CONSTANT_RANGE:?} s)"
+                        ));
+                    }
+                }
+                Effect::Hysteresis { fraction, .. } if fraction > MAX_HYSTERESIS => {
+                    return bad(format!("hysteresis of {fraction}, more than {MAX_HYSTERESIS}"));
+                }
+                Effect::ContactOffsetDrift { rate } => surface_drift += rate,
+                Effect::SensorDrift { rate } => sensor_drift += rate,
+                Effect::SensorBias { offset } => bias += offset,
+                _ => {}
+            }
+        }
+        if surface_drift.abs() > MAX_SURFACE_DRIFT {
+            return bad(format!("the surface drifting {surface_drift} m/s, faster than {MAX_SURFACE_DRIFT} m/s"));
+        }
+        if sensor_drift.abs() > MAX_SENSOR_DRIFT {
+            return bad(format!("the sensor drifting {sensor_drift} N/s, faster than {MAX_SENSOR_DRIFT} N/s"));
+        }
+        if bias.abs() > MAX_SENSOR_BIAS {
+            return bad(format!("a sensor bias of {bias} N, more than {MAX_SENSOR_BIAS} N (a tare zeroes it)"));
+        }
+        Ok(())
     }
 
     pub fn from_yaml(text: &str) -> Result<Self, ContactError> {

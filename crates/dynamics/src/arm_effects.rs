@@ -17,12 +17,19 @@ pub const COULOMB_VELOCITY_SCALE: f64 = 0.01;
 /// rad/s: compensating more friction than the joint has is negative damping, and the light wrist joints
 /// (38 N m) cannot take what the shoulder's (176 N m) can. The LWR's own lie well below.
 pub const MAX_VISCOUS_SHARE: f64 = 0.01;
-/// The largest Coulomb friction a file may give a joint, as a share of its effort limit.
-pub const MAX_COULOMB_SHARE: f64 = 0.01;
-/// The heaviest payload a file may give [kg] (the LWR IV carries 7 kg, 14 kg near the body).
-pub const MAX_PAYLOAD_MASS: f64 = 14.0;
+/// The largest Coulomb friction a file may give a joint, as a share of its effort limit (0.53 N m at
+/// A1–A2, 0.3 N m at A3–A5, 0.11 N m at the wrist): fed forward on an arm without it, it pushes each
+/// joint along its motion; at these the arm stays below a quarter of its velocity limits.
+pub const MAX_COULOMB_SHARE: f64 = 0.003;
+/// The heaviest payload a file may give [kg]: a load the description does not know (an adapter, cables),
+/// not a tool — a tool belongs in the URDF. Compensated on an arm that does not carry it, a file's payload
+/// pushes the hand with its full weight (14 kg at 0.5 m swung a wrist joint past its velocity limit;
+/// 1.5 kg at 5 cm moves the hand about 1 cm across and takes 15 N off a press).
+pub const MAX_PAYLOAD_MASS: f64 = 1.5;
 /// The farthest a payload's centre may lie from the flange [m].
-pub const MAX_PAYLOAD_REACH: f64 = 0.5;
+pub const MAX_PAYLOAD_REACH: f64 = 0.3;
+/// The largest first moment m·|c| of a payload about the flange [kg m]: the torque it puts on the wrist.
+pub const MAX_PAYLOAD_MOMENT: f64 = 0.075;
 
 /// Viscous and Coulomb friction per joint.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -57,8 +64,9 @@ impl JointFriction {
     pub fn validate(&self) -> Result<(), Error> {
         let (viscous, coulomb) = Self::bounds();
         let bad = |what: &str, v: &[f64; 7], max: &[f64; 7]| {
-            (!v.iter().zip(max).all(|(x, m)| x.is_finite() && (0.0..=*m).contains(x)))
-                .then(|| Error::Parse(format!("joint friction: each {what} must be in [0, {max:.2?}] (got {v:?})")))
+            (!v.iter().zip(max).all(|(x, m)| x.is_finite() && (0.0..=*m).contains(x))).then(|| {
+                Error::ArmEffects(format!("joint friction: each {what} must be in [0, {max:.2?}] (got {v:?})"))
+            })
         };
         match bad("viscous coefficient [N m s/rad]", &self.viscous, &viscous)
             .or_else(|| bad("Coulomb torque [N m]", &self.coulomb, &coulomb))
@@ -83,11 +91,11 @@ impl Payload {
     pub fn validate(&self) -> Result<(), Error> {
         let reach = self.com.iter().map(|c| c * c).sum::<f64>().sqrt();
         if !(self.mass.is_finite() && (0.0..=MAX_PAYLOAD_MASS).contains(&self.mass)) {
-            return Err(Error::Parse(format!("payload: mass {} kg outside [0, {MAX_PAYLOAD_MASS}]", self.mass)));
+            return Err(Error::ArmEffects(format!("payload: mass {} kg outside [0, {MAX_PAYLOAD_MASS}]", self.mass)));
         }
-        if !(reach.is_finite() && reach <= MAX_PAYLOAD_REACH) {
-            return Err(Error::Parse(format!(
-                "payload: centre {:?} m, farther than {MAX_PAYLOAD_REACH} m from the flange",
+        if !(reach.is_finite() && reach <= MAX_PAYLOAD_REACH && self.mass * reach <= MAX_PAYLOAD_MOMENT) {
+            return Err(Error::ArmEffects(format!(
+                "payload: centre {:?} m, farther than {MAX_PAYLOAD_REACH} m from the flange or a moment m·|c| beyond {MAX_PAYLOAD_MOMENT} kg m",
                 self.com
             )));
         }
@@ -121,8 +129,7 @@ impl ArmEffects {
 
     /// Reads and checks a file's text.
     pub fn from_yaml(text: &str) -> Result<Self, Error> {
-        let effects: ArmEffects =
-            serde_yaml_ng::from_str(text).map_err(|e| Error::Parse(format!("arm effects: {e}")))?;
+        let effects: ArmEffects = serde_yaml_ng::from_str(text).map_err(|e| Error::ArmEffects(e.to_string()))?;
         effects.validate()?;
         Ok(effects)
     }
@@ -147,7 +154,7 @@ mod tests {
     #[test]
     fn a_file_round_trips_and_bad_ones_are_refused() {
         let effects = ArmEffects {
-            joint_friction: Some(JointFriction { viscous: [0.3; 7], coulomb: [0.5; 7] }),
+            joint_friction: Some(JointFriction { viscous: [0.3; 7], coulomb: [0.1; 7] }),
             payload: Some(Payload { mass: 1.2, com: [0.01, -0.02, 0.03] }),
         };
         assert_eq!(ArmEffects::from_yaml(&effects.to_yaml()).unwrap(), effects);
@@ -163,6 +170,9 @@ mod tests {
             "payload: {mass: 1, com: [0, 0, 1e300]}",
             "payload: {mass: 1, com: [0, 0, 0], extra: 1}",
             "payload: {mass: 100, com: [0, 0, 0]}",
+            "payload: {mass: 14, com: [0.5, 0, 0]}",
+            "payload: {mass: 2, com: [0.2, 0, 0]}",
+            "payload: {mass: 3, com: [0, 0, 0]}",
         ] {
             assert!(ArmEffects::from_yaml(bad).is_err(), "{bad}");
         }

@@ -59,6 +59,8 @@ pub enum Error {
     UnknownFrame { name: String, known: String },
     #[error("the mass matrix is not positive definite at this state")]
     NotPositiveDefinite,
+    #[error("invalid arm effects: {0}")]
+    ArmEffects(String),
 }
 
 /// The KUKA LWR IV of this project (urdf/lwr4.urdf, compiled in so every tool has the same robot).
