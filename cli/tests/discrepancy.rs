@@ -345,7 +345,7 @@ fn write_arm_run(path: &Path, hidden: bool) {
         sensor: FtSensorConfig::ideal(),
         friction: hidden.then_some(JointFriction {
             viscous: [0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2],
-            coulomb: [0.5, 0.5, 0.3, 0.3, 0.2, 0.05, 0.05],
+            coulomb: [0.5, 0.5, 0.25, 0.25, 0.2, 0.05, 0.05],
         }),
         payload: hidden.then_some(Payload { mass: 1.2, com: [0.01, -0.02, 0.03] }),
         ..SimConfig::above_surface(ContactModel::new(Kind::KelvinVoigt, 1.0, 0.0).unwrap(), 5)

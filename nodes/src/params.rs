@@ -241,11 +241,29 @@ pub struct Declared {
     pub specs: Vec<Spec>,
 }
 
+/// The largest parameter or model file read [bytes]: memory stays bounded whatever the path names.
+pub const MAX_FILE: u64 = 1 << 20;
+
+/// A regular file's text, at most [`MAX_FILE`] bytes: a device, a FIFO or a larger file is an error.
+pub fn read_small(path: &Path) -> std::io::Result<String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path)?;
+    if !file.metadata()?.is_file() {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"));
+    }
+    let mut text = String::new();
+    file.take(MAX_FILE + 1).read_to_string(&mut text)?;
+    if text.len() as u64 > MAX_FILE {
+        return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("larger than {MAX_FILE} bytes")));
+    }
+    Ok(text)
+}
+
 /// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
 pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
     let mut merged = Mapping::new();
     for path in &args.files {
-        let text = std::fs::read_to_string(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
+        let text = read_small(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
         merge(&mut merged, node_section(node, path, &text)?);
     }
     for o in &args.overrides {
@@ -451,6 +469,20 @@ mod tests {
             assert!(declared.values.iter().any(|(n, _)| s.covers(n)), "{node}: {} is no parameter", s.name);
             assert!(!s.description.is_empty(), "{node}: {} has no description", s.name);
         }
+    }
+
+    #[test]
+    fn a_device_or_a_huge_file_is_refused_not_read() {
+        let args = |f: &str| ParamArgs { files: vec![f.into()], overrides: vec![], ros_args: false };
+        for path in ["/dev/zero", "/dev/urandom", "/"] {
+            let err = load::<crate::deformation_controller::Params>("deformation_controller", &args(path));
+            assert!(err.is_err(), "{path}");
+        }
+        let big = tempfile_path::TempPath::with(&"# padding\n".repeat(200_000));
+        assert!(
+            load::<crate::deformation_controller::Params>("deformation_controller", &args(big.0.to_str().unwrap()))
+                .is_err()
+        );
     }
 
     #[test]

@@ -253,9 +253,11 @@ impl Params {
         if self.surface == SurfaceKind::None {
             return Err("surface_model given with surface none".into());
         }
-        let text = std::fs::read_to_string(&self.surface_model)
+        let text = crate::params::read_small(std::path::Path::new(&self.surface_model))
             .map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
-        ContactModel::from_yaml(&text).map(Some).map_err(|e| format!("surface_model {}: {e}", self.surface_model))
+        let model = ContactModel::from_yaml(&text).map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
+        model.plausible().map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
+        Ok(Some(model))
     }
 }
 

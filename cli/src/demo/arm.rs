@@ -24,7 +24,7 @@ pub fn hidden() -> ArmEffects {
     ArmEffects {
         joint_friction: Some(JointFriction {
             viscous: [0.8, 0.8, 0.5, 0.5, 0.3, 0.2, 0.2],
-            coulomb: [0.5, 0.5, 0.3, 0.3, 0.2, 0.05, 0.05],
+            coulomb: [0.5, 0.5, 0.25, 0.25, 0.2, 0.05, 0.05],
         }),
         payload: Some(Payload { mass: 1.2, com: [0.01, -0.02, 0.03] }),
     }

@@ -381,13 +381,13 @@ impl ContactModel {
         let (mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64);
         for e in &self.effects {
             match *e {
-                Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
-                    if stiffness > MAX_BRANCH_STIFFNESS || !TIME_CONSTANT_RANGE.contains(&time_constant) {
-                        return bad(format!(
-                            "a relaxation branch of {stiffness} N/m at {time_constant} s (at most \
-                             {MAX_BRANCH_STIFFNESS} N/m, τ in {TIME_CONSTANT_RANGE:?} s)"
-                        ));
-                    }
+                Effect::ViscoelasticRelaxation { stiffness, time_constant }
+                    if stiffness > MAX_BRANCH_STIFFNESS || !TIME_CONSTANT_RANGE.contains(&time_constant) =>
+                {
+                    return bad(format!(
+                        "a relaxation branch of {stiffness} N/m at {time_constant} s (at most \
+                         {MAX_BRANCH_STIFFNESS} N/m, τ in {TIME_CONSTANT_RANGE:?} s)"
+                    ));
                 }
                 Effect::Hysteresis { fraction, .. } if fraction > MAX_HYSTERESIS => {
                     return bad(format!("hysteresis of {fraction}, more than {MAX_HYSTERESIS}"));
