@@ -1474,9 +1474,20 @@ mod tests {
             with(Effect::ContactOffsetDrift { rate: 0.01 }),
             with(Effect::SensorDrift { rate: 10.0 }),
             with(Effect::ViscoelasticRelaxation { stiffness: 1e300, time_constant: 0.15 }),
+            ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 1e300, 0.0).unwrap(),
             with(Effect::ViscoelasticRelaxation { stiffness: 1e3, time_constant: 1e-300 }),
             with(Effect::Hysteresis { fraction: 0.999999, velocity_scale: 0.05 }),
             // Each within its bound, together beyond it.
+            {
+                let mut m = sponge.clone();
+                m.effects = vec![Effect::ViscoelasticRelaxation { stiffness: 4e5, time_constant: 1e-3 }; 3];
+                m
+            },
+            {
+                let mut m = sponge.clone();
+                m.effects = vec![Effect::Hysteresis { fraction: 0.3, velocity_scale: 0.05 }; 2];
+                m
+            },
             {
                 let mut m = with(Effect::SensorBias { offset: 10.0 });
                 m.effects.push(Effect::SensorBias { offset: 10.0 });

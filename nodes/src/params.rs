@@ -247,10 +247,11 @@ pub const MAX_FILE: u64 = 1 << 20;
 /// A regular file's text, at most [`MAX_FILE`] bytes: a device, a FIFO or a larger file is an error.
 pub fn read_small(path: &Path) -> std::io::Result<String> {
     use std::io::Read;
-    let file = std::fs::File::open(path)?;
-    if !file.metadata()?.is_file() {
+    // Before opening: opening a FIFO blocks until a writer comes.
+    if !std::fs::metadata(path)?.is_file() {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a regular file"));
     }
+    let file = std::fs::File::open(path)?;
     let mut text = String::new();
     file.take(MAX_FILE + 1).read_to_string(&mut text)?;
     if text.len() as u64 > MAX_FILE {
@@ -477,6 +478,15 @@ mod tests {
         for path in ["/dev/zero", "/dev/urandom", "/"] {
             let err = load::<crate::deformation_controller::Params>("deformation_controller", &args(path));
             assert!(err.is_err(), "{path}");
+        }
+        // A FIFO: refused without waiting for a writer.
+        let fifo = std::env::temp_dir().join(format!("softcontact-params-fifo-{}", std::process::id()));
+        let _ = std::fs::remove_file(&fifo);
+        if std::process::Command::new("mkfifo").arg(&fifo).status().is_ok_and(|s| s.success()) {
+            let err =
+                load::<crate::deformation_controller::Params>("deformation_controller", &args(fifo.to_str().unwrap()));
+            let _ = std::fs::remove_file(&fifo);
+            assert!(err.is_err(), "a FIFO");
         }
         let big = tempfile_path::TempPath::with(&"# padding\n".repeat(200_000));
         assert!(

@@ -93,7 +93,8 @@ impl Payload {
         if !(self.mass.is_finite() && (0.0..=MAX_PAYLOAD_MASS).contains(&self.mass)) {
             return Err(Error::ArmEffects(format!("payload: mass {} kg outside [0, {MAX_PAYLOAD_MASS}]", self.mass)));
         }
-        if !(reach.is_finite() && reach <= MAX_PAYLOAD_REACH && self.mass * reach <= MAX_PAYLOAD_MOMENT) {
+        if !(reach.is_finite() && reach <= MAX_PAYLOAD_REACH && self.mass * reach <= MAX_PAYLOAD_MOMENT * (1.0 + 1e-12))
+        {
             return Err(Error::ArmEffects(format!(
                 "payload: centre {:?} m, farther than {MAX_PAYLOAD_REACH} m from the flange or a moment m·|c| beyond {MAX_PAYLOAD_MOMENT} kg m",
                 self.com
