@@ -280,7 +280,7 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     if args.closed_loop {
         return crate::closed_loop::run(args, &analysis);
     }
-    let Analysis { name, baseline, series, report, .. } = analysis;
+    let Analysis { name, baseline, series, report, surface: analysis_surface } = analysis;
     let name = name.as_str();
     let id_args = &args.recording;
     print_report(&report, name);
@@ -289,6 +289,10 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     let model_file = args.out.join(format!("{name}.augmented.yaml"));
     std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
     println!("augmented model: {}", model_file.display());
+    let [x, y, z] = id_args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
+    let surface = analysis_surface + report.contact_shift * Vector3::new(x, y, z).normalize();
+    let overlay = write_overlay(&args.out, name, &report.model, &surface)?;
+    println!("the graph's parameters for it (launch-scripts/sim.sh or robot.sh --params-file): {}", overlay.display());
     let at_surface = series.shifted(report.contact_shift);
     let figures = discrepancy_figures::Figures {
         name,
@@ -304,9 +308,49 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     if let Some(path) = &id_args.json {
         let mut value = serde_json::to_value(&report)?;
         value["model_file"] = serde_json::Value::from(model_file.display().to_string());
+        value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
         identify_cmd::write_json(path, &value)?;
     }
     Ok(())
+}
+
+/// `DIR/NAME.params.yaml`: the augmented model as a parameter overlay of the graph. The controller
+/// starts from it (`initial_model`, its surface placed where the workflow placed it: `initial_surface`)
+/// and the estimator carries its effects in every refit (`augmented_model`), with the surface held
+/// there (`surface_position`).
+pub fn write_overlay(
+    dir: &std::path::Path,
+    name: &str,
+    model: &ContactModel,
+    surface: &Vector3<f64>,
+) -> anyhow::Result<PathBuf> {
+    model.plausible()?;
+    anyhow::ensure!(surface.iter().all(|v| v.is_finite()), "the surface position is not finite");
+    let model: serde_yaml_ng::Value = serde_yaml_ng::to_value(model)?;
+    let section = |params: serde_yaml_ng::Value| {
+        serde_yaml_ng::Value::Mapping([("ros__parameters".into(), params)].into_iter().collect())
+    };
+    let point = serde_yaml_ng::to_value([surface.x, surface.y, surface.z])?;
+    let controller: serde_yaml_ng::Mapping =
+        [("initial_model".into(), model.clone()), ("initial_surface".into(), point.clone())].into_iter().collect();
+    let estimator: serde_yaml_ng::Mapping =
+        [("augmented_model".into(), model), ("surface_position".into(), point)].into_iter().collect();
+    let top: serde_yaml_ng::Mapping = [
+        ("deformation_controller".into(), section(controller.into())),
+        ("contact_estimator".into(), section(estimator.into())),
+    ]
+    .into_iter()
+    .collect();
+    let text = format!(
+        "# The contact model `softcontact discrepancy` augmented with the effects it named, and where it\n\
+         # placed the surface, for the graph: the controller starts from them and the estimator carries the\n\
+         # effects in every refit.\n{}",
+        serde_yaml_ng::to_string(&top)?
+    );
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let path = dir.join(format!("{name}.params.yaml"));
+    std::fs::write(&path, text).with_context(|| format!("writing {}", path.display()))?;
+    Ok(path)
 }
 
 /// The loading-path workflow's answer: what it named, with the parameters and the gap before and after.

@@ -87,6 +87,23 @@ fn a_hidden_relaxation_is_named() {
     let tau = branch["parameters"]["time_constant_s"].as_f64().unwrap();
     assert!((tau / 0.3 - 1.0).abs() < 0.3, "τ {tau} s named, 0.3 s hidden\n{shown}");
     assert!(augmented.effects.iter().any(|e| e.id() == "viscoelastic_relaxation"), "{augmented:?}");
+    // The graph's overlay, read by the nodes' own loaders: the controller starts from the augmented model
+    // with its surface placed, the estimator carries its effects with the surface held there (at 0.3 m).
+    let overlay = report["overlay_file"].as_str().unwrap_or_else(|| panic!("overlay_file in {report}"));
+    let args = softcontact_nodes::params::ParamArgs { files: vec![overlay.into()], overrides: vec![], ros_args: false };
+    let (controller, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
+        "deformation_controller",
+        &args,
+    )
+    .unwrap();
+    let (estimator, _) =
+        softcontact_nodes::params::load::<softcontact_nodes::contact_estimator::Params>("contact_estimator", &args)
+            .unwrap();
+    assert_eq!(controller.initial_model, augmented);
+    assert_eq!(estimator.augmented_model.as_ref(), Some(&augmented));
+    let surface = controller.initial_surface.unwrap();
+    assert_eq!(estimator.surface_position, Some(surface));
+    assert!((surface[2] - 0.3).abs() < 1e-3, "surface placed at {surface:?}\n{shown}");
     let (before, after) = (report["refit"]["rms"].as_f64().unwrap(), report["final_rms"].as_f64().unwrap());
     let ideal = 1.0 - report["noise_floor"].as_f64().unwrap() / before;
     assert!(1.0 - after / before >= 0.8 * ideal, "RMS {before} → {after}, ideal shrink {ideal}\n{shown}");

@@ -48,6 +48,13 @@ fn every_project_message_round_trips_through_cdr() {
         window_fill: 1.0,
         stiffness_excited: true,
         damping_excited: false,
+        effects: vec![
+            softcontact_msgs::softcontact_msgs::ContactEffect {
+                id: "viscoelastic_relaxation".into(),
+                parameters: vec![2500.0, 0.15],
+            },
+            softcontact_msgs::softcontact_msgs::ContactEffect { id: "sensor_drift".into(), parameters: vec![-0.004] },
+        ],
         ..Default::default()
     };
     let bytes = to_vec::<_, Le>(&model).unwrap();
@@ -95,6 +102,7 @@ fn every_message_type_has_a_definition_naming_each_dependency_once() {
     check::<diagnostic_msgs::DiagnosticArray>();
     check::<rosgraph_msgs::Clock>();
     check::<::softcontact_msgs::softcontact_msgs::ContactModel>();
+    check::<::softcontact_msgs::softcontact_msgs::ContactEffect>();
     check::<::softcontact_msgs::softcontact_msgs::ContactState>();
     check::<::softcontact_msgs::softcontact_msgs::ControllerState>();
     check::<::softcontact_msgs::softcontact_msgs::ForceCommand>();

@@ -7,8 +7,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::geometry::ContactGeometry;
 use softcontact_contact::{
-    ContactError, ContactModel, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample, TimedSample,
-    WindowEstimator, estimate_contact_offset, fit_with_effects, fit_with_effects_at,
+    ContactError, ContactModel, Effect, Estimate, FitConfig, OnsetConfig, OnsetDetector, OnsetEvent, Sample,
+    TimedSample, WindowEstimator, estimate_contact_offset, fit_with_effects, fit_with_effects_at,
 };
 
 #[derive(Debug, Clone, PartialEq)]
@@ -254,6 +254,10 @@ pub struct Params {
     pub state_rate: f64,
     pub stale_after: f64,
     pub dead_after: f64,
+    /// The model `softcontact discrepancy --out` augmented with named effects, carried in every refit.
+    pub augmented_model: Option<ContactModel>,
+    /// Where that workflow placed the undeformed surface in the world: the refits hold it there.
+    pub surface_position: Option<[f64; 3]>,
     pub use_sim_time: bool,
 }
 
@@ -274,6 +278,8 @@ impl Default for Params {
             state_rate: 100.0,
             stale_after: 0.05,
             dead_after: 2.0,
+            augmented_model: None,
+            surface_position: None,
             use_sim_time: false,
         }
     }
@@ -288,6 +294,16 @@ impl Params {
             onset: OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm },
             fit: FitConfig { folds: self.folds, max_relative_error: self.max_relative_error, ..Default::default() },
             offset_range: (self.offset_range[0], self.offset_range[1]),
+        }
+    }
+
+    /// The node these parameters describe: refitting on their schedule from reading time `from` on, with
+    /// the effects of `augmented_model` held at `surface_position` if they are given.
+    pub fn estimator(&self, from: f64) -> Result<ContactEstimatorNode, ContactError> {
+        let node = ContactEstimatorNode::new(self.estimator_config())?.with_refits(self, from);
+        match &self.augmented_model {
+            Some(model) => node.with_effects(model.clone(), self.surface_position.map(Vector3::from)),
+            None => Ok(node),
         }
     }
 }
@@ -347,9 +363,26 @@ impl crate::params::NodeParams for Params {
             0.0,
             "/ft_sensor/wrench or /lwr/ee_pose silent this long after they flowed (both are due at 1 kHz): their publisher or the middleware is dead, and the node exits with an error [s]",
         );
+        d.rule(
+            "augmented_model",
+            self.augmented_model.as_ref().map_or(Ok(()), |m| m.plausible().map_err(|e| e.to_string())),
+            "null, or a plausible contact model with named effects",
+            "the model the discrepancy workflow augmented (`softcontact discrepancy FILE --out DIR` writes it into DIR/NAME.params.yaml): every refit keeps its kind, exponents and effects' time constants and refits their amplitudes",
+        );
+        let surface = match (self.surface_position, &self.augmented_model) {
+            (Some(p), _) if !p.iter().all(|v| v.is_finite()) => Err(format!("{p:?} is not finite")),
+            (Some(_), None) => Err("it places the surface of an augmented_model, and there is none".into()),
+            _ => Ok(()),
+        };
+        d.rule(
+            "surface_position",
+            surface,
+            "null, or a finite point [x, y, z] [m] with augmented_model",
+            "where the discrepancy workflow placed the undeformed surface in the world: the refits of augmented_model hold it there (a window that never leaves the surface cannot tell its place from a sensor offset) [m]",
+        );
         d.use_sim_time();
         // The estimator checks its configuration as it is built.
-        d.together(ContactEstimatorNode::new(self.estimator_config()).map(|_| ()).map_err(|e| e.to_string()));
+        d.together(self.estimator(0.0).map(|_| ()).map_err(|e| e.to_string()));
     }
 }
 
@@ -375,6 +408,14 @@ impl ModelOut {
             window_fill: self.window_fill,
             stiffness_excited: self.stiffness_excited,
             damping_excited: self.damping_excited,
+            effects: m
+                .effects
+                .iter()
+                .map(|e| softcontact_msgs::softcontact_msgs::ContactEffect {
+                    id: e.id().into(),
+                    parameters: e.parameter_list(),
+                })
+                .collect(),
         }
     }
 }
@@ -389,6 +430,16 @@ pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), Co
     if kind.exponents().is_some_and(|e| e == exponents) {
         model = ContactModel::new(kind, msg.stiffness, msg.damping)?;
     }
+    if msg.effects.len() > softcontact_contact::MAX_EFFECTS {
+        return Err(ContactError::InvalidModel(format!(
+            "{} effects (at most {})",
+            msg.effects.len(),
+            softcontact_contact::MAX_EFFECTS
+        )));
+    }
+    model.effects =
+        msg.effects.iter().map(|e| Effect::from_parameters(&e.id, &e.parameters)).collect::<Result<_, _>>()?;
+    model.validate()?;
     let p = &msg.contact_position;
     let position = Vector3::new(p.x, p.y, p.z);
     if !position.iter().all(|v| v.is_finite()) {
@@ -490,6 +541,120 @@ mod tests {
         let zdot = 0.002 * std::f64::consts::TAU * (std::f64::consts::TAU * t).cos();
         let n = Vector3::new(0.0, 0.0, -1.0);
         (n * (0.3 + z), n * zdot, 2000.0 * z + 5.0 * zdot)
+    }
+
+    /// A Kelvin-Voigt surface (k 2000 N/m, λ 5 N s/m, under z = 0 at 0.3 m) with a Maxwell branch
+    /// (1000 N/m, τ 0.5 s), read with a sensor offset of 0.3 N: the node fed `seconds` of a press at
+    /// 1 Hz and 0.1 Hz (the slow one lets the branch relax, which tells it from the spring).
+    fn fed_augmented(node: &mut ContactEstimatorNode, seconds: f64) {
+        use std::f64::consts::TAU;
+        let (km, tau) = (1000.0, 0.5_f64);
+        let n = Vector3::new(0.0, 0.0, -1.0);
+        let mut branch = 0.0;
+        let mut z_prev = None;
+        for i in 0..(seconds * 1e3) as usize {
+            let t = i as f64 * 1e-3;
+            let z = 0.006 + 0.002 * (TAU * t).sin() + 0.003 * (TAU * 0.1 * t).sin();
+            let zdot = 0.002 * TAU * (TAU * t).cos() + 0.003 * TAU * 0.1 * (TAU * 0.1 * t).cos();
+            if let Some(prev) = z_prev {
+                // Exact for a deformation changing at a constant rate over the step.
+                let decay = (-1e-3 / tau).exp();
+                branch = branch * decay + km * tau * (z - prev) / 1e-3 * (1.0 - decay);
+            }
+            z_prev = Some(z);
+            let f = 2000.0 * z + 5.0 * zdot + branch;
+            node.update(t, &(n * (0.3 + z)), &(n * zdot), f + 0.3).unwrap();
+        }
+    }
+
+    fn structure() -> ContactModel {
+        ContactModel {
+            effects: vec![
+                Effect::ViscoelasticRelaxation { stiffness: 500.0, time_constant: 0.5 },
+                Effect::SensorBias { offset: 0.0 },
+            ],
+            ..ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 1000.0, 0.0).unwrap()
+        }
+    }
+
+    #[test]
+    fn the_parameters_augmented_model_is_carried_in_every_refit_and_on_the_wire() {
+        let surface = [0.0, 0.0, -0.3];
+        let p = Params {
+            window: 1200,
+            augmented_model: Some(structure()),
+            surface_position: Some(surface),
+            ..Params::default()
+        };
+        let mut node = p.estimator(0.0).unwrap();
+        fed_augmented(&mut node, 12.0);
+        let out = node.refit().unwrap();
+        // The branch and the offset of the hidden truth, refitted with the time constant kept.
+        let ids: Vec<&str> = out.model.effects.iter().map(Effect::id).collect();
+        assert_eq!(ids, ["viscoelastic_relaxation", "sensor_bias"]);
+        match out.model.effects[0] {
+            Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
+                assert!((stiffness - 1000.0).abs() < 20.0, "branch {stiffness} N/m for 1000");
+                assert_eq!(time_constant, 0.5);
+            }
+            other => panic!("{other:?}"),
+        }
+        match out.model.effects[1] {
+            Effect::SensorBias { offset } => assert!((offset - 0.3).abs() < 0.02, "offset {offset} N for 0.3"),
+            other => panic!("{other:?}"),
+        }
+        assert!((out.contact_position - Vector3::from(surface)).norm() < 1e-9, "{}", out.contact_position);
+        // The message carries every effect: what the controller reads is what the estimator fitted.
+        let header = softcontact_msgs::std_msgs::Header::default();
+        let (model, position) = model_from_msg(&out.to_msg(header)).unwrap();
+        assert_eq!(model, out.model);
+        assert_eq!(position, out.contact_position);
+        // Without the parameter, the plain estimator.
+        let mut plain = Params { window: 1200, ..Params::default() }.estimator(0.0).unwrap();
+        fed_augmented(&mut plain, 12.0);
+        assert!(plain.refit().unwrap().model.effects.is_empty());
+    }
+
+    #[test]
+    fn augmented_parameters_and_effects_from_the_wire_are_checked() {
+        use crate::params::NodeParams;
+        let bad = |p: Params| p.validate().unwrap_err();
+        let lone = bad(Params { surface_position: Some([0.0, 0.0, 0.3]), ..Params::default() });
+        assert!(lone.contains("there is none"), "{lone}");
+        let nan = bad(Params {
+            augmented_model: Some(structure()),
+            surface_position: Some([0.0, f64::NAN, 0.3]),
+            ..Params::default()
+        });
+        assert!(nan.contains("not finite"), "{nan}");
+        let mut loud = structure();
+        loud.effects.push(Effect::SensorDrift { rate: 5.0 });
+        assert!(bad(Params { augmented_model: Some(loud), ..Params::default() }).contains("implausible"));
+
+        let effect = |id: &str, parameters: Vec<f64>| softcontact_msgs::softcontact_msgs::ContactEffect {
+            id: id.into(),
+            parameters,
+        };
+        let msg = |effects| ModelMsg {
+            kind: "kelvin_voigt".into(),
+            stiffness: 1000.0,
+            exponent_a: 1.0,
+            exponent_c: 1.0,
+            effects,
+            ..ModelMsg::default()
+        };
+        assert_eq!(model_from_msg(&msg(vec![effect("sensor_bias", vec![0.2])])).unwrap().0.effects.len(), 1);
+        for (effects, words) in [
+            (vec![effect("gremlins", vec![1.0])], "unknown effect"),
+            (vec![effect("sensor_bias", vec![f64::NAN])], "finite"),
+            (vec![effect("sensor_bias", vec![1e300, 2.0])], "takes 1 parameters"),
+            (vec![effect("viscoelastic_relaxation", vec![-1.0, 0.5])], "stiffness must be ≥ 0"),
+            (vec![effect("hysteresis", vec![f64::INFINITY, 0.1])], "finite"),
+            (vec![effect("sensor_bias", vec![0.1]); 9], "9 effects"),
+        ] {
+            let err = model_from_msg(&msg(effects)).unwrap_err().to_string();
+            assert!(err.contains(words), "expected `{words}` in `{err}`");
+        }
     }
 
     #[test]

@@ -960,6 +960,9 @@ pub struct Params {
     pub model_update: ModelUpdate,
     pub retarget_duration: f64,
     pub initial_model: ContactModel,
+    /// Where the undeformed surface lies in the world, if known before contact (the discrepancy
+    /// workflow's placement): the first force command in contact places `initial_model`'s surface there.
+    pub initial_surface: Option<[f64; 3]>,
     pub state_rate: f64,
     pub stale_after: f64,
     pub force_check_tolerance: f64,
@@ -999,6 +1002,7 @@ impl Default for Params {
             retarget_duration: 0.5,
             initial_model: ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 5_000.0, 0.0)
                 .expect("a valid model"),
+            initial_surface: None,
             state_rate: 100.0,
             stale_after: 0.05,
             force_check_tolerance: 20.0,
@@ -1157,6 +1161,16 @@ impl crate::params::NodeParams for Params {
             model,
             "a valid contact model",
             "the model used until the estimator has one (a rough guess is enough to start identification)",
+        );
+        let surface = match self.initial_surface {
+            Some(p) if !p.iter().all(|v| v.is_finite()) => Err(format!("{p:?} is not finite")),
+            _ => Ok(()),
+        };
+        d.rule(
+            "initial_surface",
+            surface,
+            "null, or a finite point [x, y, z] [m]",
+            "where the undeformed surface lies in the world, if known before contact (`softcontact discrepancy FILE --out DIR` writes the workflow's placement into DIR/NAME.params.yaml): the first force command in contact places initial_model's surface there, refused beyond max_surface_offset from the onset [m]",
         );
         d.rule(
             "arm_effects",

@@ -93,8 +93,13 @@ pub struct CommandResult {
     /// |reached_measured − command| [N].
     pub error_measured: f64,
     pub model: ModelUse,
-    /// The stiffness of the model the command went through.
+    /// The stiffness of the model the command went through (JSON null: not known to the client).
+    #[serde(deserialize_with = "nan_if_null")]
     pub model_stiffness: f64,
+}
+
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl CommandResult {

@@ -7,6 +7,8 @@
 //! controller retreat and re-tare the sensor (/deformation_controller/retare), then
 //! sends the force commands and reads the force at the end of each move: the simulator's true contact
 //! force (/sim_arm/contact_wrench) for the grade, the sensor's reading (the controller's state) beside it.
+//! Then, as a user would: `softcontact discrepancy` on that recording, and a second graph started with
+//! the parameter overlay it writes, for the force commands again through the augmented model.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -23,26 +25,28 @@ use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::geometry::ContactGeometry;
 use softcontact_nodes::{deformation_controller, ros};
 
-use super::experiment::{CommandResult, Plan, SurfaceSpec};
-use super::report::{Fitness, Identified, Report, SurfaceReport};
+use super::experiment::{CommandResult, ModelUse, Plan, SurfaceSpec};
+use super::report::{Discrepancy, Fitness, Identified, Report, SurfaceReport};
 
 fn client_report(out: &Path, name: &str) -> PathBuf {
     out.join(format!("graph_{name}.json"))
 }
 
-/// Runs one graph per surface, one after the other, and collects what the clients measured.
+/// The client's report of the control experiment through the augmented model.
+fn augmented_report(out: &Path, name: &str) -> PathBuf {
+    out.join(format!("graph_{name}_augmented.json"))
+}
+
+/// Runs one graph per surface, one after the other, and collects what the clients measured. With
+/// `plan.augmented`, the discrepancy workflow then runs on the first graph's recording, and a second
+/// graph, started with the augmented model's parameter overlay as a user would start it, runs the
+/// control experiment again through it.
 pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Report> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().context("the repository root")?;
-    let script = root.join("launch-scripts/sim.sh");
-    anyhow::ensure!(script.exists(), "--graph needs the repository's {} (run from a checkout)", script.display());
-    let exe = std::env::current_exe()?;
     let mut surfaces = Vec::new();
     for spec in specs {
         let logs = out.join("graph_logs").join(spec.name);
-        let _ = std::fs::remove_file(client_report(out, spec.name));
-        println!("{}: starting the graph (logs in {}) …", spec.name, logs.display());
-        // The controller's limits of the in-process run, as a parameter overlay.
         std::fs::create_dir_all(&logs)?;
+        // The controller's limits of the in-process run, as a parameter overlay.
         let limits = logs.join("demo_limits.yaml");
         std::fs::write(
             &limits,
@@ -54,27 +58,97 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
                 1.2 * spec.max_force
             ),
         )?;
-        let mut cmd = Command::new(&script);
-        cmd.args(["--isolated", "--surface", &format!("lab_{}", spec.name), "--params-file"])
-            .arg(&limits)
-            .arg("--log-dir")
-            .arg(&logs)
-            .arg("--run")
-            .arg(&exe)
-            .args(["demo", "--graph-client", spec.name, "--out"])
-            .arg(out)
-            .args(["--runs", &plan.identification_runs.to_string(), "--commands", &plan.commands.to_string()]);
-        // The node binaries beside this one, if they are built; else launch.sh builds them.
-        if let Some(dir) = exe.parent().filter(|d| d.join("sim_arm").exists()) {
-            cmd.env("SOFTCONTACT_BIN", dir);
+        let report_path = client_report(out, spec.name);
+        let _ = std::fs::remove_file(&report_path);
+        println!("{}: starting the graph (logs in {}) …", spec.name, logs.display());
+        launch(spec, plan, out, &logs, &[&limits], &["--graph-client", spec.name])?;
+        let text =
+            std::fs::read_to_string(&report_path).with_context(|| format!("reading {}", report_path.display()))?;
+        let mut report: SurfaceReport =
+            serde_json::from_str(&text).with_context(|| report_path.display().to_string())?;
+        if plan.augmented {
+            let (discrepancy, overlay) = augment(out, spec.name, &logs)?;
+            let path = augmented_report(out, spec.name);
+            let _ = std::fs::remove_file(&path);
+            println!("{}: the graph again, with {} …", spec.name, overlay.display());
+            let max_force = format!("{:?}", report.max_force);
+            let args = ["--graph-client", spec.name, "--graph-augmented", &max_force];
+            launch(spec, plan, out, &logs.join("augmented"), &[&limits, &overlay], &args)?;
+            let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+            let mut commands: Vec<CommandResult> =
+                serde_json::from_str(&text).with_context(|| path.display().to_string())?;
+            for c in commands.iter_mut().filter(|c| c.model_stiffness.is_nan()) {
+                // Before the estimator's first model: the controller's initial model, the augmented one.
+                c.model_stiffness = discrepancy.augmented_model.stiffness;
+            }
+            report.commands.extend(commands);
+            report.discrepancy = Some(discrepancy);
         }
-        let status = cmd.status().with_context(|| format!("running {}", script.display()))?;
-        anyhow::ensure!(status.success(), "{}: the graph run failed (logs in {})", spec.name, logs.display());
-        let path = client_report(out, spec.name);
-        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-        surfaces.push(serde_json::from_str(&text).with_context(|| path.display().to_string())?);
+        surfaces.push(report);
     }
     Ok(Report { simulation: true, mode: "graph".into(), surfaces, arm: None })
+}
+
+/// One graph of the surface `spec` (`launch-scripts/sim.sh --isolated`, logs in `logs`, the parameter
+/// `overlays` on top of config/), with this binary inside as `demo CLIENT_ARGS`.
+fn launch(
+    spec: &SurfaceSpec,
+    plan: Plan,
+    out: &Path,
+    logs: &Path,
+    overlays: &[&Path],
+    client_args: &[&str],
+) -> anyhow::Result<()> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().context("the repository root")?;
+    let script = root.join("launch-scripts/sim.sh");
+    anyhow::ensure!(script.exists(), "--graph needs the repository's {} (run from a checkout)", script.display());
+    let exe = std::env::current_exe()?;
+    std::fs::create_dir_all(logs)?;
+    let mut cmd = Command::new(&script);
+    cmd.args(["--isolated", "--surface", &format!("lab_{}", spec.name)]);
+    for overlay in overlays {
+        cmd.arg("--params-file").arg(overlay);
+    }
+    cmd.arg("--log-dir").arg(logs).arg("--run").arg(&exe).arg("demo").args(client_args).arg("--out").arg(out).args([
+        "--runs",
+        &plan.identification_runs.to_string(),
+        "--commands",
+        &plan.commands.to_string(),
+    ]);
+    // The node binaries beside this one, if they are built; else launch.sh builds them.
+    if let Some(dir) = exe.parent().filter(|d| d.join("sim_arm").exists()) {
+        cmd.env("SOFTCONTACT_BIN", dir);
+    }
+    let status = cmd.status().with_context(|| format!("running {}", script.display()))?;
+    anyhow::ensure!(status.success(), "{}: the graph run failed (logs in {})", spec.name, logs.display());
+    Ok(())
+}
+
+/// The discrepancy workflow on the first graph's recording, as `softcontact discrepancy FILE --out DIR`
+/// runs it: what it names, and the parameter overlay of the augmented model.
+fn augment(out: &Path, name: &str, logs: &Path) -> anyhow::Result<(Discrepancy, PathBuf)> {
+    let file = out.join(format!("{name}_graph.mcap"));
+    let normal = deformation_controller::Params::default().normal;
+    let args = crate::discrepancy_cmd::DiscrepancyArgs {
+        recording: crate::identify_cmd::IdentifyArgs {
+            file,
+            json: None,
+            normal: normal.to_vec(),
+            onset: 1.0,
+            sample_period: 0.01,
+        },
+        model: None,
+        out: logs.to_path_buf(),
+        loading_paths: false,
+        arm: false,
+        closed_loop: false,
+    };
+    let analysis =
+        crate::discrepancy_cmd::analyse_file(&args, false).with_context(|| format!("{name}: discrepancy"))?;
+    let report = &analysis.report;
+    let surface = analysis.surface + report.contact_shift * Vector3::from(normal).normalize();
+    let overlay = crate::discrepancy_cmd::write_overlay(logs, name, &report.model, &surface)?;
+    Ok((Discrepancy::of(report), overlay))
 }
 
 /// `softcontact record` beside the client: stopped with SIGINT (as Ctrl-C) at the end, or when the
@@ -103,7 +177,7 @@ struct Heard {
     /// The last few normal forces of the controller's 100 Hz state (the sensor's reading).
     recent: Vec<f64>,
     /// The last 10 ms of the simulator's true normal force (/sim_arm/contact_wrench, 1 kHz).
-    recent_true: std::collections::VecDeque<f64>,
+    recent_true: VecDeque<f64>,
     max_force: f64,
 }
 
@@ -112,45 +186,50 @@ fn mean<'a>(v: impl ExactSizeIterator<Item = &'a f64>) -> f64 {
     v.sum::<f64>() / n
 }
 
-/// Inside the namespace, with the graph up: the experiments on one surface.
-pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> {
-    let exe = std::env::current_exe()?;
-    let recording = out.join(format!("{}_graph.mcap", spec.name));
-    let _ = std::fs::remove_file(&recording);
-    let mut recorder =
-        Recorder(Some(Command::new(&exe).arg("record").arg("-o").arg(&recording).stdout(Stdio::null()).spawn()?));
-    let mut node = ros::node("softcontact_demo")?;
-    let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
-    let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
-    let truth = ros::subscription::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
-    let retare = node.create_client::<TriggerRequest, TriggerResponse>(
-        ros::service_mapping("cyclone")?,
-        &Name::new("/deformation_controller", "retare")?,
-        &ServiceTypeName::new("std_srvs", "Trigger"),
-        ros::reliable_qos(),
-        ros::reliable_qos(),
-    )?;
-    let commands =
-        ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
-    // The true normal force along the controller's normal (its default: the graph's parameters).
-    let geometry = ContactGeometry::lwr4(Vector3::from(deformation_controller::Params::default().normal))
-        .context("the controller's normal")?;
-    let mut heard =
-        Heard { state: None, model: None, recent: Vec::new(), recent_true: VecDeque::new(), max_force: 0.0 };
-    let listen = |heard: &mut Heard, seconds: f64| -> anyhow::Result<()> {
+/// The demo's node in the graph: what it hears and the force commands it sends.
+struct Client {
+    node: ros2_client::Node,
+    states: ros2_client::Subscription<ControllerState>,
+    models: ros2_client::Subscription<ContactModel>,
+    truth: ros2_client::Subscription<WrenchStamped>,
+    commands: ros2_client::Publisher<ForceCommand>,
+    /// The true normal force along the controller's normal (its default: the graph's parameters).
+    geometry: ContactGeometry,
+    heard: Heard,
+}
+
+impl Client {
+    fn new() -> anyhow::Result<Self> {
+        let mut node = ros::node("softcontact_demo")?;
+        let states =
+            ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
+        let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+        let truth = ros::subscription::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
+        let commands =
+            ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
+        let geometry = ContactGeometry::lwr4(Vector3::from(deformation_controller::Params::default().normal))
+            .context("the controller's normal")?;
+        let heard =
+            Heard { state: None, model: None, recent: Vec::new(), recent_true: VecDeque::new(), max_force: 0.0 };
+        Ok(Self { node, states, models, truth, commands, geometry, heard })
+    }
+
+    /// Takes what arrives for `seconds`.
+    fn listen(&mut self, seconds: f64) -> anyhow::Result<()> {
+        let heard = &mut self.heard;
         let until = Instant::now() + Duration::from_secs_f64(seconds);
         loop {
-            while let Ok(Some((m, _))) = models.take() {
+            while let Ok(Some((m, _))) = self.models.take() {
                 heard.model = Some(m);
             }
-            while let Ok(Some((w, _))) = truth.take() {
+            while let Ok(Some((w, _))) = self.truth.take() {
                 let f = w.wrench.force;
-                heard.recent_true.push_back(geometry.normal_force(&Vector3::new(f.x, f.y, f.z)));
+                heard.recent_true.push_back(self.geometry.normal_force(&Vector3::new(f.x, f.y, f.z)));
                 if heard.recent_true.len() > 10 {
                     heard.recent_true.pop_front();
                 }
             }
-            while let Ok(Some((s, _))) = states.take() {
+            while let Ok(Some((s, _))) = self.states.take() {
                 heard.max_force = heard.max_force.max(s.f);
                 heard.recent.push(s.f);
                 if heard.recent.len() > 3 {
@@ -164,24 +243,76 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
             }
             std::thread::sleep(Duration::from_millis(5));
         }
-    };
-
-    let start = Instant::now();
-    while !heard.state.as_ref().is_some_and(|s| s.in_contact) {
-        anyhow::ensure!(start.elapsed() < Duration::from_secs(30), "no contact after 30 s");
-        listen(&mut heard, 0.05)?;
     }
-    listen(&mut heard, 0.3)?; // the controller's reader matches our writer
-    eprintln!("{}: contact after {:.1} s; identification pushes at 1 Hz", spec.name, start.elapsed().as_secs_f64());
+
+    fn in_contact(&self) -> bool {
+        self.heard.state.as_ref().is_some_and(|s| s.in_contact)
+    }
+
+    /// Until the controller reports contact (at most 30 s), and a little longer, so that its reader
+    /// matches our writer.
+    fn wait_for_contact(&mut self, name: &str) -> anyhow::Result<()> {
+        let start = Instant::now();
+        while !self.in_contact() {
+            anyhow::ensure!(start.elapsed() < Duration::from_secs(30), "no contact after 30 s");
+            self.listen(0.05)?;
+        }
+        self.listen(0.3)?;
+        eprintln!("{name}: contact after {:.1} s", start.elapsed().as_secs_f64());
+        Ok(())
+    }
+
+    /// Seed 001's force commands, ratios of `max_force`, each graded at the end of its move on the true
+    /// force, with the sensor's reading beside it.
+    fn control(
+        &mut self,
+        name: &str,
+        plan: Plan,
+        max_force: f64,
+        model: ModelUse,
+    ) -> anyhow::Result<Vec<CommandResult>> {
+        let mut results = Vec::new();
+        for i in 0..plan.commands {
+            let (_, _, command) = CommandResult::planned(i, max_force);
+            let stiffness = self.heard.model.as_ref().map_or(f64::NAN, |m| m.stiffness);
+            self.commands.publish(ForceCommand { force: command, duration: plan.move_duration })?;
+            self.listen(plan.move_duration)?;
+            let heard = &self.heard;
+            anyhow::ensure!(!heard.recent_true.is_empty(), "no true contact force from /sim_arm/contact_wrench");
+            let (reached, measured) = (mean(heard.recent_true.iter()), mean(heard.recent.iter()));
+            eprintln!("{name}: command {command:.2} N, reached {reached:.2} N (the sensor read {measured:.2} N)");
+            results.push(CommandResult { model, ..CommandResult::new(i, max_force, reached, measured, stiffness) });
+        }
+        Ok(results)
+    }
+}
+
+/// Inside the namespace, with the graph up: the experiments on one surface.
+pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> {
+    let exe = std::env::current_exe()?;
+    let recording = out.join(format!("{}_graph.mcap", spec.name));
+    let _ = std::fs::remove_file(&recording);
+    let mut recorder =
+        Recorder(Some(Command::new(&exe).arg("record").arg("-o").arg(&recording).stdout(Stdio::null()).spawn()?));
+    let mut c = Client::new()?;
+    let retare = c.node.create_client::<TriggerRequest, TriggerResponse>(
+        ros::service_mapping("cyclone")?,
+        &Name::new("/deformation_controller", "retare")?,
+        &ServiceTypeName::new("std_srvs", "Trigger"),
+        ros::reliable_qos(),
+        ros::reliable_qos(),
+    )?;
+    c.wait_for_contact(spec.name)?;
+    eprintln!("{}: identification pushes at 1 Hz", spec.name);
     let (high, low) = spec.push_forces;
     for _ in 0..plan.identification_runs * plan.push_periods as usize {
         for force in [high, low] {
-            commands.publish(ForceCommand { force, duration: 0.5 })?;
-            listen(&mut heard, 0.5)?;
+            c.commands.publish(ForceCommand { force, duration: 0.5 })?;
+            c.listen(0.5)?;
         }
     }
-    listen(&mut heard, 1.1)?; // one more refit
-    let model = heard.model.clone().context("the estimator published no model")?;
+    c.listen(1.1)?; // one more refit
+    let model = c.heard.model.clone().context("the estimator published no model")?;
     // As on the robot (and in-process): the sensor re-tared with the hand free before the control run.
     let request = retare.send_request(TriggerRequest::default()).map_err(|e| anyhow::anyhow!("re-tare: {e:?}"))?;
     let asked = Instant::now();
@@ -192,34 +323,24 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
             break r;
         }
         anyhow::ensure!(asked.elapsed() < Duration::from_secs(10), "no answer to the re-tare in 10 s");
-        listen(&mut heard, 0.01)?;
+        c.listen(0.01)?;
     };
     anyhow::ensure!(response.success, "re-tare: {}", response.message);
     let mut approached = false;
-    while !(approached && heard.state.as_ref().is_some_and(|s| s.in_contact)) {
+    while !(approached && c.in_contact()) {
         anyhow::ensure!(asked.elapsed() < Duration::from_secs(20), "no contact again after the re-tare");
-        approached |= heard.state.as_ref().is_some_and(|s| !s.in_contact);
-        listen(&mut heard, 0.01)?;
+        approached |= !c.in_contact();
+        c.listen(0.01)?;
     }
-    listen(&mut heard, 0.5)?;
+    c.listen(0.5)?;
     eprintln!("{}: {}", spec.name, response.message);
-    let max_force = heard.max_force;
+    let max_force = c.heard.max_force;
     eprintln!(
         "{}: estimator chose {} (k {:.0}); maximum force {max_force:.1} N",
         spec.name, model.kind, model.stiffness
     );
 
-    let mut results = Vec::new();
-    for i in 0..plan.commands {
-        let (_, _, command) = CommandResult::planned(i, max_force);
-        let stiffness = heard.model.as_ref().map_or(f64::NAN, |m| m.stiffness);
-        commands.publish(ForceCommand { force: command, duration: plan.move_duration })?;
-        listen(&mut heard, plan.move_duration)?;
-        anyhow::ensure!(!heard.recent_true.is_empty(), "no true contact force from /sim_arm/contact_wrench");
-        let (reached, measured) = (mean(heard.recent_true.iter()), mean(heard.recent.iter()));
-        eprintln!("{}: command {command:.2} N, reached {reached:.2} N (the sensor read {measured:.2} N)", spec.name);
-        results.push(CommandResult::new(i, max_force, reached, measured, stiffness));
-    }
+    let results = c.control(spec.name, plan, max_force, ModelUse::Identified)?;
     anyhow::ensure!(recorder.stop()?, "the recorder did not stop cleanly");
 
     let p = &model.contact_position;
@@ -247,5 +368,19 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
     };
     let path = client_report(out, spec.name);
     std::fs::write(&path, serde_json::to_string_pretty(&report)?).with_context(|| path.display().to_string())?;
+    Ok(())
+}
+
+/// Inside the namespace of the second graph (its controller starting from the augmented model, its
+/// estimator carrying the model's effects): the control experiment again, planned from the first
+/// graph's `max_force`.
+pub fn client_augmented(spec: &SurfaceSpec, plan: Plan, max_force: f64, out: &Path) -> anyhow::Result<()> {
+    anyhow::ensure!(max_force.is_finite() && max_force > 0.0, "the maximum force must be positive");
+    let mut c = Client::new()?;
+    c.wait_for_contact(spec.name)?;
+    c.listen(0.5)?;
+    let results = c.control(spec.name, plan, max_force, ModelUse::Augmented)?;
+    let path = augmented_report(out, spec.name);
+    std::fs::write(&path, serde_json::to_string_pretty(&results)?).with_context(|| path.display().to_string())?;
     Ok(())
 }

@@ -39,6 +39,10 @@ pub struct DemoArgs {
     /// (internal) the --graph client for one surface, run inside the graph's namespace.
     #[arg(long, hide = true)]
     pub graph_client: Option<String>,
+    /// (internal) the --graph client's second experiment, through the augmented model of the graph's
+    /// parameters, its commands planned from this maximum force [N].
+    #[arg(long, hide = true, requires = "graph_client")]
+    pub graph_augmented: Option<f64>,
 }
 
 /// Seed 001's two surfaces as the simulator makes them (with effects no model kind has).
@@ -69,7 +73,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let plan = Plan { identification_runs: args.runs as usize, commands: args.commands as usize, ..Plan::SEED_001 };
     if let Some(name) = &args.graph_client {
         let spec = surfaces().into_iter().find(|s| s.name == name).context("no such surface")?;
-        return graph::client(&spec, plan, &args.out);
+        return match args.graph_augmented {
+            Some(max_force) => graph::client_augmented(&spec, plan, max_force, &args.out),
+            None => graph::client(&spec, plan, &args.out),
+        };
     }
     let specs = surfaces();
     let mode = if args.graph { "the node processes over DDS, real time" } else { "in-process, lockstep at 1 kHz" };

@@ -70,6 +70,26 @@ pub struct Discrepancy {
     pub augmented_model: ContactModel,
 }
 
+impl Discrepancy {
+    pub fn of(r: &softcontact_discrepancy::Report) -> Self {
+        Self {
+            named: r
+                .effects
+                .iter()
+                .map(|e| NamedEffect { id: e.id.clone(), parameters: e.parameters.clone() })
+                .collect(),
+            remaining: serde_json::to_value(r.remaining)
+                .ok()
+                .and_then(|v| v.as_str().map(String::from))
+                .unwrap_or_default(),
+            rms_before: r.refit.rms,
+            rms_after: r.final_rms,
+            noise_floor: r.noise_floor,
+            augmented_model: r.model.clone(),
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct NamedEffect {
     pub id: String,
@@ -99,24 +119,7 @@ impl SurfaceReport {
             max_force: run.max_force,
             commands: run.commands.clone(),
             simulated_surface: run.spec.truth.clone(),
-            discrepancy: run.augmented.as_ref().map(|(found, _)| {
-                let r = &found.report;
-                Discrepancy {
-                    named: r
-                        .effects
-                        .iter()
-                        .map(|e| NamedEffect { id: e.id.clone(), parameters: e.parameters.clone() })
-                        .collect(),
-                    remaining: serde_json::to_value(r.remaining)
-                        .ok()
-                        .and_then(|v| v.as_str().map(String::from))
-                        .unwrap_or_default(),
-                    rms_before: r.refit.rms,
-                    rms_after: r.final_rms,
-                    noise_floor: r.noise_floor,
-                    augmented_model: found.model.clone(),
-                }
-            }),
+            discrepancy: run.augmented.as_ref().map(|(found, _)| Discrepancy::of(&found.report)),
         }
     }
 
@@ -271,10 +274,15 @@ pub fn print_errors(s: &SurfaceReport, table: &str, source: &str) {
 
 /// What the discrepancy workflow named in a surface's identification runs, beside what the simulated
 /// surface and sensor really hide.
-pub fn print_discrepancy(s: &SurfaceReport) {
+pub fn print_discrepancy(s: &SurfaceReport, graph: bool) {
     let Some(d) = &s.discrepancy else { return };
+    let against = if graph {
+        "the model identified from the first graph's recording against that recording"
+    } else {
+        "the identified model against its own identification runs"
+    };
     println!(
-        "DISCREPANCY — {}: the identified model against its own identification runs, in-contact RMS {:.3} N → {:.3} N (noise floor {:.3} N; remaining: {})",
+        "DISCREPANCY — {}: {against}, in-contact RMS {:.3} N → {:.3} N (noise floor {:.3} N; remaining: {})",
         s.name, d.rms_before, d.rms_after, d.noise_floor, d.remaining
     );
     for e in &d.named {
@@ -294,7 +302,7 @@ pub fn print(report: &Report) {
     };
     print_table_one(&report.surfaces, source);
     for s in &report.surfaces {
-        print_discrepancy(s);
+        print_discrepancy(s, report.mode == "graph");
     }
     for s in &report.surfaces {
         print_errors(s, if s.name == "dice" { "III" } else { "II" }, source);

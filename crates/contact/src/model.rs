@@ -135,6 +135,42 @@ impl Effect {
         }
     }
 
+    /// The parameters in the order of the file's fields (the form of a /contact_estimator/model message).
+    pub fn parameter_list(&self) -> Vec<f64> {
+        let n = match self {
+            Effect::ViscoelasticRelaxation { .. } | Effect::Hysteresis { .. } => 2,
+            Effect::SensorCrosstalk { .. } => 3,
+            _ => 1,
+        };
+        self.parameters()[..n].to_vec()
+    }
+
+    /// The effect `id` with the parameters of [`Self::parameter_list`], checked as a file's entry is.
+    pub fn from_parameters(id: &str, p: &[f64]) -> Result<Effect, ContactError> {
+        let arity = |n: usize| {
+            if p.len() == n {
+                Ok(())
+            } else {
+                Err(ContactError::InvalidModel(format!("effect `{id}` takes {n} parameters, not {}", p.len())))
+            }
+        };
+        let effect = match id {
+            "viscoelastic_relaxation" => {
+                arity(2).map(|_| Effect::ViscoelasticRelaxation { stiffness: p[0], time_constant: p[1] })
+            }
+            "hysteresis" => arity(2).map(|_| Effect::Hysteresis { fraction: p[0], velocity_scale: p[1] }),
+            "contact_offset_drift" => arity(1).map(|_| Effect::ContactOffsetDrift { rate: p[0] }),
+            "sensor_bias" => arity(1).map(|_| Effect::SensorBias { offset: p[0] }),
+            "sensor_drift" => arity(1).map(|_| Effect::SensorDrift { rate: p[0] }),
+            "time_delay" => arity(1).map(|_| Effect::TimeDelay { delay: p[0] }),
+            "sensor_crosstalk" => arity(3).map(|_| Effect::SensorCrosstalk { coupling: [p[0], p[1], p[2]] }),
+            "tool_gravity" => arity(1).map(|_| Effect::ToolGravity { mass: p[0] }),
+            _ => Err(ContactError::InvalidModel(format!("unknown effect `{id}`"))),
+        }?;
+        effect.validate()?;
+        Ok(effect)
+    }
+
     fn parameters(&self) -> [f64; 3] {
         match *self {
             Effect::ViscoelasticRelaxation { stiffness, time_constant } => [stiffness, time_constant, 0.0],

@@ -116,6 +116,46 @@ fn yaml_round_trip_keeps_everything() {
 }
 
 #[test]
+fn an_effect_travels_as_its_id_and_its_fields_in_file_order() {
+    let every = [
+        Effect::ViscoelasticRelaxation { stiffness: 800.0, time_constant: 1.5 },
+        Effect::Hysteresis { fraction: 0.05, velocity_scale: 0.01 },
+        Effect::ContactOffsetDrift { rate: -1e-5 },
+        Effect::SensorBias { offset: -0.4 },
+        Effect::SensorDrift { rate: 0.004 },
+        Effect::TimeDelay { delay: 0.02 },
+        Effect::SensorCrosstalk { coupling: [0.01, -0.02, 0.0] },
+        Effect::ToolGravity { mass: 0.3 },
+    ];
+    for effect in every {
+        let list = effect.parameter_list();
+        // The reference: the file's own fields, in the order the file writes them.
+        let yaml: serde_yaml_ng::Mapping = serde_yaml_ng::to_value(effect).unwrap().as_mapping().unwrap().clone();
+        let fields: Vec<f64> = yaml
+            .iter()
+            .filter(|(k, _)| k.as_str() != Some("id"))
+            .flat_map(|(_, v)| match v {
+                serde_yaml_ng::Value::Sequence(s) => s.iter().map(|x| x.as_f64().unwrap()).collect(),
+                v => vec![v.as_f64().unwrap()],
+            })
+            .collect();
+        assert_eq!(list, fields, "{}", effect.id());
+        assert_eq!(Effect::from_parameters(effect.id(), &list).unwrap(), effect);
+    }
+    for (id, p, words) in [
+        ("gremlins", vec![1.0], "unknown effect `gremlins`"),
+        ("sensor_bias", vec![], "takes 1 parameters, not 0"),
+        ("viscoelastic_relaxation", vec![1.0, 2.0, 3.0], "takes 2 parameters, not 3"),
+        ("viscoelastic_relaxation", vec![1.0, f64::NAN], "finite"),
+        ("hysteresis", vec![1.5, 0.01], "fraction must be in [0, 1)"),
+        ("time_delay", vec![1e300], "delay must be in"),
+    ] {
+        let err = Effect::from_parameters(id, &p).unwrap_err().to_string();
+        assert!(err.contains(words), "{id} {p:?}: expected `{words}` in `{err}`");
+    }
+}
+
+#[test]
 fn yaml_mistakes_are_named() {
     for (yaml, words) in [
         ("kind: kelvin_voigt\nstiffness: 10\nexponents: {a: 1.5, b: 0, c: 1}\n", "kind kelvin_voigt has exponents"),

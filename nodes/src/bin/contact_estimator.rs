@@ -14,7 +14,7 @@ use nalgebra::Vector3;
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::softcontact_msgs::ContactState;
 use softcontact_msgs::std_msgs::Header;
-use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ForcePairing, ModelMsg, Params};
+use softcontact_nodes::contact_estimator::{ForcePairing, ModelMsg, Params};
 use softcontact_nodes::geometry;
 use softcontact_nodes::liveness::{StreamWatch, first_dead};
 use softcontact_nodes::params::{self, ParamArgs};
@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
     ros::init_logging("contact_estimator");
     let (p, declared) = params::load::<Params>("contact_estimator", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
-    let mut estimator = ContactEstimatorNode::new(p.estimator_config())?.with_refits(&p, f64::NEG_INFINITY);
+    let mut estimator = p.estimator(f64::NEG_INFINITY)?;
     let normal = Vector3::from(p.normal).normalize();
     let mut node = ros::node_with_parameters("contact_estimator", declared)?;
     let mut wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;

@@ -265,7 +265,10 @@ impl ControllerNode {
     /// The node as the parameters describe it, with their initial model.
     pub fn from_params(params: &Params) -> Result<Self, ControlError> {
         let law = DeformationController::new(params.controller_config(), params.initial_model.clone())?;
-        Self::new(params, law)
+        let mut node = Self::new(params, law)?;
+        // A known surface places the initial model as an estimate would, at the first command in contact.
+        node.pending_model = params.initial_surface.map(|p| (params.initial_model.clone(), Vector3::from(p)));
+        Ok(node)
     }
 
     pub fn geometry(&self) -> &ContactGeometry {
@@ -321,14 +324,16 @@ impl ControllerNode {
         }
     }
 
-    /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted first (seed
-    /// 001: once per command cycle); if it is refused the command goes on with the present model, and
-    /// the refusal is returned beside the command's own result.
+    /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted first, once
+    /// in contact (seed 001: once per command cycle); if it is refused the command goes on with the
+    /// present model, and the refusal is returned beside the command's own result.
     pub fn on_force_command(&mut self, force: f64, duration: f64) -> (Option<ControlError>, Result<(), ControlError>) {
         if self.retare.is_some() {
             return (None, Err(ControlError::Retaring));
         }
-        let refused = self.pending_model.take().and_then(|(m, surface)| {
+        // Out of contact a model waits: its surface is placed relative to the onset, not yet found.
+        let waiting = if self.law.contact_level().is_some() { self.pending_model.take() } else { None };
+        let refused = waiting.and_then(|(m, surface)| {
             let adopted = self.law.adopt_estimate(m, &surface, None);
             self.count_adoption(adopted.is_ok());
             adopted.err()
@@ -781,6 +786,59 @@ mod tests {
         // The true force of the simulated sponge at the end agrees with the sensor's (tared) reading.
         let truth = cell.sim.contact().normal_force;
         assert!((reached - truth).abs() < 0.05 * 60.0, "reached {reached} N, the surface pushes {truth} N");
+    }
+
+    /// The true force the sponge pushes with at the end of a 60 N press through `node` in the cell.
+    fn press_60(node: ControllerNode) -> (crate::cell::Cell, f64, Option<ControlError>) {
+        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
+        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+        let law =
+            DeformationController::new(super::super::ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge())
+                .unwrap();
+        let mut cell =
+            crate::cell::Cell::new(config, law, ContactEstimatorNode::new(EstimatorConfig::default()).unwrap())
+                .unwrap();
+        cell.controller = node;
+        cell.start(5000).unwrap();
+        // Before contact a command is refused, and the known surface still waits.
+        assert!(matches!(cell.controller.on_force_command(60.0, 0.5), (None, Err(ControlError::NoContact))));
+        while !cell.cycle().unwrap().unwrap().controller.in_contact {}
+        for _ in 0..500 {
+            cell.cycle().unwrap();
+        }
+        let (refused, taken) = cell.controller.on_force_command(60.0, 0.5);
+        assert!(taken.is_ok(), "{taken:?}");
+        for _ in 0..600 {
+            cell.cycle().unwrap();
+        }
+        let truth = cell.sim.contact().normal_force;
+        (cell, truth, refused)
+    }
+
+    #[test]
+    fn a_known_surface_places_the_initial_model_at_the_first_command_in_contact() {
+        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+        let surface = config.surface.as_ref().unwrap().point;
+        let params = |known: Option<[f64; 3]>| Params {
+            initial_model: softcontact_sim::sponge(),
+            initial_surface: known,
+            ..Params::default()
+        };
+        let (cell, placed, refused) = press_60(ControllerNode::from_params(&params(Some(surface.into()))).unwrap());
+        assert!(refused.is_none(), "{refused:?}");
+        // The onset fired below the surface (a soft sponge reaches the threshold late); the command put
+        // the model's surface where it is.
+        let n = cell.controller.law.config().normal;
+        let level = cell.controller.law.contact_level().unwrap();
+        assert!(surface.dot(&n) < level, "the onset at {level} m, the surface at {} m along n", surface.dot(&n));
+        let (_, onset_only, _) = press_60(ControllerNode::from_params(&params(None)).unwrap());
+        assert!((placed - 60.0).abs() < 0.01 * 60.0, "with the surface known: {placed} N for 60 N");
+        assert!((placed - 60.0).abs() < 0.5 * (onset_only - 60.0).abs(), "{placed} N against {onset_only} N");
+        // A placement beyond max_surface_offset from the onset is refused, the command still taken.
+        let far = surface - 0.05 * n;
+        let (_, unplaced, refused) = press_60(ControllerNode::from_params(&params(Some(far.into()))).unwrap());
+        assert!(matches!(refused, Some(ControlError::ImplausibleModel(_))), "{refused:?}");
+        assert!((unplaced - onset_only).abs() < 1e-6, "{unplaced} N against {onset_only} N");
     }
 
     #[test]
