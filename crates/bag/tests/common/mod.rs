@@ -7,7 +7,7 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyVa
 use softcontact_msgs::geometry_msgs::*;
 use softcontact_msgs::rosgraph_msgs::Clock;
 use softcontact_msgs::sensor_msgs::JointState;
-use softcontact_msgs::softcontact_msgs::{ContactModel, ContactState, ControllerState, ForceCommand};
+use softcontact_msgs::softcontact_msgs::{ContactEffect, ContactModel, ContactState, ControllerState, ForceCommand};
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::tf2_msgs::TFMessage;
 
@@ -104,6 +104,10 @@ pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
                 window_fill: 1.0,
                 stiffness_excited: true,
                 damping_excited: i.is_multiple_of(2),
+                effects: vec![
+                    ContactEffect { id: "viscoelastic_relaxation".into(), parameters: vec![2500.0 + x, 0.15] },
+                    ContactEffect { id: "sensor_drift".into(), parameters: vec![-0.004] },
+                ],
             }),
         ),
         (
