@@ -315,6 +315,7 @@ fn plausible_for(model: &ContactModel, config: &ControllerConfig) -> Result<(), 
     Ok(())
 }
 
+#[derive(Clone)]
 pub struct DeformationController {
     config: ControllerConfig,
     model: Model,
@@ -765,11 +766,16 @@ impl DeformationController {
         self.last_tick = Some(time);
         self.time += dt;
         let force_rate = self.force_rate(normal_force, dt);
-        // The surface's force as the reading says it: without the sensor's named bias and drift.
+        // The surface's force as the reading says it: without the sensor's named bias and drift. Only
+        // while a force command stands on the surface: holding or in free space the correction would be
+        // fed forward as a push of its own (a wrong bias of −12 N pressed a holding hand to 20 N).
         let most = MAX_SENSOR_CORRECTION * self.config.limits.max_force;
-        let surface_force = self.inverse.as_ref().map_or(normal_force, |i| {
-            normal_force - (normal_force - i.surface_reading(normal_force)).clamp(-most, most)
-        });
+        let surface_force = match &self.inverse {
+            Some(i) if self.f_cmd > 0.0 && self.contact_level.is_some() => {
+                normal_force - (normal_force - i.surface_reading(normal_force)).clamp(-most, most)
+            }
+            _ => normal_force,
+        };
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -1162,14 +1168,17 @@ impl crate::params::NodeParams for Params {
             "a valid contact model",
             "the model used until the estimator has one (a rough guess is enough to start identification)",
         );
+        let far = crate::contact_estimator::MAX_SURFACE_DISTANCE;
         let surface = match self.initial_surface {
-            Some(p) if !p.iter().all(|v| v.is_finite()) => Err(format!("{p:?} is not finite")),
+            Some(p) if !(p.iter().all(|v| v.is_finite()) && Vector3::from(p).norm() <= far) => {
+                Err(format!("{p:?} is not finite or farther than {far} m from the base"))
+            }
             _ => Ok(()),
         };
         d.rule(
             "initial_surface",
             surface,
-            "null, or a finite point [x, y, z] [m]",
+            "null, or a point [x, y, z] within 5 m of the base [m]",
             "where the undeformed surface lies in the world, if known before contact (`softcontact discrepancy FILE --out DIR` writes the workflow's placement into DIR/NAME.params.yaml): the first force command in contact places initial_model's surface there, refused beyond max_surface_offset from the onset [m]",
         );
         d.rule(
@@ -1491,6 +1500,7 @@ mod tests {
             ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 1e300, 0.0).unwrap(),
             with(Effect::ViscoelasticRelaxation { stiffness: 1e3, time_constant: 1e-300 }),
             with(Effect::Hysteresis { fraction: 0.999999, velocity_scale: 0.05 }),
+            with(Effect::Hysteresis { fraction: 0.5, velocity_scale: 1e-300 }),
             // Each within its bound, together beyond it.
             {
                 let mut m = sponge.clone();

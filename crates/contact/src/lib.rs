@@ -68,8 +68,8 @@ pub use loading_paths::{
 };
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_CONTACT_STIFFNESS, MAX_DELAY, MAX_EFFECTS,
-    MAX_HYSTERESIS, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT, MAX_SURFACE_DRIFT, PLAUSIBLE_DEPTH, SensorInputs,
-    TIME_CONSTANT_RANGE, gravity_change, maxwell_step, maxwell_step_with_decay,
+    MAX_HYSTERESIS, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT, MAX_SURFACE_DRIFT, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH,
+    SensorInputs, TIME_CONSTANT_RANGE, gravity_change, maxwell_step, maxwell_step_with_decay,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

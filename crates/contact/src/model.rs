@@ -154,6 +154,7 @@ impl Effect {
                 Err(ContactError::InvalidModel(format!("effect `{id}` takes {n} parameters, not {}", p.len())))
             }
         };
+        // (A stranger's id may be any length: only a known one is echoed whole.)
         let effect = match id {
             "viscoelastic_relaxation" => {
                 arity(2).map(|_| Effect::ViscoelasticRelaxation { stiffness: p[0], time_constant: p[1] })
@@ -165,7 +166,9 @@ impl Effect {
             "time_delay" => arity(1).map(|_| Effect::TimeDelay { delay: p[0] }),
             "sensor_crosstalk" => arity(3).map(|_| Effect::SensorCrosstalk { coupling: [p[0], p[1], p[2]] }),
             "tool_gravity" => arity(1).map(|_| Effect::ToolGravity { mass: p[0] }),
-            _ => Err(ContactError::InvalidModel(format!("unknown effect `{id}`"))),
+            _ => {
+                Err(ContactError::InvalidModel(format!("unknown effect `{}`", id.chars().take(40).collect::<String>())))
+            }
         }?;
         effect.validate()?;
         Ok(effect)
@@ -312,6 +315,9 @@ pub const PLAUSIBLE_DEPTH: f64 = 0.1;
 pub const TIME_CONSTANT_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
 /// The largest hysteresis of a plausible model (a share of the elastic force).
 pub const MAX_HYSTERESIS: f64 = 0.5;
+/// The slowest speed over which a plausible model's hysteresis turns [m/s]: slower is a switch on the
+/// sign of the sensor's noise.
+pub const MIN_HYSTERESIS_SCALE: f64 = 1e-4;
 /// The fastest surface offset drift of a plausible model [m/s]: a surface at rest.
 pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
 /// The fastest sensor drift of a plausible model [N/s] (a warming F/T sensor drifts mN/s).
@@ -433,6 +439,11 @@ impl ContactModel {
                     ));
                 }
                 Effect::ViscoelasticRelaxation { stiffness: k, .. } => stiffness += k,
+                Effect::Hysteresis { velocity_scale, .. } if velocity_scale < MIN_HYSTERESIS_SCALE => {
+                    return bad(format!(
+                        "hysteresis turning over {velocity_scale} m/s, slower than {MIN_HYSTERESIS_SCALE} m/s"
+                    ));
+                }
                 Effect::Hysteresis { fraction, .. } => hysteresis += fraction,
                 Effect::ContactOffsetDrift { rate } => surface_drift += rate,
                 Effect::SensorDrift { rate } => sensor_drift += rate,

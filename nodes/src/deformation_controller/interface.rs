@@ -165,9 +165,21 @@ impl ControllerInterface {
                 }
                 continue;
             }
-            let outcome = model_from_msg(&m).map_err(ControlError::from).and_then(|(m, s)| control.on_model(m, s));
+            let outcome = match model_from_msg(&m) {
+                Ok((model, surface)) => control.on_model(model, surface),
+                Err(e) => {
+                    // A message that is no model is refused as an implausible one is.
+                    control.counters.models_refused += 1;
+                    Err(ControlError::from(e))
+                }
+            };
             if let Err(e) = outcome {
-                self.log(LogLevel::Warn, &format!("model refused: {e}"));
+                // The log backs off as refusals repeat (a stranger may send them at any rate).
+                if control.counters.models_refused.is_power_of_two() {
+                    let why: String = e.to_string().chars().take(300).collect();
+                    let n = control.counters.models_refused;
+                    self.log(LogLevel::Warn, &format!("model refused ({n} so far): {why}"));
+                }
             }
         }
         while let Ok(Some((c, _))) = self.commands.take() {

@@ -324,21 +324,34 @@ impl ControllerNode {
         }
     }
 
-    /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted first, once
-    /// in contact (seed 001: once per command cycle); if it is refused the command goes on with the
-    /// present model, and the refusal is returned beside the command's own result.
+    /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted with it,
+    /// once in contact (seed 001: once per command cycle); if the model is refused the command goes on
+    /// with the present model, and the refusal is returned beside the command's own result. A command
+    /// refused changes nothing: the model keeps waiting for the next.
     pub fn on_force_command(&mut self, force: f64, duration: f64) -> (Option<ControlError>, Result<(), ControlError>) {
         if self.retare.is_some() {
             return (None, Err(ControlError::Retaring));
         }
         // Out of contact a model waits: its surface is placed relative to the onset, not yet found.
         let waiting = if self.law.contact_level().is_some() { self.pending_model.take() } else { None };
-        let refused = waiting.and_then(|(m, surface)| {
-            let adopted = self.law.adopt_estimate(m, &surface, None);
-            self.count_adoption(adopted.is_ok());
-            adopted.err()
-        });
-        (refused, self.law.command_force(force, duration))
+        let Some((model, surface)) = waiting else { return (None, self.law.command_force(force, duration)) };
+        let before = self.law.clone();
+        if let Err(refused) = self.law.adopt_estimate(model.clone(), &surface, None) {
+            self.count_adoption(false);
+            return (Some(refused), self.law.command_force(force, duration));
+        }
+        match self.law.command_force(force, duration) {
+            Ok(()) => {
+                self.count_adoption(true);
+                (None, Ok(()))
+            }
+            Err(e) => {
+                // A refused command changes nothing: the law as it was, the model still waiting.
+                self.law = before;
+                self.pending_model = Some((model, surface));
+                (None, Err(e))
+            }
+        }
     }
 
     /// Retreat and re-tare: lifts the hand off the surface it holds. Needs contact (the hand still on
@@ -839,6 +852,37 @@ mod tests {
         let (_, unplaced, refused) = press_60(ControllerNode::from_params(&params(Some(far.into()))).unwrap());
         assert!(matches!(refused, Some(ControlError::ImplausibleModel(_))), "{refused:?}");
         assert!((unplaced - onset_only).abs() < 1e-6, "{unplaced} N against {onset_only} N");
+    }
+
+    #[test]
+    fn a_refused_command_leaves_the_model_waiting_and_the_hand_where_it_is() {
+        use softcontact_contact::{Effect, Kind};
+        let mut cell = pressing_cell();
+        let n = cell.controller.law.config().normal;
+        let level = cell.controller.law.contact_level().unwrap();
+        let before = cell.sim.contact().normal_force;
+        // A soft model with a sensor bias, its surface 9.5 mm below the onset: 250 N would need more
+        // than max_deformation, so the command is refused.
+        let model = ContactModel {
+            effects: vec![Effect::SensorBias { offset: -12.0 }],
+            ..ContactModel::new(Kind::KelvinVoigt, 4000.0, 0.0).unwrap()
+        };
+        let surface = n * (level + 0.0095);
+        assert_eq!(cell.controller.on_model(model.clone(), surface), Ok(false));
+        let (refused, taken) = cell.controller.on_force_command(250.0, 2.0);
+        assert!(refused.is_none() && matches!(taken, Err(ControlError::Limit(_))), "{refused:?} {taken:?}");
+        let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
+        for _ in 0..7000 {
+            cell.cycle().unwrap();
+            let f = cell.sim.contact().normal_force;
+            (low, high) = (low.min(f), high.max(f));
+        }
+        assert!(before - low < 1.0 && high - before < 1.0, "{before} N before, then {low}..{high} N");
+        assert_ne!(cell.controller.law.contact_model(), &model, "the refused command took the model");
+        // The model still waits, and comes with the next command that is taken.
+        let (refused, taken) = cell.controller.on_force_command(20.0, 2.0);
+        assert!(refused.is_none() && taken.is_ok(), "{refused:?} {taken:?}");
+        assert_eq!(cell.controller.law.contact_model(), &model);
     }
 
     #[test]
