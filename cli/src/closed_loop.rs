@@ -73,11 +73,12 @@ pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<()> {
     let recording = Recording::open(&args.recording.file)?;
     let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let normal = Vector3::new(x, y, z).normalize();
-    let commands = commands(&recording)?;
+    let read = read(&recording, &analysis.series.t)?;
+    let first_q = read.first_q.with_context(|| format!("the recording has no {JOINT_STATES}"))?;
+    let commands = first_experiment(read.commands)?;
     let (t0, t1) = (commands[0].0, commands.last().map_or(0.0, |c| c.0 + c.2) + 0.5);
     anyhow::ensure!(t1 - t0 <= MAX_SECONDS, "the commands span {:.0} s, more than {MAX_SECONDS} s", t1 - t0);
-    let recorded = recorded(&recording, analysis, t0, t1)?;
-    let first_q = first_joint_state(&recording)?;
+    let recorded = recorded(&read.q_at, analysis, t0, t1)?;
     let report = &analysis.report;
     let augmented_surface = analysis.surface + report.contact_shift * normal;
     println!(
@@ -114,19 +115,47 @@ pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The first experiment's force commands: (time [s], force [N], duration [s]).
-fn commands(recording: &Recording) -> anyhow::Result<Vec<(f64, f64, f64)>> {
+/// What the replay needs of the recording, read in one pass: every force command (time [s], force [N],
+/// duration [s]), the first joint state, and the joint angles in force at each of the workflow's samples
+/// (the first joint state stamped at or after it; as many as the series has samples, so memory stays
+/// bounded with the series).
+struct Read {
+    commands: Vec<(f64, f64, f64)>,
+    first_q: Option<[f64; 7]>,
+    q_at: Vec<[f64; 7]>,
+}
+
+fn read(recording: &Recording, series_t: &[f64]) -> anyhow::Result<Read> {
     anyhow::ensure!(recording.topic(FORCE_COMMAND).is_some(), "the recording has no {FORCE_COMMAND} to replay");
-    let mut all = Vec::new();
+    let mut read = Read { commands: Vec::new(), first_q: None, q_at: Vec::new() };
     for m in recording.messages() {
         let m = m?;
-        if m.topic() == FORCE_COMMAND {
-            let c = m.decode::<ForceCommand>()?;
-            anyhow::ensure!(c.force.is_finite() && c.duration.is_finite(), "a force command that is not finite");
-            all.push((m.log_time as f64 * 1e-9, c.force, c.duration));
-            anyhow::ensure!(all.len() <= 10_000, "more than 10 000 force commands");
+        match m.topic() {
+            FORCE_COMMAND => {
+                let c = m.decode::<ForceCommand>()?;
+                anyhow::ensure!(c.force.is_finite() && c.duration.is_finite(), "a force command that is not finite");
+                read.commands.push((m.log_time as f64 * 1e-9, c.force, c.duration));
+                anyhow::ensure!(read.commands.len() <= 10_000, "more than 10 000 force commands");
+            }
+            JOINT_STATES => {
+                let js = m.decode::<JointState>()?;
+                let Ok(q) = <[f64; 7]>::try_from(&js.position[..]) else { continue };
+                if read.first_q.is_none() && q.iter().all(|v| v.is_finite()) {
+                    read.first_q = Some(q);
+                }
+                let t = js.header.stamp.as_secs_f64();
+                while read.q_at.len() < series_t.len() && series_t[read.q_at.len()] <= t {
+                    read.q_at.push(q);
+                }
+            }
+            _ => {}
         }
     }
+    Ok(read)
+}
+
+/// The first experiment of `all` force commands: up to the first pause three times their usual spacing.
+fn first_experiment(mut all: Vec<(f64, f64, f64)>) -> anyhow::Result<Vec<(f64, f64, f64)>> {
     let mut gaps: Vec<f64> = all.windows(2).map(|w| w[1].0 - w[0].0).collect();
     gaps.sort_by(f64::total_cmp);
     let usual = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::INFINITY);
@@ -136,49 +165,20 @@ fn commands(recording: &Recording) -> anyhow::Result<Vec<(f64, f64, f64)>> {
     Ok(all)
 }
 
-fn first_joint_state(recording: &Recording) -> anyhow::Result<[f64; 7]> {
-    for m in recording.messages() {
-        let m = m?;
-        if m.topic() == JOINT_STATES {
-            let js = m.decode::<JointState>()?;
-            if let Ok(q) = <[f64; 7]>::try_from(&js.position[..])
-                && q.iter().all(|v| v.is_finite())
-            {
-                return Ok(q);
-            }
-        }
-    }
-    anyhow::bail!("the recording has no {JOINT_STATES}")
-}
-
 /// The recording between t0 and t1 on the replay's time axis: the workflow's series (force and
-/// deformation, 10 ms) and the joint states nearest each of its samples.
-fn recorded(recording: &Recording, analysis: &Analysis, t0: f64, t1: f64) -> anyhow::Result<Signals> {
+/// deformation, 10 ms) and the joint angles in force at each of its samples.
+fn recorded(q_at: &[[f64; 7]], analysis: &Analysis, t0: f64, t1: f64) -> anyhow::Result<Signals> {
     let s = &analysis.series;
     let mut out = Signals::default();
-    for i in 0..s.t.len() {
-        if s.t[i] >= t0 && s.t[i] <= t1 {
-            out.t.push(s.t[i] - t0);
-            out.force.push(s.f[i]);
-            out.deformation.push(s.z[i]);
+    for i in (0..s.t.len()).filter(|&i| s.t[i] >= t0 && s.t[i] <= t1) {
+        out.t.push(s.t[i] - t0);
+        out.force.push(s.f[i]);
+        out.deformation.push(s.z[i]);
+        if let Some(q) = q_at.get(i) {
+            out.q.push(*q);
         }
     }
     anyhow::ensure!(out.t.len() >= 10, "the recording has no force readings after its first command");
-    let mut next = 0;
-    for m in recording.messages() {
-        let m = m?;
-        if m.topic() != JOINT_STATES || next >= out.t.len() {
-            continue;
-        }
-        let js = m.decode::<JointState>()?;
-        let t = js.header.stamp.as_secs_f64() - t0;
-        if let Ok(q) = <[f64; 7]>::try_from(&js.position[..]) {
-            while next < out.t.len() && out.t[next] <= t {
-                out.q.push(q);
-                next += 1;
-            }
-        }
-    }
     let last = *out.q.last().context("no joint states after the first command")?;
     out.q.resize(out.t.len(), last);
     Ok(out)

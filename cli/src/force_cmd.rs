@@ -4,7 +4,7 @@
 
 use std::time::{Duration, Instant};
 
-use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalStatusEnum};
+use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalId, GoalStatusEnum};
 use ros2_client::{ActionTypeName, Name};
 use softcontact_msgs::softcontact_msgs::{ControllerState, PressForceFeedback, PressForceGoal, PressForceResult};
 use softcontact_nodes::deformation_controller::PRESS_ACTION;
@@ -68,37 +68,25 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     }
     let (accepted, goal_id) =
         sent.ok_or_else(|| anyhow::anyhow!("no answer from {PRESS_ACTION} (--service-mapping of the controller?)"))?;
-    anyhow::ensure!(
-        accepted,
-        "the controller refused {} N over {} s (out of its limits? see its log or /rosout)",
-        args.force,
-        args.duration
-    );
+    if !accepted {
+        // The controller keeps the reason as the refused goal's result.
+        let why = result(&press, goal_id, 2.0, false)?
+            .map_or_else(|| "see its log or /rosout".to_string(), |(_, r)| r.message);
+        anyhow::bail!("the controller refused {:?} N over {:?} s: {why}", args.force, args.duration);
+    }
     println!("force command {:.2} N over {:.2} s taken", args.force, args.duration);
     if args.no_wait {
         return Ok(());
     }
-    // The result comes at the end of the move; asked for once more if the first request went astray.
-    let mut outcome = None;
-    'result: for _ in 0..2 {
-        let request = press.request_result(goal_id).map_err(|e| anyhow::anyhow!("asking for the result: {e:?}"))?;
-        let end = Instant::now() + Duration::from_secs_f64(args.duration + 3.0);
-        while Instant::now() < end {
-            while let Ok(Some(f)) = press.receive_feedback(goal_id) {
-                if args.verbose {
-                    println!("  {}: {:.2} N, deformation {:.2} mm", f.phase, f.force, f.deformation * 1e3);
-                }
-            }
-            if let Ok(Some(r)) = press.receive_result(request) {
-                outcome = Some(r);
-                break 'result;
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    }
+    // The result comes at the end of the move.
+    let outcome = result(&press, goal_id, args.duration + 3.0, args.verbose)?;
     let (status, result) = outcome.ok_or_else(|| anyhow::anyhow!("no result from {PRESS_ACTION}"))?;
     anyhow::ensure!(status == GoalStatusEnum::Succeeded, "the press ended {status:?}: {}", result.message);
-    let error = result.error / args.force.max(1e-9);
+    if args.force == 0.0 {
+        println!("reached {:.2} N for 0 N", result.force);
+        return Ok(());
+    }
+    let error = result.error / args.force;
     println!("reached {:.2} N for {:.2} N ({:+.2} %)", result.force, args.force, error * 100.0);
     if let Some(tolerance) = args.tolerance {
         anyhow::ensure!(error.abs() <= tolerance, "off by {:.2} %, beyond ±{:.2} %", error * 100.0, tolerance * 100.0);
@@ -106,11 +94,36 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+type Press = ActionClient<PressForceGoal, PressForceResult, PressForceFeedback>;
+
+/// The goal's result, waiting up to `seconds` (asked for once more if the first request went astray);
+/// `verbose` prints the feedback meanwhile.
+fn result(
+    press: &Press,
+    goal_id: GoalId,
+    seconds: f64,
+    verbose: bool,
+) -> anyhow::Result<Option<(GoalStatusEnum, PressForceResult)>> {
+    for _ in 0..2 {
+        let request = press.request_result(goal_id).map_err(|e| anyhow::anyhow!("asking for the result: {e:?}"))?;
+        let end = Instant::now() + Duration::from_secs_f64(seconds);
+        while Instant::now() < end {
+            while let Ok(Some(f)) = press.receive_feedback(goal_id) {
+                if verbose {
+                    println!("  {}: {:.2} N, deformation {:.2} mm", f.phase, f.force, f.deformation * 1e3);
+                }
+            }
+            if let Ok(Some(r)) = press.receive_result(request) {
+                return Ok(Some(r));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+    Ok(None)
+}
+
 /// The client of the controller's force action, with the QoS of ROS 2 actions.
-fn press_client(
-    node: &mut ros2_client::Node,
-    mapping: &str,
-) -> anyhow::Result<ActionClient<PressForceGoal, PressForceResult, PressForceFeedback>> {
+fn press_client(node: &mut ros2_client::Node, mapping: &str) -> anyhow::Result<Press> {
     let (ns, base) = PRESS_ACTION.rsplit_once('/').expect("a namespaced name");
     let qos = ActionClientQosPolicies {
         goal_service: ros::reliable_qos(),

@@ -245,7 +245,8 @@ impl Default for Params {
 }
 
 impl Params {
-    /// The contact model of `surface_model`, read and checked (None: the preset's).
+    /// The contact model of `surface_model`, read and checked (None: the preset's); an error names the
+    /// file, not the parameter.
     pub fn surface_model(&self) -> Result<Option<ContactModel>, String> {
         if self.surface_model.is_empty() {
             return Ok(None);
@@ -254,9 +255,9 @@ impl Params {
             return Err("surface_model given with surface none".into());
         }
         let text = crate::params::read_small(std::path::Path::new(&self.surface_model))
-            .map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
-        let model = ContactModel::from_yaml(&text).map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
-        model.plausible().map_err(|e| format!("surface_model {}: {e}", self.surface_model))?;
+            .map_err(|e| format!("{}: {e}", self.surface_model))?;
+        let model = ContactModel::from_yaml(&text).map_err(|e| format!("{}: {e}", self.surface_model))?;
+        model.plausible().map_err(|e| format!("{}: {e}", self.surface_model))?;
         Ok(Some(model))
     }
 }

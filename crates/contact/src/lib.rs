@@ -69,7 +69,7 @@ pub use loading_paths::{
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_CONTACT_STIFFNESS, MAX_DELAY, MAX_EFFECTS,
     MAX_HYSTERESIS, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT, MAX_SURFACE_DRIFT, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH,
-    SensorInputs, TIME_CONSTANT_RANGE, gravity_change, maxwell_step, maxwell_step_with_decay,
+    SensorInputs, TIME_CONSTANT_RANGE, finite, gravity_change, maxwell_step, maxwell_step_with_decay,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

@@ -299,7 +299,8 @@ pub(crate) fn pow(z: f64, e: f64) -> f64 {
     }
 }
 
-pub(crate) fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
+/// `v` if it is a finite number, else the error naming it.
+pub fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
     if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 

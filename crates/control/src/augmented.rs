@@ -17,7 +17,7 @@
 //! named bias and drift are what a reading carries besides the surface force ([`AugmentedInverse::surface_reading`]).
 //! Pure, and every per-tick method allocates nothing.
 
-use softcontact_contact::{ContactError, ContactModel, EffectState};
+use softcontact_contact::{ContactError, ContactModel, EffectState, finite};
 
 use crate::quintic::{Quintic, Reference};
 
@@ -169,10 +169,6 @@ impl AugmentedInverse {
         }
         Err(ContactError::InvalidModel(format!("the augmented model gives no move to {force} N in {duration} s")))
     }
-}
-
-fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
-    if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 
 #[cfg(test)]

@@ -30,18 +30,18 @@ pub struct Limits {
     pub force_limit: f64,
 }
 
-/// Why a command was refused.
+/// Why a command was refused (numbers as Rust's shortest round trip: 1e300 stays short).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LimitError {
-    #[error("force command {0} N is outside [0, {1}] N")]
+    #[error("force command {0:?} N is outside [0, {1:?}] N")]
     Force(f64, f64),
-    #[error("the force command needs a deformation of {0} m, beyond the surface's limit of {1} m")]
+    #[error("the force command needs a deformation of {0:?} m, beyond the surface's limit of {1:?} m")]
     Deformation(f64, f64),
-    #[error("a lift of {0} m is beyond the limit of {1} m")]
+    #[error("a lift of {0:?} m is beyond the limit of {1:?} m")]
     Lift(f64, f64),
-    #[error("move duration {0} s is outside [{1}, {2}] s")]
+    #[error("move duration {0:?} s is outside [{1:?}, {2:?}] s")]
     Duration(f64, f64, f64),
-    #[error("a move at {0} m/s is faster than {1} m/s: give it more time")]
+    #[error("a move at {0:?} m/s is faster than {1:?} m/s: give it more time")]
     Rate(f64, f64),
     #[error("the command is not a finite number")]
     NonFinite,

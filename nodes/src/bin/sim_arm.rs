@@ -38,7 +38,7 @@ fn main() -> anyhow::Result<()> {
         SurfaceKind::LabDice => Some(softcontact_sim::lab_dice()),
         SurfaceKind::None => None,
     };
-    match p.surface_model().map_err(anyhow::Error::msg)?.or(model) {
+    match p.surface_model().map_err(|e| anyhow::anyhow!("surface_model: {e}"))?.or(model) {
         Some(m) => config.surface.as_mut().expect("preset has a surface").model = m,
         None => config.surface = None,
     }

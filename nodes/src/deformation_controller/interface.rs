@@ -183,21 +183,23 @@ impl ControllerInterface {
             }
         }
         while let Ok(Some((c, _))) = self.commands.take() {
-            if self.command(control, c.force, c.duration) {
+            if self.command(control, c.force, c.duration).is_ok() {
                 self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "superseded by a force command");
             }
         }
         while let Ok(Some((id, request))) = self.server.receive_goal() {
             let (force, duration) = (request.goal.force, request.goal.duration);
-            let accepted = self.command(control, force, duration);
+            let commanded = self.command(control, force, duration);
+            let accepted = commanded.is_ok();
             let stamp = ros2_client::builtin_interfaces::Time::now();
-            if accepted {
+            if let Err(why) = commanded {
+                // The reason waits as the goal's result, for the client that asks.
+                let result = PressForceResult { force: f64::NAN, error: f64::NAN, message: why };
+                self.remember(request.goal_id, GoalStatusEnum::Aborted, result);
+            } else {
                 self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "superseded by a newer goal");
                 let press = Press::new(force, duration, control.law.time());
                 self.goal = Some(Goal { info: GoalInfo { goal_id: request.goal_id, stamp }, press });
-            } else {
-                let result = PressForceResult { force: f64::NAN, error: f64::NAN, message: "refused".into() };
-                self.remember(request.goal_id, GoalStatusEnum::Aborted, result);
             }
             let _ = self.server.send_goal_response(id, SendGoalResponse { accepted, stamp });
             self.publish_statuses();
@@ -305,7 +307,8 @@ impl ControllerInterface {
     }
 
     /// A force command from the topic or a goal; whether the controller took it (logged either way).
-    fn command(&mut self, control: &mut ControllerNode, force: f64, duration: f64) -> bool {
+    /// A force command or goal: taken, or why not.
+    fn command(&mut self, control: &mut ControllerNode, force: f64, duration: f64) -> Result<(), String> {
         let (model_refused, commanded) = control.on_force_command(force, duration);
         if let Some(e) = model_refused {
             self.log(LogLevel::Warn, &format!("model refused: {e}"));
@@ -315,11 +318,11 @@ impl ControllerInterface {
                 let m = control.law.contact_model();
                 let what = format!("{:?} k {:.0} λ {:.1}", m.kind, m.stiffness, m.damping);
                 self.log(LogLevel::Info, &format!("force command {force:.2} N over {duration:.2} s ({what})"));
-                true
+                Ok(())
             }
             Err(e) => {
-                self.log(LogLevel::Error, &format!("force command {force} N refused: {e}"));
-                false
+                self.log(LogLevel::Error, &format!("force command {force:?} N refused: {e}"));
+                Err(e.to_string())
             }
         }
     }
