@@ -751,8 +751,9 @@ mod tests {
         }
     }
 
-    /// A node on the simulated sponge, in contact and holding (the cell's own node).
-    fn pressing_cell() -> crate::cell::Cell {
+    /// The lockstep cell above the simulated sponge, started (the hand not yet down): with the cell's
+    /// own node around the sponge's model, or with `node`.
+    fn sponge_cell(node: Option<ControllerNode>) -> crate::cell::Cell {
         use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
         let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
         let law =
@@ -761,11 +762,25 @@ mod tests {
         let mut cell =
             crate::cell::Cell::new(config, law, ContactEstimatorNode::new(EstimatorConfig::default()).unwrap())
                 .unwrap();
+        if let Some(node) = node {
+            cell.controller = node;
+        }
         cell.start(5000).unwrap();
+        cell
+    }
+
+    /// Cycles until the controller reports contact, then holds 0.5 s.
+    fn settle_in_contact(cell: &mut crate::cell::Cell) {
         while !cell.cycle().unwrap().unwrap().controller.in_contact {}
         for _ in 0..500 {
             cell.cycle().unwrap();
         }
+    }
+
+    /// A node on the simulated sponge, in contact and holding (the cell's own node).
+    fn pressing_cell() -> crate::cell::Cell {
+        let mut cell = sponge_cell(None);
+        settle_in_contact(&mut cell);
         cell
     }
 
@@ -803,22 +818,10 @@ mod tests {
 
     /// The true force the sponge pushes with at the end of a 60 N press through `node` in the cell.
     fn press_60(node: ControllerNode) -> (crate::cell::Cell, f64, Option<ControlError>) {
-        use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
-        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
-        let law =
-            DeformationController::new(super::super::ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge())
-                .unwrap();
-        let mut cell =
-            crate::cell::Cell::new(config, law, ContactEstimatorNode::new(EstimatorConfig::default()).unwrap())
-                .unwrap();
-        cell.controller = node;
-        cell.start(5000).unwrap();
+        let mut cell = sponge_cell(Some(node));
         // Before contact a command is refused, and the known surface still waits.
         assert!(matches!(cell.controller.on_force_command(60.0, 0.5), (None, Err(ControlError::NoContact))));
-        while !cell.cycle().unwrap().unwrap().controller.in_contact {}
-        for _ in 0..500 {
-            cell.cycle().unwrap();
-        }
+        settle_in_contact(&mut cell);
         let (refused, taken) = cell.controller.on_force_command(60.0, 0.5);
         assert!(taken.is_ok(), "{taken:?}");
         for _ in 0..600 {
