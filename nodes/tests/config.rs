@@ -39,6 +39,10 @@ fn unsafe_controller_settings_are_refused() {
         "torque_rate:=.nan",
         "onset_confirm:=0",
         "force_limit:=200",
+        "initial_surface:=[.nan,0,0.3]",
+        "initial_surface:=[0,.inf,0.3]",
+        "initial_surface:=[1e300,0,0.3]",
+        "initial_surface:=[0,0]",
     ] {
         let args = ParamArgs { overrides: vec![bad.into()], ..Default::default() };
         assert!(load::<Params>("deformation_controller", &args).is_err(), "{bad} accepted");
