@@ -8,7 +8,6 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 use softcontact_sim::{SimConfig, SimError, Simulator};
-use softcontact_wire::fri::InterfaceState;
 
 use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
 use crate::deformation_controller::{
@@ -130,7 +129,7 @@ impl Cell {
             Some(c) => self.controller.on_force(time, Vector3::new(c[0], c[1], c[2]), time),
             None => self.controller.force_withheld(),
         }
-        let commanding = out.state == InterfaceState::Command;
+        let commanding = out.torque_mode();
         let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
         self.controller.on_external_torque(time, &out.external_torque);
         let step = self.controller.on_joint_state(&joint_state, time);

@@ -3,11 +3,23 @@
 //! KRC expects — joint impedance with zero stiffness, the measured position mirrored, and the KRC's own
 //! gravity removed because the KRC adds it back.
 //!
+//! Torque reaches the arm only in torque mode: the KRC's interface in command state, `robot.control`
+//! joint impedance, the KRL program's handshake saying it started (`$FRI_TO_INT[2]` = 1, and
+//! `$FRI_TO_INT[1]` = 30 where the program reports its strategy), all seven drives powered, no drive
+//! error, a link graded OK or better and no fault latched. In any other state the answer is that mode's
+//! safe command, with no added torque: the measured position (and pose) in position control, Cartesian
+//! impedance or any other strategy, what the KRC commands itself in monitor mode, and in joint impedance
+//! the hold below. Joint states then say "monitor": the controller integrates and plans nothing, and
+//! approaches afresh when torque mode begins again — each beginning is a new KRC session. A KRC that
+//! commands in another strategy is asked to stop, so that the KRL program starts again in joint impedance.
+//!
 //! Safety, in this order: a joint moving faster than `velocity_margin` of its limit, or heading into the
-//! last `limit_margin` before its position limit, is a fault: the driver holds where the arm is, with no
-//! torque of any command, until the KRC starts a new session (as the KRC's own limit switches stop the
-//! arm until the operator acts). A command older than `watchdog_cycles` (or none yet) makes the driver
-//! hold the current position with a stiff joint impedance instead. A torque beyond its joint's limit is
+//! last `limit_margin` before its position limit, is a fault, found as the measurement is read, before
+//! any controller sees it: the driver holds where the arm is, with no torque of any command, and asks
+//! for no start, until the operator restarts the KRL program (the KRC seen out of command mode with
+//! `$FRI_TO_INT[2]` = 10) — never on a silence, a new port or a new session. A command older than
+//! `watchdog_cycles` (or none yet) makes the driver hold the current position with a stiff joint
+//! impedance instead. A torque beyond its joint's limit is
 //! no command a sound controller sends: it is refused (hold), never clipped into one. The driver never
 //! waits for the controller — it answers with the newest command it has and counts stale cycles.
 //!
@@ -23,8 +35,8 @@
 //! - One KRC: the first sender (or the configured `krc_address`) is pinned by IP address; datagrams
 //!   from any other address, or from port 0, are refused and counted as strangers, unanswered. A new
 //!   source port of the pinned address, or measurements resuming after `new_session_after` of silence,
-//!   start a new KRC session: the command, the hold and the velocity history are forgotten, and only a
-//!   command answering a joint state of the new session is applied.
+//!   start a new KRC session: the command, the hold and the velocity history are forgotten (a latched
+//!   fault is not), and only a command answering a joint state of the new session is applied.
 //! - The watchdog counts answered measurements (each one sample time), whatever their sequence
 //!   numbers say: an out-of-order counter is counted, never a way to keep an old command alive.
 //! - A measurement that is not physically plausible (sample time outside 0.5–100 ms, a joint beyond its
@@ -44,7 +56,7 @@ use std::net::{IpAddr, SocketAddr};
 use nalgebra::{Isometry3, Matrix6xX, Vector6};
 use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 use softcontact_wire::WireError;
-use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
+use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
 use crate::writer_pin::{WriterId, WriterPin, WriterRefused};
 
@@ -63,9 +75,14 @@ pub const LIMIT_LOOKAHEAD: f64 = 0.05;
 /// Sample times the KRC can be configured to (FRI: 1 to 100 ms), with a margin below.
 const SAMPLE_TIME: std::ops::RangeInclusive<f64> = 0.0005..=0.1;
 
-/// KRL exchange convention (CentroEPiaggio ros_control.src): `$FRI_FRM_INT[1]` strategy,
-/// `$FRI_FRM_INT[2]` 1 = start.
-const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+/// KRL exchange (krl/softcontact.src, as ros_control.src of the LWR's ROS 1 stack): `$FRI_FRM_INT[1]`
+/// the strategy the remote asks for, `$FRI_FRM_INT[2]` 1 start / 0 stop; `$FRI_TO_INT[2]` 1 started,
+/// 0 stopped, 10 the program just began; `$FRI_TO_INT[1]` the strategy started (softcontact.src only).
+pub const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+pub const KRL_STARTED: i32 = 1;
+pub const KRL_INIT: i32 = 10;
+/// `robot.power`: one bit a drive.
+pub const ALL_DRIVES: u16 = 0x7F;
 /// More lost measurements in a row than this is no longer a gap but a broken counter.
 const MAX_LOST_IN_A_ROW: i32 = 100;
 
@@ -164,6 +181,11 @@ pub struct DriverCounters {
     /// Commands from another writer than the pinned one, or while writers were ambiguous (not part of
     /// `commands_refused`: they never touch the present command).
     pub commands_from_strangers: u64,
+    /// Latched faults cleared by the operator restarting the KRL program.
+    pub faults_cleared: u64,
+    /// Cycles the KRC commanded (any strategy) and the driver applied no torque for a reason other
+    /// than a fault or a stale command: what /diagnostics names.
+    pub waiting_cycles: u64,
 }
 
 /// Why the driver holds until the KRC starts a new session.
@@ -183,7 +205,57 @@ impl std::fmt::Display for Fault {
                 write!(f, "joint {joint} at {position:.4} rad, heading into its position limit")
             }
         }?;
-        write!(f, ": holding until the KRC starts a new session")
+        write!(f, ": holding until the operator restarts the KRL program")
+    }
+}
+
+/// Why the driver applies no torque on a measurement: what it waits for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Waiting {
+    /// The KRC's interface is not in command state.
+    Monitor(InterfaceState),
+    /// In command state, but the KRC runs another control strategy.
+    Strategy(ControlMode),
+    /// The same, after the KRL program was asked to start joint impedance and started this again.
+    StrategyKept(ControlMode),
+    /// The KRL program has not said that it started joint impedance (`$FRI_TO_INT[2]`,
+    /// `$FRI_TO_INT[1]`).
+    Handshake {
+        started: i32,
+        strategy: i32,
+    },
+    /// `robot.power`: not all seven drives on.
+    DrivesOff(u16),
+    /// `robot.error`: a drive error.
+    DriveError(u16),
+    /// The link graded below OK.
+    Quality(Quality),
+    Fault(Fault),
+}
+
+impl std::fmt::Display for Waiting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Waiting::Monitor(state) => {
+                write!(f, "KRC in {state:?} state: waiting for the KRL program to start joint impedance")
+            }
+            Waiting::Strategy(mode) => write!(
+                f,
+                "KRC commands in {mode:?} control: no torque applied; asking the KRL program to stop and start again in joint impedance (strategy {STRATEGY_JOINT_IMPEDANCE})"
+            ),
+            Waiting::StrategyKept(mode) => write!(
+                f,
+                "KRC commands in {mode:?} control: no torque applied; asked for joint impedance, the KRL program started {mode:?} again: it does not take $FRI_FRM_INT[1] (run krl/softcontact.src)"
+            ),
+            Waiting::Handshake { started, strategy } => write!(
+                f,
+                "KRL handshake: $FRI_TO_INT[2] = {started}, $FRI_TO_INT[1] = {strategy}; waiting for {KRL_STARTED} and {STRATEGY_JOINT_IMPEDANCE}"
+            ),
+            Waiting::DrivesOff(power) => write!(f, "drives off (robot.power {power:#04x}): waiting for all seven"),
+            Waiting::DriveError(error) => write!(f, "drive error {error:#06x}: waiting for the KRC to clear it"),
+            Waiting::Quality(q) => write!(f, "FRI link quality {q:?}: waiting for OK or better"),
+            Waiting::Fault(fault) => write!(f, "{fault}"),
+        }
     }
 }
 
@@ -253,6 +325,8 @@ pub struct DriverOutput {
     pub quality: Quality,
     /// The driver is holding position instead of applying the command.
     pub holding: bool,
+    /// Why no torque is applied on this measurement; `None`: torque mode.
+    pub waiting: Option<Waiting>,
     /// The KRC's cycle counter of this measurement.
     pub sequence: u16,
     /// The KRC session this measurement belongs to (published with the joint state).
@@ -261,6 +335,13 @@ pub struct DriverOutput {
     /// simulated time on it, the loop's clock in lockstep (`use_sim_time`), where /clock can lag the
     /// datagram. FRI sends it as f32: whole cycles stay exact for about 2 hours (2^13 s at 1 ms).
     pub krc_time: f64,
+}
+
+impl DriverOutput {
+    /// The driver applies the controller's torque on this measurement (if one is fresh).
+    pub fn torque_mode(&self) -> bool {
+        self.waiting.is_none()
+    }
 }
 
 /// A measurement read by [`LwrDriver::measure`], waiting for [`LwrDriver::answer`].
@@ -294,6 +375,13 @@ pub struct LwrDriver {
     commander: WriterPin,
     hold: Option<Hold>,
     fault: Option<Fault>,
+    /// The newest measurement was in torque mode; torque mode has begun in this session.
+    torque_mode: bool,
+    session_used: bool,
+    /// Times in a row the KRC entered command mode in another strategy than joint impedance, and the
+    /// state of the newest measurement.
+    wrong_starts: u32,
+    last_state: InterfaceState,
     /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
     last_torque: [f32; 7],
     pub counters: DriverCounters,
@@ -324,6 +412,10 @@ impl LwrDriver {
             commander: WriterPin::default(),
             hold: None,
             fault: None,
+            torque_mode: false,
+            session_used: false,
+            wrong_starts: 0,
+            last_state: InterfaceState::Off,
             last_torque: [0.0; 7],
             counters: DriverCounters::default(),
         }
@@ -365,7 +457,8 @@ impl LwrDriver {
         self.fault
     }
 
-    /// A new KRC session: forget the command, its writer, the hold, a fault and the velocity history.
+    /// A new KRC session: forget the command, its writer, the hold and the velocity history. A latched
+    /// fault stays: only the operator clears it (see [`LwrDriver::measure`]).
     pub fn begin_session(&mut self) {
         self.session = self.session.wrapping_add(1);
         self.counters.sessions += 1;
@@ -373,8 +466,33 @@ impl LwrDriver {
         self.command = None;
         self.commander.release();
         self.hold = None;
-        self.fault = None;
+        self.torque_mode = false;
+        self.session_used = false;
         self.last_torque = [0.0; 7];
+    }
+
+    /// Why the driver would apply no torque on `m` (the fault as latched now).
+    fn waiting_for(&self, m: &fri::Measurement) -> Option<Waiting> {
+        let (started, strategy) = (m.krl.int[1], m.krl.int[0]);
+        if let Some(f) = self.fault {
+            Some(Waiting::Fault(f))
+        } else if m.intf.state != InterfaceState::Command {
+            Some(Waiting::Monitor(m.intf.state))
+        } else if m.robot.control != ControlMode::JointImpedance && self.krl_ignores_strategy() {
+            Some(Waiting::StrategyKept(m.robot.control))
+        } else if m.robot.control != ControlMode::JointImpedance {
+            Some(Waiting::Strategy(m.robot.control))
+        } else if started != KRL_STARTED || !(strategy == 0 || strategy == STRATEGY_JOINT_IMPEDANCE) {
+            Some(Waiting::Handshake { started, strategy })
+        } else if m.robot.power & ALL_DRIVES != ALL_DRIVES {
+            Some(Waiting::DrivesOff(m.robot.power))
+        } else if m.robot.error != 0 {
+            Some(Waiting::DriveError(m.robot.error))
+        } else if m.intf.quality < Quality::Ok {
+            Some(Waiting::Quality(m.intf.quality))
+        } else {
+            None
+        }
     }
 
     /// A new total joint torque command (gravity included), answering the newest measurement. If it is
@@ -499,6 +617,15 @@ impl LwrDriver {
         }
         self.last_msr = Some((seq, q));
         self.cycle += 1;
+        self.note_operator(&m);
+        // A joint too fast or too near its limit latches the fault here, before any controller sees the
+        // measurement (a forged or corrupt position jump included).
+        if m.intf.state == InterfaceState::Command && self.fault.is_none() {
+            self.fault = self.fault_of(&q, &dq);
+        }
+        self.note_start(&m);
+        let waiting = self.waiting_for(&m);
+        self.note_torque_mode(waiting.is_none());
         self.model.forward_kinematics(&mut self.data, &q);
         let tool_pose = self.model.frame_pose(&self.data, self.tool);
         self.model.frame_jacobian(&self.data, self.tool, Axes::World, &mut self.jacobian);
@@ -516,6 +643,7 @@ impl LwrDriver {
             state: m.intf.state,
             quality: m.intf.quality,
             holding: false,
+            waiting,
             sequence: seq,
             session: self.session,
             krc_time: (m.intf.timestamp as f64 / self.sample_time).round() * self.sample_time,
@@ -523,15 +651,65 @@ impl LwrDriver {
         Ok(Measured { m, output })
     }
 
-    /// The answer to a measurement: the present command when it is fresh and no fault stands, the hold
-    /// otherwise, or, while the KRC does not command, what the KRC commands itself.
+    /// The operator's action the driver can see: the KRC out of command state with the KRL program just
+    /// begun (`$FRI_TO_INT[2]` = 10). It clears a latched fault.
+    fn note_operator(&mut self, m: &fri::Measurement) {
+        if self.fault.is_some() && m.intf.state != InterfaceState::Command && m.krl.int[1] == KRL_INIT {
+            self.fault = None;
+            self.counters.faults_cleared += 1;
+        }
+    }
+
+    /// Torque mode begins again after it ended: a new session, so that no command of before is applied
+    /// and the controller approaches afresh. Leaving it forgets the command.
+    fn note_torque_mode(&mut self, torque_mode: bool) {
+        if torque_mode && !self.torque_mode && self.session_used {
+            self.begin_session();
+        }
+        if !torque_mode {
+            self.command = None;
+        }
+        self.session_used |= torque_mode;
+        self.torque_mode = torque_mode;
+    }
+
+    /// Counts the KRC entering command mode in another strategy; torque mode resets the count.
+    fn note_start(&mut self, m: &fri::Measurement) {
+        let entered = m.intf.state == InterfaceState::Command && self.last_state != InterfaceState::Command;
+        if entered && m.robot.control != ControlMode::JointImpedance {
+            self.wrong_starts += 1;
+        }
+        if m.intf.state == InterfaceState::Command && m.robot.control == ControlMode::JointImpedance {
+            self.wrong_starts = 0;
+        }
+        self.last_state = m.intf.state;
+    }
+
+    /// The KRL program started another strategy again after being asked to stop and start in joint
+    /// impedance: it does not take `$FRI_FRM_INT[1]`, and asking again would only toggle FRI.
+    pub fn krl_ignores_strategy(&self) -> bool {
+        self.wrong_starts >= 2
+    }
+
+    /// Whether to ask the KRL program to start (1) or stop (0) command mode: a KRC commanding in another
+    /// strategy is asked to stop (the program then starts again in the strategy asked for), once; while a
+    /// fault stands no start is asked for; in monitor-only mode the KRC's state is left as it is.
+    fn start_request(&self, m: &fri::Measurement) -> bool {
+        let in_command = m.intf.state == InterfaceState::Command;
+        if !self.config.request_command_mode || self.krl_ignores_strategy() {
+            return in_command;
+        }
+        if in_command && m.robot.control != ControlMode::JointImpedance {
+            return false;
+        }
+        in_command || (self.fault.is_none() && m.intf.quality == Quality::Perfect)
+    }
+
+    /// The answer to a measurement: the present command when in torque mode with a fresh command, the
+    /// hold in joint impedance otherwise, or, in any other mode, that mode's safe command.
     pub fn answer(&mut self, measured: Measured) -> (fri::Command, DriverOutput) {
         let Measured { m, mut output } = measured;
-        let (q, dq, seq) = (output.q, output.dq, output.sequence);
-        let commanding = m.intf.state == InterfaceState::Command && m.robot.power != 0;
-        if commanding && self.fault.is_none() {
-            self.fault = self.fault_of(&q, &dq);
-        }
+        let (q, seq) = (output.q, output.sequence);
         let fresh = self.command.filter(|(_, at)| self.cycle.saturating_sub(*at) <= self.config.watchdog_cycles);
 
         let mut reply = fri::Command::default();
@@ -539,54 +717,77 @@ impl LwrDriver {
         reply.header.send_seq = self.send_seq;
         reply.header.refl_seq = seq;
         reply.krl.int[0] = STRATEGY_JOINT_IMPEDANCE;
-        reply.krl.int[1] =
-            i32::from(self.config.request_command_mode && m.intf.quality == Quality::Perfect || commanding);
+        reply.krl.int[1] = i32::from(self.start_request(&m));
         reply.flags = flags::JOINT_IMPEDANCE;
-        let holding;
-        if !commanding {
-            // Mirror what the KRC commands itself, so that entering command mode is seamless.
-            reply.jnt_pos = std::array::from_fn(|i| m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]);
-            reply.jnt_damping = [self.config.hold_damping as f32; 7];
-            self.hold = None;
-            self.last_torque = [0.0; 7];
-            holding = false;
-        } else if let (Some((effort, _)), None) = (fresh, self.fault) {
-            for (i, total) in effort.iter().enumerate() {
-                // The KRC adds its own gravity model: send only the rest.
-                reply.add_jnt_trq[i] = (total - m.data.gravity[i] as f64) as f32;
+        // Whatever fields the KRC reads in its present strategy, they say: stay where you are.
+        reply.cart_pos = m.data.msr_cart_pos;
+        reply.jnt_damping = [self.config.hold_damping as f32; 7];
+        let in_command = m.intf.state == InterfaceState::Command;
+        let joint_impedance = m.robot.control == ControlMode::JointImpedance;
+        let waits = output.waiting.is_some_and(|w| !matches!(w, Waiting::Fault(_)));
+        self.counters.waiting_cycles += u64::from(in_command && waits);
+        let holding = match (output.waiting, fresh) {
+            (None, Some((effort, _))) => {
+                for (i, total) in effort.iter().enumerate() {
+                    // The KRC adds its own gravity model: send only the rest.
+                    reply.add_jnt_trq[i] = (total - m.data.gravity[i] as f64) as f32;
+                }
+                reply.jnt_pos = m.data.msr_jnt_pos;
+                self.last_torque = reply.add_jnt_trq;
+                self.hold = None;
+                false
             }
-            reply.jnt_pos = m.data.msr_jnt_pos;
-            self.last_torque = reply.add_jnt_trq;
-            self.hold = None;
-            holding = false;
-        } else {
-            self.counters.stale_cycles += u64::from(fresh.is_none());
-            match self.fault {
-                Some(Fault::Overspeed { .. }) => self.counters.overspeed_cycles += 1,
-                Some(Fault::PositionLimit { .. }) => self.counters.limit_cycles += 1,
-                None => {}
-            }
-            let config = &self.config;
-            let hold = self.hold.get_or_insert_with(|| Hold::new(q, self.cycle, &self.last_torque, config));
-            if self.fault.is_some() {
-                // The command itself is suspect: no torque of it is kept, and the hold stays where the arm
-                // is (never beyond a limit).
+            _ if !in_command => {
+                // Mirror what the KRC commands itself, so that entering command mode is seamless.
+                reply.jnt_pos = std::array::from_fn(|i| m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]);
+                self.hold = None;
                 self.last_torque = [0.0; 7];
-                hold.preload = [0.0; 7];
-                hold.rest = [0.0; 7];
-                hold.q = std::array::from_fn(|i| hold.q[i].clamp(self.position_limits[i].0, self.position_limits[i].1));
+                false
             }
-            let elapsed = self.cycle.saturating_sub(hold.since) as f64;
-            let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0);
-            reply.add_jnt_trq = hold.rest.map(|t| (t * keep) as f32);
-            reply.jnt_pos = std::array::from_fn(|i| (hold.q[i] + hold.preload[i]) as f32);
-            reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
-            reply.jnt_damping = [self.config.hold_damping as f32; 7];
-            holding = true;
-        }
-
+            _ if !joint_impedance => {
+                // Position control, Cartesian impedance or anything else: the measured position.
+                reply.jnt_pos = m.data.msr_jnt_pos;
+                reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
+                self.hold = None;
+                self.last_torque = [0.0; 7];
+                true
+            }
+            (waiting, _) => {
+                self.hold_answer(&mut reply, &q, waiting, fresh.is_none());
+                true
+            }
+        };
         output.holding = holding;
         (reply, output)
+    }
+
+    /// The hold in joint impedance: a stiff spring where the arm is. For a stale command it carries on
+    /// the command's torque as a set-point offset and fades the rest; for a fault, or any other reason
+    /// not to apply torque, it carries nothing of it.
+    fn hold_answer(&mut self, reply: &mut fri::Command, q: &[f64; 7], waiting: Option<Waiting>, stale: bool) {
+        self.counters.stale_cycles += u64::from(stale && waiting.is_none());
+        match self.fault {
+            Some(Fault::Overspeed { .. }) => self.counters.overspeed_cycles += 1,
+            Some(Fault::PositionLimit { .. }) => self.counters.limit_cycles += 1,
+            None => {}
+        }
+        let config = &self.config;
+        let hold = self.hold.get_or_insert_with(|| Hold::new(*q, self.cycle, &self.last_torque, config));
+        if self.fault.is_some() {
+            // The command itself is suspect: no torque of it is kept, and the hold stays where the arm
+            // is (never beyond a limit).
+            hold.preload = [0.0; 7];
+            hold.q = std::array::from_fn(|i| hold.q[i].clamp(self.position_limits[i].0, self.position_limits[i].1));
+        }
+        if waiting.is_some() {
+            hold.rest = [0.0; 7];
+        }
+        self.last_torque = [0.0; 7];
+        let elapsed = self.cycle.saturating_sub(hold.since) as f64;
+        let keep = (1.0 - elapsed / self.config.hold_release_cycles.max(1) as f64).max(0.0);
+        reply.add_jnt_trq = hold.rest.map(|t| (t * keep) as f32);
+        reply.jnt_pos = std::array::from_fn(|i| (hold.q[i] + hold.preload[i]) as f32);
+        reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
     }
 
     /// A joint beyond `velocity_margin` of its velocity limit, or in or heading into (at its velocity,

@@ -16,7 +16,6 @@ use softcontact_msgs::tf2_msgs::TFMessage;
 use crate::contact_estimator::ContactStateOut;
 use crate::deformation_controller::ControllerState;
 use crate::lwr_driver::DriverOutput;
-use softcontact_wire::fri::InterfaceState;
 
 pub fn header(frame: &str, stamp: Time) -> Header {
     Header { stamp, frame_id: frame.into() }
@@ -91,7 +90,7 @@ impl DriverSession {
 impl DriverOutput {
     pub fn messages(&self, joint_names: &[String], stamp: Time) -> DriverMessages {
         let h = header("world", stamp);
-        let session = DriverSession { session: self.session, commanding: self.state == InterfaceState::Command };
+        let session = DriverSession { session: self.session, commanding: self.torque_mode() };
         let (t, q) = pose_parts(&self.tool_pose);
         let v = self.tool_twist;
         DriverMessages {

@@ -3,7 +3,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{Biquad, FtConfig, FtSensorNode};
-use softcontact_nodes::lwr_driver::{DriverConfig, DriverError, Fault, LwrDriver};
+use softcontact_nodes::lwr_driver::{DriverConfig, DriverError, Fault, LwrDriver, Waiting};
 use softcontact_nodes::writer_pin::WriterRefused;
 use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
 use softcontact_wire::rdt::{Calibration, Record, Status};
@@ -21,6 +21,11 @@ fn measurement(seq: u16, state: InterfaceState, q: [f32; 7], gravity: [f32; 7]) 
     m.intf.quality = Quality::Perfect;
     m.intf.desired_msr_sample_time = 0.001;
     m.robot.power = 0x7F;
+    // In command state: the shipped KRL program started joint impedance.
+    if state == InterfaceState::Command {
+        m.robot.control = fri::ControlMode::JointImpedance;
+        (m.krl.int[0], m.krl.int[1]) = (30, 1);
+    }
     m.data.msr_jnt_pos = q;
     m.data.cmd_jnt_pos = q;
     m.data.cmd_jnt_pos_fri_offset[0] = 0.001;
@@ -259,7 +264,7 @@ fn drive(joint: usize, from: f32, speed: f32, cycles: u16, config: DriverConfig)
 }
 
 #[test]
-fn a_joint_heading_into_its_position_limit_holds_the_arm_until_a_new_session() {
+fn a_joint_heading_into_its_position_limit_holds_the_arm_until_the_operator_restarts_the_krl_program() {
     // Adversary, separate layout: +8 N·m on joint 5 carried it 0.1 rad past its limit while the driver
     // applied every command (it only stopped answering once the measurement was implausible).
     let upper = 2.0944; // joint 4, ±120°
@@ -278,14 +283,29 @@ fn a_joint_heading_into_its_position_limit_holds_the_arm_until_a_new_session() {
     // Away from the limit: never.
     let (first, d) = drive(3, 1.7, -1.0, 400, DriverConfig::default());
     assert_eq!((first, d.fault()), (None, None));
-    // The fault stands until the KRC starts a new session.
+    // The fault stands through new sessions, silences and the KRC's own fallback to monitor mode, until
+    // the operator restarts the KRL program.
     let (_, mut d) = drive(3, 1.99, 0.0, 10, DriverConfig::default());
     d.set_command(&G.map(f64::from)).unwrap();
     assert!(d.handle(&measurement(11, InterfaceState::Command, Q, G)).unwrap().1.holding, "back inside, still held");
     d.begin_session();
+    d.resumed_after(5.0);
+    let mut stopped = fri::Measurement::decode(&measurement(1, InterfaceState::Monitor, Q, G)).unwrap();
+    stopped.krl.int[1] = 0;
+    let (reply, out) = d.handle(&stopped.encode()).unwrap();
+    assert_eq!(reply.krl.int[1], 0, "no start asked for while the fault stands");
+    assert!(matches!(out.waiting, Some(Waiting::Fault(_))));
     d.set_command(&G.map(f64::from)).unwrap();
-    assert!(!d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap().1.holding);
-    assert_eq!(d.fault(), None);
+    assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding, "a new session holds on");
+    assert!(d.fault().is_some());
+    stopped.krl.int[1] = 10;
+    stopped.header.send_seq = 3;
+    let (reply, out) = d.handle(&stopped.encode()).unwrap();
+    assert_eq!((d.fault(), out.waiting, reply.krl.int[1]), (None, Some(Waiting::Monitor(InterfaceState::Monitor)), 1));
+    d.handle(&measurement(4, InterfaceState::Command, Q, G)).unwrap();
+    d.set_command(&G.map(f64::from)).unwrap();
+    assert!(!d.handle(&measurement(5, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert_eq!(d.counters.faults_cleared, 1);
 }
 
 #[test]
@@ -376,7 +396,12 @@ fn a_joint_too_fast_makes_the_driver_hold() {
     d.set_command(&[0.0; 7]).unwrap();
     let mut fast = Q;
     fast[6] += 0.0031; // 3.1 rad/s over 1 ms; the limit is 3.21 rad/s, the margin 90 %
-    let (_, out) = d.handle(&measurement(2, InterfaceState::Command, fast, G)).unwrap();
+    // Read, the measurement already says: no torque mode — a controller given it integrates nothing.
+    let measured = d.measure(&measurement(2, InterfaceState::Command, fast, G)).unwrap();
+    assert!(matches!(measured.output.waiting, Some(Waiting::Fault(Fault::Overspeed { joint: 7, .. }))));
+    assert!(!measured.output.torque_mode());
+    let (reply, out) = d.answer(measured);
+    assert_eq!(reply.add_jnt_trq, [0.0; 7]);
     assert!(out.holding && d.counters.overspeed_cycles == 1);
     assert!((out.dq[6] - 3.1).abs() < 1e-3);
     // A fault: held on, fresh commands and a still joint or not, until the KRC starts a new session.
@@ -470,4 +495,98 @@ fn datagrams_all_refused_are_told_apart_from_some_refused() {
     assert_eq!((only_refused.implausible, only_refused.malformed), (10, 1));
     let some = d.counters.refusals_since(&before);
     assert!(!some.all_refused() && some.refused() == 11 && some.accepted == 1, "{some}");
+}
+
+/// A measurement in command state with the KRC's robot and KRL fields set by `edit`.
+fn commanding_with(seq: u16, edit: impl FnOnce(&mut fri::Measurement)) -> Vec<u8> {
+    let mut m = fri::Measurement::decode(&measurement(seq, InterfaceState::Command, Q, G)).unwrap();
+    m.data.msr_cart_pos = std::array::from_fn(|i| 0.1 * i as f32);
+    edit(&mut m);
+    m.encode().to_vec()
+}
+
+#[test]
+fn a_krc_commanding_in_position_control_gets_the_measured_position_and_no_torque() {
+    let mut d = LwrDriver::new(DriverConfig::default());
+    for seq in 1..2000u16 {
+        let (reply, out) = d
+            .handle(&commanding_with(seq, |m| {
+                m.robot.control = fri::ControlMode::Position;
+                m.krl.int[0] = 10;
+            }))
+            .unwrap();
+        // A controller's torque, however fresh, never reaches the arm.
+        d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();
+        assert_eq!(reply.add_jnt_trq, [0.0; 7]);
+        assert_eq!(reply.add_tcp_ft, [0.0; 6]);
+        assert_eq!(reply.jnt_pos, Q, "position control holds the measured position");
+        assert_eq!(reply.krl.int[1], 0, "the KRL program is asked to stop, to start again in joint impedance");
+        assert_eq!(out.waiting, Some(Waiting::Strategy(fri::ControlMode::Position)));
+        assert!(!out.torque_mode() && out.holding);
+    }
+    assert_eq!(d.counters.waiting_cycles, 1999);
+    assert!(Waiting::Strategy(fri::ControlMode::Position).to_string().contains("asking the KRL program to stop"));
+}
+
+#[test]
+fn in_every_other_mode_the_answer_is_that_modes_safe_command_without_torque() {
+    type Edit = fn(&mut fri::Measurement);
+    let cases: [(&str, Edit, fn(&Waiting) -> bool); 8] = [
+        (
+            "Cartesian impedance",
+            |m| m.robot.control = fri::ControlMode::CartesianImpedance,
+            |w| matches!(w, Waiting::Strategy(fri::ControlMode::CartesianImpedance)),
+        ),
+        ("another strategy", |m| m.robot.control = fri::ControlMode::Other, |w| matches!(w, Waiting::Strategy(_))),
+        ("not started", |m| m.krl.int[1] = 10, |w| matches!(w, Waiting::Handshake { started: 10, .. })),
+        ("another strategy reported", |m| m.krl.int[0] = 10, |w| matches!(w, Waiting::Handshake { strategy: 10, .. })),
+        ("one drive off", |m| m.robot.power = 0x7E, |w| matches!(w, Waiting::DrivesOff(0x7E))),
+        ("a drive error", |m| m.robot.error = 0x20, |w| matches!(w, Waiting::DriveError(0x20))),
+        ("quality bad", |m| m.intf.quality = Quality::Bad, |w| matches!(w, Waiting::Quality(Quality::Bad))),
+        (
+            "quality unacceptable",
+            |m| m.intf.quality = Quality::Unacceptable,
+            |w| matches!(w, Waiting::Quality(Quality::Unacceptable)),
+        ),
+    ];
+    for (what, edit, expected) in cases {
+        let mut d = LwrDriver::new(DriverConfig::default());
+        // Torque mode first, a command applied: then the KRC changes.
+        d.handle(&commanding_with(1, |_| {})).unwrap();
+        d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();
+        assert!(!d.handle(&commanding_with(2, |_| {})).unwrap().1.holding);
+        for seq in 3..600u16 {
+            d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();
+            let (reply, out) = d.handle(&commanding_with(seq, edit)).unwrap();
+            assert!(out.waiting.as_ref().is_some_and(expected), "{what}: {:?}", out.waiting);
+            assert!(!out.torque_mode() && out.holding, "{what}");
+            assert_eq!(reply.add_jnt_trq, [0.0; 7], "{what}: no added torque");
+            assert_eq!(reply.add_tcp_ft, [0.0; 6], "{what}: no added force");
+            assert_eq!(reply.cart_pos, std::array::from_fn(|i| 0.1 * i as f32), "{what}: the measured pose");
+            assert_eq!(reply.flags, flags::JOINT_IMPEDANCE, "{what}: flags never change in command mode");
+            for (i, (sent, measured)) in reply.jnt_pos.iter().zip(Q).enumerate() {
+                let preload = DriverConfig::default().hold_max_preload as f32;
+                assert!(
+                    (sent - measured).abs() <= preload + 1e-6,
+                    "{what}: joint {i} held at {sent}, is at {measured}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn torque_mode_beginning_again_is_a_new_session_and_no_earlier_command_is_applied() {
+    let mut d = LwrDriver::new(DriverConfig::default());
+    d.handle(&commanding_with(1, |_| {})).unwrap();
+    let first = d.session();
+    d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();
+    d.handle(&commanding_with(2, |m| m.robot.control = fri::ControlMode::Position)).unwrap();
+    let (reply, out) = d.handle(&commanding_with(3, |_| {})).unwrap();
+    assert_ne!(out.session, first, "back in joint impedance: a new session");
+    assert!(out.torque_mode() && out.holding, "the command of before is gone: hold until one answers");
+    assert_eq!(reply.add_jnt_trq, [0.0; 7]);
+    // A network controller's command answering the old session is refused.
+    let old = d.set_remote_command(&[0.0; 7], Some(first), 0.0, CONTROLLER, || 1);
+    assert!(matches!(old, Err(DriverError::OtherSession(..))), "{old:?}");
 }

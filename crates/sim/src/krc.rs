@@ -2,9 +2,15 @@
 //! timing grade (quality) of the remote's answers, and the joint-impedance law the KRC runs, with its
 //! own gravity compensation, as the real controller does (specs/fri-lwr4.md sections 9–11).
 //!
-//! KRL convention (CentroEPiaggio's ros_control.src): `$FRI_FRM_INT[1]` = strategy (30 = joint
-//! impedance), `$FRI_FRM_INT[2]` = 1 start / 0 stop; the KRC acknowledges in `$FRI_TO_INT[2]`
-//! (10 initial, 1 started, 0 stopped).
+//! The KRL side runs one of two programs ([`KrlProgram`]): the one this repository ships
+//! (`krl/softcontact.src`) or the common `ros_control.src` of the LWR's ROS 1 stack. Both read
+//! `$FRI_FRM_INT[1]` as the strategy the remote asks for (10 joint position, 20 Cartesian impedance, 30
+//! joint impedance) and `$FRI_FRM_INT[2]` as 1 start / 0 stop, and acknowledge in `$FRI_TO_INT[2]` (10
+//! program just started, 1 started, 0 stopped). Both begin in position control (strategy 10). They
+//! differ in two things: `ros_control.src` keeps position control on its first start after the program
+//! began (the remote must stop and start again to change it) and does not report the strategy;
+//! `softcontact.src` takes the asked strategy on every start and reports it in `$FRI_TO_INT[1]`.
+//! `robot.control` reports the strategy the KRL side selected, in every state.
 
 use std::collections::VecDeque;
 
@@ -42,6 +48,7 @@ pub struct KrcConfig {
     /// Noise of the joint torque sensors [N·m].
     pub torque_noise: f64,
     pub cycle: f64,
+    pub program: KrlProgram,
 }
 
 impl Default for KrcConfig {
@@ -52,8 +59,20 @@ impl Default for KrcConfig {
             mirror_tolerance: 1e-3,
             torque_noise: 0.05,
             cycle: 1e-3,
+            program: KrlProgram::default(),
         }
     }
+}
+
+/// The KRL program running on the KRC (see the module's docs for how they differ).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum KrlProgram {
+    #[default]
+    Softcontact,
+    RosControl,
+    /// A program of the cell's own that always starts this strategy, whatever the remote asks, and
+    /// reports none.
+    Fixed(i32),
 }
 
 /// What changed in the KRC.
@@ -64,9 +83,50 @@ pub enum KrcEvent {
     FellBack(String),
     /// A start was refused because the command did not mirror the current position.
     InterpolationError,
+    /// A start the KRL program or the KRC refused, and why (as the pendant's message line says it).
+    Refused(String),
 }
 
-const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+/// The KRL strategies (`$stiffness.strategy`).
+pub const STRATEGY_POSITION: i32 = 10;
+pub const STRATEGY_CARTESIAN_IMPEDANCE: i32 = 20;
+pub const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
+/// `$FRI_TO_INT[2]` once the KRL program has begun, before its first start.
+pub const KRL_INIT: i32 = 10;
+/// `robot.power` with all seven drives on.
+pub const ALL_DRIVES: u16 = 0x7F;
+
+/// The control mode `robot.control` reports for a KRL strategy.
+pub fn control_mode(strategy: i32) -> ControlMode {
+    match strategy {
+        STRATEGY_POSITION => ControlMode::Position,
+        STRATEGY_CARTESIAN_IMPEDANCE => ControlMode::CartesianImpedance,
+        STRATEGY_JOINT_IMPEDANCE => ControlMode::JointImpedance,
+        _ => ControlMode::Other,
+    }
+}
+
+/// The command fields a strategy needs (FRI: position control reads jntPos, joint impedance jntPos and
+/// optionally stiffness, damping and torque, Cartesian impedance cartPos).
+fn needed_flags(strategy: i32) -> u32 {
+    match strategy {
+        STRATEGY_CARTESIAN_IMPEDANCE => flags::CART_POS,
+        _ => flags::JNT_POS,
+    }
+}
+
+/// How the KRC drives the motors this step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Drive {
+    /// Monitor mode, drives off or a fault: the brakes hold the arm.
+    Brakes,
+    /// Position control (also how the simulator holds an arm in Cartesian impedance, whose KRL-set
+    /// stiffness it does not model): the joints follow these positions, as stiff as the arm's own
+    /// position controller.
+    Position([f64; 7]),
+    /// Joint impedance: these motor torques.
+    Torque([f64; 7]),
+}
 
 /// The KRC's FRI state.
 #[derive(Debug, Clone)]
@@ -86,6 +146,12 @@ pub struct Krc {
     pub late_answers: u64,
     pub missed_cycles: u64,
     ack: i32,
+    /// The KRL program's `$stiffness.strategy`.
+    strategy: i32,
+    /// `robot.power`, `robot.error` and `robot.warning` (tests set them as a real cell's drives would).
+    pub power: u16,
+    pub error: u16,
+    pub warning: u16,
     fault: Option<String>,
     jacobian: nalgebra::Matrix6xX<f64>,
 }
@@ -104,7 +170,11 @@ impl Krc {
             consecutive_misses: 0,
             late_answers: 0,
             missed_cycles: 0,
-            ack: 10,
+            ack: KRL_INIT,
+            strategy: STRATEGY_POSITION,
+            power: ALL_DRIVES,
+            error: 0,
+            warning: 0,
             fault: None,
             jacobian: nalgebra::Matrix6xX::zeros(7),
         }
@@ -121,6 +191,32 @@ impl Krc {
 
     pub fn last_fault(&self) -> Option<&str> {
         self.fault.as_deref()
+    }
+
+    /// The strategy the KRL program selected (`$stiffness.strategy`).
+    pub fn strategy(&self) -> i32 {
+        self.strategy
+    }
+
+    /// The operator restarts the KRL program (after acknowledging a fault on the pendant): FRI closed
+    /// and opened again in monitor mode, position control, `$FRI_TO_INT[2]` = 10.
+    pub fn restart_program(&mut self, q: [f64; 7]) {
+        self.state = InterfaceState::Monitor;
+        self.hold = q;
+        self.command = None;
+        self.ack = KRL_INIT;
+        self.strategy = STRATEGY_POSITION;
+        self.fault = None;
+    }
+
+    /// The KRL side changes the strategy while the KRC commands (`$stiffness.strategy`, commit).
+    pub fn switch_strategy(&mut self, strategy: i32) {
+        self.strategy = strategy;
+    }
+
+    /// Drives on, no error: what the KRC's motors need to move the arm.
+    fn drives_ready(&self) -> bool {
+        self.power == ALL_DRIVES && self.error == 0
     }
 
     pub(crate) fn hold_at(&mut self, q: [f64; 7]) {
@@ -173,13 +269,11 @@ impl Krc {
             return None;
         }
         self.answered = true;
-        let strategy = cmd.krl.int[0];
-        let start = cmd.krl.int[1];
+        let (strategy, start) = (cmd.krl.int[0], cmd.krl.int[1]);
         match self.state {
             InterfaceState::Command => {
-                if let Some(current) = &self.command
-                    && current.flags != cmd.flags
-                {
+                let previous = self.command.replace(*cmd);
+                if previous.is_some_and(|p| p.flags != cmd.flags) {
                     return Some(self.fall_back("cmdFlags changed during cmd mode".into(), *q));
                 }
                 if start == 0 {
@@ -188,13 +282,31 @@ impl Krc {
                     self.ack = 0;
                     return Some(KrcEvent::FellBack("stop requested".into()));
                 }
-                self.command = Some(*cmd);
                 None
             }
             _ => {
-                let wants_start =
-                    start == 1 && strategy == STRATEGY_JOINT_IMPEDANCE && cmd.flags == flags::JOINT_IMPEDANCE;
-                if !wants_start || self.quality() < Quality::Perfect {
+                // The KRL program waits for a start request it has not acknowledged yet.
+                if start != 1 || self.ack == 1 {
+                    return None;
+                }
+                let strategy = match self.config.program {
+                    KrlProgram::Softcontact => strategy,
+                    KrlProgram::RosControl if self.ack != KRL_INIT => strategy,
+                    KrlProgram::RosControl => self.strategy,
+                    KrlProgram::Fixed(fixed) => fixed,
+                };
+                if control_mode(strategy) == ControlMode::Other {
+                    return Some(KrcEvent::Refused(format!("unknown strategy {strategy} in $FRI_FRM_INT[1]")));
+                }
+                let needed = needed_flags(strategy);
+                if cmd.flags & needed != needed {
+                    return Some(KrcEvent::Refused(format!(
+                        "strategy {strategy} needs cmdFlags {needed:#06x}, the remote sends {:#06x}",
+                        cmd.flags
+                    )));
+                }
+                // The KRL program waits for a perfect link, and the drives must be on, before friStart.
+                if self.quality() < Quality::Perfect || !self.drives_ready() {
                     return None;
                 }
                 let mirrored = cmd
@@ -202,9 +314,10 @@ impl Krc {
                     .iter()
                     .zip(&self.hold)
                     .all(|(c, h)| (*c as f64 - h).abs() <= self.config.mirror_tolerance);
-                if !mirrored {
+                if needed == flags::JNT_POS && !mirrored {
                     return Some(KrcEvent::InterpolationError);
                 }
+                self.strategy = strategy;
                 self.state = InterfaceState::Command;
                 self.command = Some(*cmd);
                 self.consecutive_misses = 0;
@@ -242,14 +355,20 @@ impl Krc {
         None
     }
 
-    /// Motor torques of the joint-impedance law in command mode, τ = k (q_cmd − q) − D q̇ + g(q) + τ_FRI
-    /// with D_j = 2 d_j √(k_j M_jj); `None` in monitor mode (the brakes hold the arm).
-    pub fn motor_torque(&mut self, model: &Model, data: &mut Data, q: &[f64; 7], dq: &[f64; 7]) -> Option<[f64; 7]> {
-        if self.state != InterfaceState::Command {
+    /// How the motors are driven this step. In joint impedance the law τ = k (q_cmd − q) − D q̇ + g(q) + τ_FRI
+    /// with D_j = 2 d_j √(k_j M_jj); in position control the commanded joint positions; brakes in monitor
+    /// mode or with the drives off.
+    pub fn drive(&mut self, model: &Model, data: &mut Data, q: &[f64; 7], dq: &[f64; 7]) -> Drive {
+        if self.state != InterfaceState::Command || !self.drives_ready() {
             self.hold = *q;
-            return None;
+            return Drive::Brakes;
         }
-        let cmd = self.command.as_ref()?;
+        let Some(cmd) = self.command.as_ref() else { return Drive::Brakes };
+        match self.strategy {
+            STRATEGY_JOINT_IMPEDANCE => {}
+            STRATEGY_POSITION => return Drive::Position(cmd.jnt_pos.map(f64::from)),
+            _ => return Drive::Position(self.hold),
+        }
         let needs_mass = cmd.jnt_stiffness.iter().any(|k| *k != 0.0);
         let diag: [f64; 7] = if needs_mass {
             let m = model.mass_matrix(data, q);
@@ -258,7 +377,7 @@ impl Krc {
             [0.0; 7]
         };
         let g = model.gravity_torques(data, q);
-        Some(std::array::from_fn(|i| {
+        Drive::Torque(std::array::from_fn(|i| {
             let k = cmd.jnt_stiffness[i] as f64;
             let d = 2.0 * cmd.jnt_damping[i] as f64 * (k * diag[i]).max(0.0).sqrt();
             k * (cmd.jnt_pos[i] as f64 - q[i]) - d * dq[i] + g[i] + cmd.add_jnt_trq[i] as f64
@@ -306,6 +425,9 @@ impl Krc {
         };
         let mut krl = fri::KrlData::default();
         krl.int[1] = self.ack;
+        if self.config.program == KrlProgram::Softcontact && self.ack == 1 {
+            krl.int[0] = self.strategy;
+        }
         let history = self.history.len().max(1) as f32;
         fri::Measurement {
             header: fri::Header {
@@ -331,10 +453,10 @@ impl Krc {
                 },
             },
             robot: fri::Robot {
-                power: 0x7F,
-                control: if self.command.is_some() { ControlMode::JointImpedance } else { ControlMode::Position },
-                error: 0,
-                warning: 0,
+                power: self.power,
+                control: control_mode(self.strategy),
+                error: self.error,
+                warning: self.warning,
                 temperature: [35.0; 7],
             },
             data: fri::MeasuredData {

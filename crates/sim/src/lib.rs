@@ -15,7 +15,10 @@ mod sensor;
 mod specimen;
 mod surface;
 
-pub use krc::{Krc, KrcConfig, KrcEvent, QualityPolicy};
+pub use krc::{
+    ALL_DRIVES, Drive, KRL_INIT, Krc, KrcConfig, KrcEvent, KrlProgram, QualityPolicy, STRATEGY_CARTESIAN_IMPEDANCE,
+    STRATEGY_JOINT_IMPEDANCE, STRATEGY_POSITION, control_mode,
+};
 pub use sensor::{FtSensor, FtSensorConfig};
 pub use specimen::{BenchRun, BenchSample, SpecimenBench, SpecimenConfig, ZERO_THRESHOLD};
 pub use surface::{Contact, Surface, SurfaceConfig};
@@ -165,6 +168,7 @@ pub struct Simulator {
     rng: SmallRng,
     last_contact: Contact,
     last_torque: [f64; 7],
+    jacobian: nalgebra::Matrix6xX<f64>,
 }
 
 impl Simulator {
@@ -212,6 +216,7 @@ impl Simulator {
             model,
             last_contact: Contact::default(),
             last_torque: [0.0; 7],
+            jacobian: nalgebra::Matrix6xX::zeros(7),
         };
         // The contact of the initial state (no time passed).
         sim.touch(0.0)?;
@@ -315,16 +320,41 @@ impl Simulator {
         Ok(())
     }
 
+    /// The motor torques that hold the arm still against gravity and the contact force: what the joint
+    /// torque sensors read under the brakes or the position controller.
+    fn holding_torque(&mut self) -> [f64; 7] {
+        let g = self.physics.gravity_torques(&mut self.physics_data, &self.q);
+        self.model.forward_kinematics(&mut self.data, &self.q);
+        let jacobian = &mut self.jacobian;
+        self.model.frame_jacobian(&self.data, self.tool, softcontact_dynamics::Axes::World, jacobian);
+        let f = self.last_contact.force;
+        std::array::from_fn(|j| g[j] - (0..3).map(|r| jacobian[(r, j)] * f[r]).sum::<f64>())
+    }
+
     fn step(&mut self) -> Result<(), SimError> {
         let h = self.config.step;
         // The contact at the current state is `last_contact`; after the step, the new state's.
-        let Some(mut tau) = self.krc.motor_torque(&self.model, &mut self.data, &self.q, &self.dq) else {
-            // Brakes: the KRC holds the arm.
-            self.dq = [0.0; 7];
-            self.last_torque =
-                self.physics.gravity_torques(&mut self.physics_data, &self.q).as_slice().try_into().expect("7 joints");
-            self.time += h;
-            return self.touch(h);
+        let mut tau = match self.krc.drive(&self.model, &mut self.data, &self.q, &self.dq) {
+            Drive::Torque(tau) => tau,
+            Drive::Brakes => {
+                self.dq = [0.0; 7];
+                self.last_torque = self.holding_torque();
+                self.time += h;
+                return self.touch(h);
+            }
+            Drive::Position(target) => {
+                // As stiff as the arm's own position controller: the joints go where commanded, at most at
+                // half their velocity limit, whatever the surface pushes.
+                for (i, j) in self.model.joints.iter().enumerate() {
+                    let reach = 0.5 * j.limits.velocity * h;
+                    let step = (target[i].clamp(j.limits.lower, j.limits.upper) - self.q[i]).clamp(-reach, reach);
+                    self.q[i] += step;
+                    self.dq[i] = step / h;
+                }
+                self.last_torque = self.holding_torque();
+                self.time += h;
+                return self.touch(h);
+            }
         };
         for (i, j) in self.model.joints.iter().enumerate() {
             tau[i] = tau[i].clamp(-j.limits.effort, j.limits.effort);

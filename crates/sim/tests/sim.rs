@@ -337,3 +337,78 @@ fn a_hidden_payload_weighs_on_the_arm_and_only_there() {
     let bad = SimConfig { payload: Some(Payload { mass: f64::NAN, com: [0.0; 3] }), ..free_config() };
     assert!(Simulator::new(bad).is_err());
 }
+
+/// Answers in monitor mode with `strategy` asked and `flags`, until the KRC enters command mode or
+/// refuses; the event.
+fn ask_start(sim: &mut Simulator, strategy: i32, flags: u32) -> Option<KrcEvent> {
+    for seq in 1..300u16 {
+        let m = sim.measurement();
+        let mut c = answer(&m, seq, m.intf.quality == Quality::Perfect, [0.0; 7]);
+        (c.krl.int[0], c.flags) = (strategy, flags);
+        c.cart_pos = m.data.msr_cart_pos;
+        let event = sim.command(&c);
+        sim.step_cycle().unwrap();
+        if event.is_some() {
+            return event;
+        }
+    }
+    None
+}
+
+#[test]
+fn the_krc_reports_the_strategy_the_krl_program_selected_in_every_state() {
+    use softcontact_sim::{KrlProgram, STRATEGY_JOINT_IMPEDANCE, STRATEGY_POSITION};
+    // Both programs begin in position control, reported in monitor mode too.
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let m = sim.measurement();
+    assert_eq!((m.intf.state, m.robot.control), (InterfaceState::Monitor, fri::ControlMode::Position));
+    assert_eq!(m.krl.int[1], 10, "$FRI_TO_INT[2]: the program just began");
+    // The SDK's doPositionControl: strategy 10 with jntPos alone enters command mode in position control.
+    assert_eq!(ask_start(&mut sim, STRATEGY_POSITION, flags::JNT_POS), Some(KrcEvent::EnteredCommand));
+    let m = sim.measurement();
+    assert_eq!((m.intf.state, m.robot.control), (InterfaceState::Command, fri::ControlMode::Position));
+    assert_eq!((m.krl.int[0], m.krl.int[1]), (STRATEGY_POSITION, 1), "softcontact.src reports the strategy");
+    // Position control follows jntPos, whatever torque is added.
+    let q0 = *sim.q();
+    for seq in 1000..1500u16 {
+        let m = sim.measurement();
+        let mut c = answer(&m, seq, true, [0.0, 50.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        c.flags = flags::JNT_POS;
+        c.jnt_pos = q0.map(|v| v as f32);
+        c.jnt_pos[0] += 0.01;
+        sim.command(&c);
+        sim.step_cycle().unwrap();
+    }
+    assert!((sim.q()[0] - (q0[0] + 0.01)).abs() < 1e-6 && (sim.q()[1] - q0[1]).abs() < 1e-6, "{:?}", sim.q());
+
+    // ros_control.src keeps position control on its first start, joint impedance asked or not.
+    let mut config = free_config();
+    config.krc.program = KrlProgram::RosControl;
+    let mut sim = Simulator::new(config).unwrap();
+    assert_eq!(ask_start(&mut sim, STRATEGY_JOINT_IMPEDANCE, flags::JOINT_IMPEDANCE), Some(KrcEvent::EnteredCommand));
+    let m = sim.measurement();
+    assert_eq!((m.robot.control, m.krl.int[0]), (fri::ControlMode::Position, 0), "no strategy reported");
+}
+
+#[test]
+fn the_krc_says_why_it_refuses_a_start() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    let refused = ask_start(&mut sim, 40, flags::JOINT_IMPEDANCE);
+    assert!(matches!(&refused, Some(KrcEvent::Refused(r)) if r.contains("unknown strategy 40")), "{refused:?}");
+    let refused = ask_start(&mut sim, 20, flags::JOINT_IMPEDANCE);
+    assert!(matches!(&refused, Some(KrcEvent::Refused(r)) if r.contains("cmdFlags")), "{refused:?}");
+    assert_eq!(ask_start(&mut sim, 20, flags::CART_POS), Some(KrcEvent::EnteredCommand));
+    assert_eq!(sim.measurement().robot.control, fri::ControlMode::CartesianImpedance);
+}
+
+#[test]
+fn a_restarted_krl_program_is_in_monitor_mode_with_its_init_flag() {
+    let mut sim = Simulator::new(free_config()).unwrap();
+    enter_command(&mut sim);
+    sim.krc.restart_program(*sim.q());
+    let m = sim.measurement();
+    assert_eq!(
+        (m.intf.state, m.robot.control, m.krl.int[1]),
+        (InterfaceState::Monitor, fri::ControlMode::Position, 10)
+    );
+}

@@ -9,7 +9,6 @@ use std::time::Instant;
 
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
-use softcontact_wire::fri::InterfaceState;
 
 use super::{ControllerInterface, ControllerNode, JointSample, Params, Reply, Step};
 use crate::handover::{ForceReading, Latest};
@@ -58,7 +57,7 @@ impl InProcessController {
             Some(r) => self.control.on_force(r.stamp, r.force, self.seconds(r.arrived)),
             None => self.control.force_withheld(),
         }
-        let session = DriverSession { session: out.session, commanding: out.state == InterfaceState::Command };
+        let session = DriverSession { session: out.session, commanding: out.torque_mode() };
         let sample =
             JointSample { stamp, session: Some(session.session), commanding: session.commanding, q: out.q, dq: out.dq };
         self.control.on_external_torque(stamp, &out.external_torque);

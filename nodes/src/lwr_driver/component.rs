@@ -11,9 +11,8 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
-use softcontact_wire::fri::InterfaceState;
 
-use super::{DriverCounters, DriverError, DriverOutput, LwrDriver, Params, Refusals};
+use super::{DriverCounters, DriverError, DriverOutput, LwrDriver, Params, Refusals, Waiting};
 use crate::deformation_controller::InProcessController;
 use crate::handover::{Latest, ToolPose};
 use crate::liveness::{DeadStream, StreamWatch};
@@ -52,6 +51,15 @@ fn diagnostics(
             ),
         ),
         (None, None) => (DiagnosticStatus::STALE, "no FRI measurement yet".to_string()),
+        (None, Some(o)) if o.waiting.is_some() => (
+            DiagnosticStatus::WARN,
+            format!(
+                "no torque applied: {} ({:?}, quality {:?})",
+                o.waiting.map(|w| w.to_string()).unwrap_or_default(),
+                o.state,
+                o.quality
+            ),
+        ),
         (None, Some(o)) if o.holding => {
             (DiagnosticStatus::WARN, format!("holding position ({:?}, quality {:?})", o.state, o.quality))
         }
@@ -78,6 +86,8 @@ fn diagnostics(
             ("limit_cycles", c.limit_cycles),
             ("commands_from_strangers", c.commands_from_strangers),
             ("commands_refused", c.commands_refused),
+            ("waiting_cycles", c.waiting_cycles),
+            ("faults_cleared", c.faults_cleared),
             ("reply_latency_p99_us", us(client.reply_latency.quantile(0.99))),
             ("reply_latency_max_us", us(client.reply_latency.max())),
             ("command_age_p99_us", us(command_age.quantile(0.99))),
@@ -147,6 +157,8 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut counted = DriverCounters::default();
     let mut all_refused_logged = false;
     let mut fault_logged = None;
+    let mut waiting_logged = None;
+    let mut next_waiting_log = Instant::now();
     // Cycles answered with a held command once the controller first commanded (start-up excluded).
     let mut stale_at_first_command: Option<u64> = None;
     while !ros::stopping(&stop) {
@@ -195,6 +207,17 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         if sign_of_life {
             command_watch.seen(start.elapsed().as_secs_f64());
         }
+        // What the driver waits for, on each change (at most once a second: a flapping link logs no flood).
+        if let Some(out) = output.as_ref()
+            && out.waiting != waiting_logged
+            && Instant::now() >= next_waiting_log
+        {
+            waiting_logged = out.waiting;
+            next_waiting_log = Instant::now() + Duration::from_secs(1);
+            if let Some(w) = waiting_logged.filter(|w| !matches!(w, Waiting::Fault(_) | Waiting::Monitor(_))) {
+                ros::log(&node, LogLevel::Warn, &format!("no torque applied: {w}"));
+            }
+        }
         if client.driver.fault() != fault_logged {
             fault_logged = client.driver.fault();
             if let Some(f) = fault_logged {
@@ -213,7 +236,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             if let Some(poses) = &poses {
                 poses.put(ToolPose { pose: out.tool_pose, measured: last_seen });
             }
-            let commanded = out.state == InterfaceState::Command && !out.holding;
+            let commanded = out.torque_mode() && !out.holding;
             if commanded {
                 stale_at_first_command.get_or_insert(client.driver.counters.stale_cycles);
             }
@@ -247,8 +270,8 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         }
         // Commands are due while the KRC commands; silence beyond dead_after is reported, never an exit.
         let now = start.elapsed().as_secs_f64();
-        let krc_commands = last.as_ref().is_some_and(|o| o.state == InterfaceState::Command)
-            && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
+        let krc_commands =
+            last.as_ref().is_some_and(|o| o.torque_mode()) && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
         if !krc_commands || controller.is_some() {
             command_watch.not_due(now);
         }
