@@ -66,6 +66,7 @@ pub struct Cell {
     orientation: Option<UnitQuaternion<f64>>,
     startup_tare: StartupTare,
     pending_tare: Option<[f64; 6]>,
+    driver_fault: Option<crate::lwr_driver::Fault>,
 }
 
 impl Cell {
@@ -95,6 +96,7 @@ impl Cell {
             orientation: None,
             startup_tare: StartupTare::new(ft_params.tare_after),
             pending_tare: None,
+            driver_fault: None,
         })
     }
 
@@ -128,6 +130,10 @@ impl Cell {
         match ft.compensated.filter(|_| self.startup_tare.tared() && !ft.invalid) {
             Some(c) => self.controller.on_force(time, Vector3::new(c[0], c[1], c[2]), time),
             None => self.controller.force_withheld(),
+        }
+        if self.driver.fault() != self.driver_fault {
+            self.driver_fault = self.driver.fault();
+            self.controller.on_driver_fault(self.driver_fault.map(|f| f.to_string()));
         }
         let commanding = out.torque_mode();
         let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };

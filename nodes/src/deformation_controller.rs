@@ -123,6 +123,8 @@ pub enum ControlError {
     NoContact,
     #[error("retreating to re-tare the sensor: commands are refused until the hand is back on the surface")]
     Retaring,
+    #[error("the LWR driver holds for a fault: {0}")]
+    DriverFault(String),
     #[error("move duration must be positive")]
     Duration,
     #[error("the contact normal must not be zero")]
@@ -166,6 +168,9 @@ pub struct ControllerState {
 /// tare zeroes the offset, so what is left is small, and a model claiming more is refused (a bias) or
 /// cut to it (a drift, which grows with the time since the tare).
 pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
+/// The time constant over which the arm's normal force is smoothed before it confirms a sensor
+/// correction [s].
+pub const ARM_FORCE_SMOOTHING: f64 = 0.05;
 
 /// How far above the command the surface's measured force may be before the hold of an augmented model
 /// stops going deeper (a share of the command; above the sensor's noise at the forces commanded).
@@ -355,6 +360,10 @@ pub struct DeformationController {
     /// The standing force command's hold through the augmented model: from `since` (the end of its move)
     /// the deformation held is re-solved every tick, so the force stays while the surface relaxes.
     force_hold: Option<ForceHold>,
+    /// The arm's normal contact force this tick, from its joint torques ([`Self::observe_arm_force`]),
+    /// and smoothed.
+    arm_force: Option<f64>,
+    arm_smoothed: Option<f64>,
     /// Buffers of eq. 15 and of the posture torque: the tick allocates nothing.
     torque: TaskTorque,
     tau0: DVector<f64>,
@@ -390,6 +399,8 @@ impl DeformationController {
             limiter: TorqueLimiter::new(),
             inverse,
             force_hold: None,
+            arm_force: None,
+            arm_smoothed: None,
             torque: TaskTorque::new(7),
             tau0: DVector::zeros(7),
         })
@@ -500,11 +511,40 @@ impl DeformationController {
         self.contact_level.is_none() && self.config.approach_speed * self.time >= self.config.max_approach
     }
 
+    /// The arm's own view of the normal contact force this tick (from the KRC's external joint torque
+    /// estimate), `None` where it has none: what confirms a model's correction of the sensor.
+    pub fn observe_arm_force(&mut self, normal_force: Option<f64>) {
+        self.arm_force = normal_force.filter(|f| f.is_finite());
+    }
+
+    /// How much of a model's correction of the reading (its named sensor bias and drift, at most
+    /// [`MAX_SENSOR_CORRECTION`] of `max_force`) is taken: as much as the arm's torques confirm it. In
+    /// full where the corrected force agrees with the arm's (smoothed over [`ARM_FORCE_SMOOTHING`]),
+    /// nothing where it is half the correction or more away from it, linearly in between. Unconfirmed,
+    /// a correction is a push of its own: fed forward, a wrong bias of −12 N in a model turned a 60 N
+    /// command into 103 N, and even 3 N of it pressed 10 N more into the sponge.
+    fn sensor_correction(&mut self, reading: f64, correction: f64, dt: f64) -> f64 {
+        let most = MAX_SENSOR_CORRECTION * self.config.limits.max_force;
+        let correction = correction.clamp(-most, most);
+        let alpha = (dt / ARM_FORCE_SMOOTHING).min(1.0);
+        self.arm_smoothed = self.arm_force.map(|arm| match self.arm_smoothed {
+            Some(previous) => previous + alpha * (arm - previous),
+            None => arm,
+        });
+        let Some(arm) = self.arm_smoothed else { return 0.0 };
+        if correction == 0.0 {
+            return 0.0;
+        }
+        let disagreement = ((reading - correction) - arm).abs() / (0.5 * correction.abs());
+        correction * (1.0 - disagreement).clamp(0.0, 1.0)
+    }
+
     /// Forgets the contact, the plan, the start pose and the move across the surface: the next tick
     /// approaches again from where the hand is, and holds it there across the surface and in orientation.
     /// For a new KRC session, or joint states that stopped for a while — the arm may have been moved, the
     /// surface too.
     pub fn restart(&mut self) {
+        self.arm_smoothed = None;
         if let Ok(onset) = OnsetDetector::new(self.config.onset) {
             self.onset = onset;
         }
@@ -769,13 +809,13 @@ impl DeformationController {
         // The surface's force as the reading says it: without the sensor's named bias and drift. Only
         // while a force command stands on the surface: holding or in free space the correction would be
         // fed forward as a push of its own (a wrong bias of −12 N pressed a holding hand to 20 N).
-        let most = MAX_SENSOR_CORRECTION * self.config.limits.max_force;
-        let surface_force = match &self.inverse {
+        let correction = match &self.inverse {
             Some(i) if self.f_cmd > 0.0 && self.contact_level.is_some() => {
-                normal_force - (normal_force - i.surface_reading(normal_force)).clamp(-most, most)
+                normal_force - i.surface_reading(normal_force)
             }
-            _ => normal_force,
+            _ => 0.0,
         };
+        let surface_force = normal_force - self.sensor_correction(normal_force, correction, dt);
         let n = self.config.normal;
         self.model.forward_kinematics(&mut self.data, q);
         let pose = self.model.frame_pose(&self.data, self.tool);
@@ -1197,6 +1237,33 @@ mod tests {
     use crate::cell::Cell;
     use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
     use softcontact_sim::SimConfig;
+
+    #[test]
+    fn a_models_sensor_correction_is_taken_as_far_as_the_arms_torques_confirm_it() {
+        let mut law = controller();
+        let dt = 1e-3;
+        // Reading 48 N, the model says the sensor reads 12 N low: the surface pushes 60 N if it is right.
+        let mut settled = |arm: Option<f64>| {
+            law.arm_smoothed = None;
+            law.observe_arm_force(arm);
+            law.sensor_correction(48.0, -12.0, dt)
+        };
+        assert_eq!(settled(Some(60.0)), -12.0, "the arm agrees with the corrected force");
+        assert_eq!(settled(Some(48.0)), 0.0, "the arm agrees with the reading");
+        assert_eq!(settled(Some(54.0)), 0.0, "half the correction away");
+        assert!((settled(Some(57.0)) + 6.0).abs() < 1e-12, "a quarter away: half of it");
+        assert_eq!(settled(None), 0.0, "no arm estimate: nothing confirmed");
+        assert_eq!(settled(Some(f64::NAN)), 0.0, "a NaN confirms nothing");
+        // At most MAX_SENSOR_CORRECTION of max_force, confirmed or not.
+        law.arm_smoothed = None;
+        law.observe_arm_force(Some(1048.0));
+        let most = MAX_SENSOR_CORRECTION * law.config.limits.max_force;
+        assert!(law.sensor_correction(48.0, -1000.0, dt).abs() <= most);
+        // One tick of an arm that jumps moves the smoothed view by dt / ARM_FORCE_SMOOTHING of the jump.
+        law.arm_smoothed = Some(48.0);
+        law.observe_arm_force(Some(60.0));
+        assert!(law.sensor_correction(48.0, -12.0, dt).abs() < 0.1);
+    }
 
     fn controller() -> DeformationController {
         DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge()).unwrap()

@@ -602,6 +602,7 @@ impl LwrDriver {
         let q: [f64; 7] = std::array::from_fn(|i| m.data.msr_jnt_pos[i] as f64);
         let seq = m.header.send_seq;
         let mut dq = [0.0; 7];
+        let trusted = self.last_msr.map_or(q, |(_, prev_q)| prev_q);
         if let Some((prev_seq, prev_q)) = self.last_msr {
             // Lost measurements widen the step; a counter that went back (or jumped) is counted and the
             // step taken as one cycle, so the velocity guard sees any jump in position.
@@ -622,6 +623,11 @@ impl LwrDriver {
         // measurement (a forged or corrupt position jump included).
         if m.intf.state == InterfaceState::Command && self.fault.is_none() {
             self.fault = self.fault_of(&q, &dq);
+            // Held where the arm was last seen sound: a jump of the position is no place to hold.
+            if let Some(fault) = self.fault {
+                let at = if matches!(fault, Fault::Overspeed { .. }) { trusted } else { q };
+                self.hold = Some(Hold::new(at, self.cycle, &[0.0; 7], &self.config));
+            }
         }
         self.note_start(&m);
         let waiting = self.waiting_for(&m);

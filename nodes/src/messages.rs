@@ -60,37 +60,50 @@ pub struct DriverMessages {
 }
 
 /// What /lwr/joint_states say of the driver in `header.frame_id` (a joint state has no frame of its
-/// own): the KRC session and whether the KRC applies commands, as `krc_session_<n>_<command|monitor>`.
-/// The torque command echoes the header it answers, so the driver applies only commands of its present
-/// session, and the controller approaches afresh when the session changes or the KRC stops commanding.
+/// own): the KRC session and whether the driver applies torque commands, as
+/// `krc_session_<n>_<command|monitor|fault>` (`fault`: no torque until the operator restarts the KRL
+/// program). The torque command echoes the header it answers, so the driver applies only commands of its
+/// present session, and the controller approaches afresh when the session changes or torque stops.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct DriverSession {
     pub session: u32,
     pub commanding: bool,
+    pub fault: bool,
 }
 
 impl DriverSession {
     const PREFIX: &str = "krc_session_";
 
+    pub fn of(output: &crate::lwr_driver::DriverOutput) -> Self {
+        let fault = matches!(output.waiting, Some(crate::lwr_driver::Waiting::Fault(_)));
+        Self { session: output.session, commanding: output.torque_mode(), fault }
+    }
+
     pub fn to_frame_id(self) -> String {
-        format!("{}{}_{}", Self::PREFIX, self.session, if self.commanding { "command" } else { "monitor" })
+        let mode = match (self.commanding, self.fault) {
+            (true, _) => "command",
+            (false, true) => "fault",
+            (false, false) => "monitor",
+        };
+        format!("{}{}_{}", Self::PREFIX, self.session, mode)
     }
 
     pub fn from_frame_id(frame_id: &str) -> Option<Self> {
         let (session, mode) = frame_id.strip_prefix(Self::PREFIX)?.split_once('_')?;
-        let commanding = match mode {
-            "command" => true,
-            "monitor" => false,
+        let (commanding, fault) = match mode {
+            "command" => (true, false),
+            "monitor" => (false, false),
+            "fault" => (false, true),
             _ => return None,
         };
-        Some(Self { session: session.parse().ok()?, commanding })
+        Some(Self { session: session.parse().ok()?, commanding, fault })
     }
 }
 
 impl DriverOutput {
     pub fn messages(&self, joint_names: &[String], stamp: Time) -> DriverMessages {
         let h = header("world", stamp);
-        let session = DriverSession { session: self.session, commanding: self.torque_mode() };
+        let session = DriverSession::of(self);
         let (t, q) = pose_parts(&self.tool_pose);
         let v = self.tool_twist;
         DriverMessages {

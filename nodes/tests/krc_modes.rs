@@ -154,3 +154,42 @@ fn drives_off_or_a_drive_error_mid_press_get_no_torque_and_the_arm_stays_put() {
         assert!(after > 0.5 * before && after < 1.2 * before, "{what}: {before} N before, {after} N after");
     }
 }
+
+#[test]
+fn a_latched_fault_fails_force_commands_with_its_reason_until_the_operator_restarts_the_krl_program() {
+    use softcontact_nodes::deformation_controller::ControlError;
+    let mut cell = pressing(35);
+    // A forged measurement from the KRC: joint 2 jumped 0.15 rad in a cycle. Latched as it is read.
+    let mut forged = cell.sim.measurement();
+    forged.data.msr_jnt_pos[1] += 0.15;
+    let measured = cell.driver.measure(&forged.encode()).unwrap();
+    assert!(!measured.output.torque_mode(), "the controller is never given it in torque mode");
+    cell.driver.answer(measured);
+    // Held where the arm was before the jump, with no torque of the command: the sponge pushes the hand
+    // back against the hold's spring, never the other way.
+    let before = cell.sim.contact().normal_force;
+    let seen = run(&mut cell, 1_000);
+    let after = cell.sim.contact().normal_force;
+    assert_eq!(seen.controller_ticks, 0, "{seen:?}");
+    assert!(seen.moved < 10e-3 && after <= before + 0.5, "{:.2} mm, {before:.1} → {after:.1} N", seen.moved * 1e3);
+    // Silence, new sessions and the KRC's own fallback do not clear it.
+    cell.driver.resumed_after(1.36);
+    cell.driver.begin_session();
+    let seen = run(&mut cell, 2_000);
+    assert_eq!(seen.controller_ticks, 0, "{seen:?}");
+    assert!(seen.moved < 10e-3 && cell.sim.contact().normal_force <= before + 0.5, "{:.2} mm", seen.moved * 1e3);
+    assert!(cell.driver.fault().is_some());
+    match cell.controller.on_force_command(60.0, 1.0) {
+        (_, Err(ControlError::DriverFault(why))) => assert!(why.contains("joint 2 overspeed"), "{why}"),
+        other => panic!("a force command while the fault stands: {other:?}"),
+    }
+    // The operator restarts the KRL program: the fault clears, the controller approaches again.
+    let q = *cell.sim.q();
+    cell.sim.krc.restart_program(q);
+    let seen = run(&mut cell, 8_000);
+    assert!(cell.driver.fault().is_none() && cell.driver.counters.faults_cleared == 1);
+    assert!(seen.controller_ticks > 1_000, "{seen:?}");
+    assert!(cell.controller.law.contact_level().is_some(), "contact found again");
+    let (_, taken) = cell.controller.on_force_command(60.0, 1.0);
+    assert!(taken.is_ok(), "{taken:?}");
+}

@@ -386,7 +386,7 @@ fn a_hold_for_a_stale_command_hands_its_torque_to_the_spring_and_overspeed_drops
     let (reply, out) = d.handle(&measurement(3, InterfaceState::Command, fast, G)).unwrap();
     assert!(out.holding);
     assert_eq!(reply.add_jnt_trq, [0.0; 7]);
-    assert_eq!(reply.jnt_pos, fast, "held where it is, no preload");
+    assert_eq!(reply.jnt_pos, Q, "held where the arm was before the jump, no preload");
 }
 
 #[test]

@@ -58,6 +58,7 @@ fn main() -> anyhow::Result<()> {
     let (mut pin_joint_states, mut pin_wrenches, mut pin_external) = Default::default();
     let mut strangers_logged = 0;
     let mut next_strangers_log = Instant::now();
+    let mut driver_fault = false;
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
         topics.take_inputs(&mut control);
@@ -95,6 +96,12 @@ fn main() -> anyhow::Result<()> {
                 continue;
             };
             let session = DriverSession::from_frame_id(&js.header.frame_id);
+            let fault = session.is_some_and(|s| s.fault);
+            if fault != driver_fault {
+                driver_fault = fault;
+                let why = "its /diagnostics name it; no torque until the operator restarts the KRL program";
+                control.on_driver_fault(fault.then(|| why.to_string()));
+            }
             let sample = JointSample {
                 stamp: js.header.stamp.as_secs_f64(),
                 session: session.map(|s| s.session),

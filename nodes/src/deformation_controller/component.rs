@@ -23,6 +23,8 @@ pub struct InProcessController {
     start: Instant,
     /// The step of the newest measurement and the joint state it answered (stamp, session).
     last: Option<(Step, f64, DriverSession)>,
+    /// The driver's fault as last handed to the controller.
+    driver_fault: Option<crate::lwr_driver::Fault>,
 }
 
 impl InProcessController {
@@ -36,7 +38,7 @@ impl InProcessController {
         let control = ControllerNode::from_params(p)?;
         let topics = ControllerInterface::new(p, declared)?;
         topics.log(LogLevel::Info, &format!("ready: in process, model update {:?}", p.model_update));
-        Ok(Self { control, topics, forces, start: Instant::now(), last: None })
+        Ok(Self { control, topics, forces, start: Instant::now(), last: None, driver_fault: None })
     }
 
     fn seconds(&self, t: Instant) -> f64 {
@@ -57,7 +59,12 @@ impl InProcessController {
             Some(r) => self.control.on_force(r.stamp, r.force, self.seconds(r.arrived)),
             None => self.control.force_withheld(),
         }
-        let session = DriverSession { session: out.session, commanding: out.torque_mode() };
+        let session = DriverSession::of(out);
+        // The fault's reason, once at each change (the only allocation here, never per cycle).
+        if driver.fault() != self.driver_fault {
+            self.driver_fault = driver.fault();
+            self.control.on_driver_fault(self.driver_fault.map(|f| f.to_string()));
+        }
         let sample =
             JointSample { stamp, session: Some(session.session), commanding: session.commanding, q: out.q, dq: out.dq };
         self.control.on_external_torque(stamp, &out.external_torque);

@@ -224,6 +224,8 @@ pub struct ControllerNode {
     pending_model: Option<(ContactModel, Vector3<f64>)>,
     retare: Option<Retare>,
     pub counters: NodeCounters,
+    /// The driver's latched fault, as it said it.
+    driver_fault: Option<String>,
 }
 
 impl ControllerNode {
@@ -259,6 +261,7 @@ impl ControllerNode {
             pending_model: None,
             retare: None,
             counters: NodeCounters::default(),
+            driver_fault: None,
         })
     }
 
@@ -329,6 +332,9 @@ impl ControllerNode {
     /// with the present model, and the refusal is returned beside the command's own result. A command
     /// refused changes nothing: the model keeps waiting for the next.
     pub fn on_force_command(&mut self, force: f64, duration: f64) -> (Option<ControlError>, Result<(), ControlError>) {
+        if let Some(fault) = &self.driver_fault {
+            return (None, Err(ControlError::DriverFault(fault.clone())));
+        }
         if self.retare.is_some() {
             return (None, Err(ControlError::Retaring));
         }
@@ -369,6 +375,12 @@ impl ControllerNode {
     /// Where a retreat to re-tare is (`None`: none under way).
     pub fn retare(&self) -> Option<Retare> {
         self.retare
+    }
+
+    /// The driver latched a fault (its reason), or it was cleared (`None`): while it stands force
+    /// commands and goals fail with it.
+    pub fn on_driver_fault(&mut self, fault: Option<String>) {
+        self.driver_fault = fault;
     }
 
     /// The F/T node tared (or refused, `tared` false): the controller restarts, to find the surface
@@ -436,10 +448,13 @@ impl ControllerNode {
             self.counters.no_arm_force += 1;
             return Step { restarted, ..nothing(Silence::NoArmForce, ControllerState { f, ..Default::default() }) };
         };
+        self.law.observe_arm_force(None);
         let checked = if force_world.iter().all(|v| v.is_finite()) {
             model.frame_jacobian(data, *tool, Axes::World, &mut self.jacobian);
             // Near a singularity the torques say nothing of the force: no comparison, no disagreement.
-            match ForceCheck::arm_force(&self.jacobian, &arm_torque) {
+            let arm = ForceCheck::arm_force(&self.jacobian, &arm_torque);
+            self.law.observe_arm_force(arm.map(|a| self.geometry.normal_force(&a)));
+            match arm {
                 Some(arm) => {
                     let tripped_before = self.force_check.error().is_some();
                     let checked = self.force_check.compare(js.stamp, &force_world, &arm);
@@ -855,6 +870,39 @@ mod tests {
         let (_, unplaced, refused) = press_60(ControllerNode::from_params(&params(Some(far.into()))).unwrap());
         assert!(matches!(refused, Some(ControlError::ImplausibleModel(_))), "{refused:?}");
         assert!((unplaced - onset_only).abs() < 1e-6, "{unplaced} N against {onset_only} N");
+    }
+
+    /// The true force after a 60 N press with the sponge's model and a sensor bias of `named` N in it,
+    /// on the simulated sponge (whose sensor has none).
+    fn press_60_with_bias(named: f64) -> f64 {
+        use softcontact_contact::Effect;
+        let biased =
+            |offset: f64| ContactModel { effects: vec![Effect::SensorBias { offset }], ..softcontact_sim::sponge() };
+        let config = softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 7);
+        let surface = config.surface.as_ref().unwrap().point;
+        let law =
+            DeformationController::new(super::super::ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge())
+                .unwrap();
+        let estimator = crate::contact_estimator::ContactEstimatorNode::new(Default::default()).unwrap();
+        let mut cell = crate::cell::Cell::new(config, law, estimator).unwrap();
+        cell.start(5000).unwrap();
+        settle_in_contact(&mut cell);
+        assert_eq!(cell.controller.on_model(biased(named), surface), Ok(false));
+        let (refused, taken) = cell.controller.on_force_command(60.0, 0.5);
+        assert!(refused.is_none() && taken.is_ok(), "{refused:?} {taken:?}");
+        for _ in 0..3000 {
+            cell.cycle().unwrap();
+        }
+        cell.sim.contact().normal_force
+    }
+
+    #[test]
+    fn a_models_sensor_bias_the_arm_does_not_confirm_moves_the_force_at_most_five_percent() {
+        // −12 N, inside the 12.5 N bound of a model's bias, once turned a 60 N command into 103 N.
+        for named in [-12.0, 12.0] {
+            let f = press_60_with_bias(named);
+            assert!((f - 60.0).abs() <= 0.05 * 60.0, "a bias of {named} N named, none there: {f:.2} N for 60 N");
+        }
     }
 
     #[test]
