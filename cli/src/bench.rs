@@ -21,16 +21,16 @@ pub enum BenchCommand {
     /// `softcontact demo` in-process: both surfaces' full experiments one after the other on one
     /// thread, without and with the recording (goal: the demo < 30 s wall).
     Demo {
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// Rigid-body dynamics: FK + Jacobian, RNEA, CRBA, g, h, forward dynamics and a whole control tick.
     Dynamics {
         /// Calls per repetition.
-        #[arg(long, default_value_t = 1_000_000)]
+        #[arg(long, default_value_t = 1_000_000, value_parser = crate::ranges::count(1, 100_000_000))]
         calls: usize,
         /// Repetitions; the best is kept.
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, default_value_t = 5, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
         /// Also time Pinocchio's C++ on the same URDF (builds it once: needs `pip install pin
         /// cmeel-eigen cmeel-urdfdom-headers` and g++) and print our/Pinocchio ratios.
@@ -44,51 +44,51 @@ pub enum BenchCommand {
     /// with every FRI measurement and RDT record encoded as the wire carries them.
     Sim {
         /// Simulated seconds per repetition.
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = 10.0, value_parser = crate::ranges::real(0.001, 3600.0, " s"))]
         seconds: f64,
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// The FRI driver's work per cycle: decode the measurement, decide the reply, compute the tool pose
     /// and twist it publishes, encode the reply.
     Driver {
-        #[arg(long, default_value_t = 200_000)]
+        #[arg(long, default_value_t = 200_000, value_parser = crate::ranges::count(1, 100_000_000))]
         calls: usize,
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, default_value_t = 5, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// Seed 000's 205 loading paths in-process: the arm as the stage (driver, F/T node, stage and simulator
     /// in lockstep) against the ideal stage in the same run (goal: < 60 s wall), and the stage's update
     /// per 1 ms tick.
     LoadingPaths {
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
         /// Stage updates per repetition.
-        #[arg(long, default_value_t = 100_000)]
+        #[arg(long, default_value_t = 100_000, value_parser = crate::ranges::count(1, 100_000_000))]
         calls: usize,
     },
     /// Seed 000's climbing snake: one stability analysis (linearisation, balanced eigenvalues, the run
     /// from a perturbed start) and the whole default climb.
     Climb {
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// The deformation controller's tick in contact: FK, J, J̇q̇, M, M⁻¹, h, the deformation law, eq. 15
     /// and the limiter.
     Controller {
-        #[arg(long, default_value_t = 200_000)]
+        #[arg(long, default_value_t = 200_000, value_parser = crate::ranges::count(1, 100_000_000))]
         calls: usize,
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, default_value_t = 5, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// Contact estimation: sliding-window update per sample, full refit of every kind with 5-fold
     /// cross-validation over the window, exponent and contact-offset estimation.
     Contact {
         /// Samples in the window (seed 001: 1200).
-        #[arg(long, default_value_t = 1200)]
+        #[arg(long, default_value_t = 1200, value_parser = crate::ranges::count(10, 1_000_000))]
         window: usize,
         /// Repetitions; the best is kept.
-        #[arg(long, default_value_t = 5)]
+        #[arg(long, default_value_t = 5, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
         #[arg(long)]
         json: Option<PathBuf>,
@@ -97,16 +97,16 @@ pub enum BenchCommand {
     /// and reading it back with `softcontact identify`'s whole work (decode, pair, fit every kind).
     Recording {
         /// Recorded seconds.
-        #[arg(long, default_value_t = 60.0)]
+        #[arg(long, default_value_t = 60.0, value_parser = crate::ranges::real(0.001, 3600.0, " s"))]
         seconds: f64,
-        #[arg(long, default_value_t = 3)]
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
     /// The discrepancy workflow: its hidden-effect corpus made in the lockstep cell (the detection table
     /// and the goals), and the whole workflow's time on a 1 kHz recording on one core.
     Discrepancy {
         /// Threads for the corpus (each case is an independent cell).
-        #[arg(long, default_value_t = 2)]
+        #[arg(long, default_value_t = 2, value_parser = crate::ranges::count(1, 64))]
         threads: usize,
         /// Write the corpus outcomes and the timing as JSON here.
         #[arg(long)]

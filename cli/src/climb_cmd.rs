@@ -17,13 +17,13 @@ use crate::loading_paths_cmd::LawArg;
 #[derive(clap::Args, Debug, Clone)]
 pub struct ClimbArgs {
     /// Number of links N (≥ 6: two tripods of two links and a spine of at least two).
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = 6, value_parser = crate::ranges::count(6, 40))]
     links: usize,
     /// How high to climb [m].
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, value_parser = crate::ranges::real(0.001, 2.0, " m"))]
     height: f64,
     /// How far a tripod moves up per cycle [m].
-    #[arg(long, default_value_t = 0.008)]
+    #[arg(long, default_value_t = 0.008, value_parser = crate::ranges::real(0.0005, 0.05, " m"))]
     step: f64,
     /// The feet's tangential law.
     #[arg(long, value_enum, default_value_t = LawArg::Walton)]
@@ -76,7 +76,14 @@ fn law(arg: LawArg) -> TangentialLaw {
 }
 
 pub fn run(args: &ClimbArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.height.is_finite() && args.height > 0.0, "--height must be a finite number > 0");
+    // Each cycle climbs one step: at most a thousand of them.
+    let cycles = args.height / args.step;
+    anyhow::ensure!(
+        cycles <= 1000.0,
+        "--height {} m in steps of {} m is {cycles:.0} cycles, at most 1000",
+        args.height,
+        args.step
+    );
     let config = ClimbConfig {
         links: args.links,
         height: args.height,

@@ -32,13 +32,13 @@ pub struct IdentifyArgs {
     #[arg(long)]
     pub json: Option<PathBuf>,
     /// Contact direction in the world, the way the hand moves to compress the surface.
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1")]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1", value_parser = crate::ranges::real(-1.0, 1.0, ""))]
     pub normal: Vec<f64>,
     /// Onset threshold of the normal force [N] (seed 001: 1 N).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::ranges::real(1e-9, 1e4, " N"))]
     pub onset: f64,
     /// Time between the samples fitted [s] (seed 001: 10 ms).
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, value_parser = crate::ranges::real(1e-6, 10.0, " s"))]
     pub sample_period: f64,
 }
 

@@ -15,6 +15,7 @@ mod loading_paths_cmd;
 mod loading_paths_figures;
 mod loading_paths_record;
 mod model_cmd;
+mod ranges;
 mod record_cmd;
 mod tangential_paths;
 

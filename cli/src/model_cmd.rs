@@ -15,13 +15,13 @@ pub struct ModelArgs {
     #[arg(long)]
     urdf: Option<PathBuf>,
     /// Joint positions [rad], comma-separated (default: zeros).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::ranges::real(-10.0, 10.0, " rad"))]
     q: Option<Vec<f64>>,
     /// Joint velocities [rad/s], comma-separated (default: zeros).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::ranges::real(-100.0, 100.0, " rad/s"))]
     dq: Option<Vec<f64>>,
     /// Joint accelerations [rad/s²], comma-separated (default: zeros).
-    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::ranges::real(-1e4, 1e4, " rad/s²"))]
     ddq: Option<Vec<f64>>,
     /// Frame whose Jacobian is shown (default: lwr_tool if the robot has it, else the chain's last frame).
     #[arg(long)]

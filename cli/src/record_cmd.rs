@@ -19,7 +19,7 @@ pub struct RecordArgs {
     /// the graph).
     pub topics: Vec<String>,
     /// Stop after this many seconds (default: at Ctrl-C / SIGTERM).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::ranges::real(0.001, 1e7, " s"))]
     pub duration: Option<f64>,
 }
 

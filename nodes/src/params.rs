@@ -244,7 +244,8 @@ pub struct Declared {
 /// The largest parameter or model file read [bytes]: memory stays bounded whatever the path names.
 pub const MAX_FILE: u64 = 1 << 20;
 
-/// A regular file's text, at most [`MAX_FILE`] bytes: a device, a FIFO or a larger file is an error.
+/// A YAML file's text: a regular file of at most [`MAX_FILE`] bytes nested at most [`MAX_NESTING`]
+/// levels ([`check_nesting`]); a device, a FIFO, a larger or a deeper file is an error.
 pub fn read_small(path: &Path) -> std::io::Result<String> {
     use std::io::Read;
     // Before opening: opening a FIFO blocks until a writer comes.
@@ -257,7 +258,48 @@ pub fn read_small(path: &Path) -> std::io::Result<String> {
     if text.len() as u64 > MAX_FILE {
         return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("larger than {MAX_FILE} bytes")));
     }
+    check_nesting(&text).map_err(|why| std::io::Error::new(std::io::ErrorKind::InvalidData, why))?;
     Ok(text)
+}
+
+/// The deepest nesting a parameter file or override may have: flow brackets (`[`, `{`) and block
+/// indentation, in levels. The deepest parameter is three levels down; a YAML parser takes time and
+/// stack in the depth, so a hostile file is refused before it is parsed.
+pub const MAX_NESTING: usize = 32;
+/// The widest block indentation of a parameter file's line [characters].
+pub const MAX_INDENT: usize = 4 * MAX_NESTING;
+
+/// The text's nesting, if within [`MAX_NESTING`] levels of brackets and [`MAX_INDENT`] characters of
+/// indentation (quoted strings and comments are skipped); the error names the line.
+pub fn check_nesting(text: &str) -> Result<(), String> {
+    let mut depth = 0usize;
+    let mut quote: Option<char> = None;
+    for (number, line) in text.lines().enumerate() {
+        let indent = line.len() - line.trim_start_matches([' ', '\t']).len();
+        if indent > MAX_INDENT {
+            return Err(format!("line {}: indented {indent} characters, at most {MAX_INDENT}", number + 1));
+        }
+        let mut previous = ' ';
+        for c in line.chars() {
+            let starts_scalar = matches!(previous, ' ' | '\t' | '[' | '{' | ',' | ':');
+            previous = c;
+            match (quote, c) {
+                (Some(q), c) if c == q => quote = None,
+                (Some(_), _) => {}
+                (None, '"' | '\'') if starts_scalar => quote = Some(c),
+                (None, '#') => break,
+                (None, '[' | '{') => {
+                    depth += 1;
+                    if depth > MAX_NESTING {
+                        return Err(format!("line {}: nested deeper than {MAX_NESTING} levels", number + 1));
+                    }
+                }
+                (None, ']' | '}') => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
@@ -269,6 +311,7 @@ pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared)
     }
     for o in &args.overrides {
         let (name, value) = o.split_once(":=").ok_or_else(|| ParamError::Override(o.clone()))?;
+        check_nesting(value).map_err(|_| ParamError::Override(o.chars().take(80).collect()))?;
         let value: Value = serde_yaml_ng::from_str(value).map_err(|_| ParamError::Override(o.clone()))?;
         set_path(&mut merged, name.trim(), value);
     }
@@ -389,6 +432,35 @@ fn parameter_value(v: &Value) -> ParameterValue {
 mod tests {
     use super::*;
     use serde::Deserialize;
+
+    #[test]
+    fn a_deeply_nested_parameter_file_is_refused_before_it_is_parsed() {
+        let dir = std::env::temp_dir().join(format!("softcontact-nesting-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let deep = 100_000;
+        let hostile = [
+            format!("lwr_driver:\n  ros__parameters:\n    x: {}{}\n", "[".repeat(deep), "]".repeat(deep)),
+            format!("lwr_driver:\n  ros__parameters:\n    x: {}1{}\n", "{a: ".repeat(deep), "}".repeat(deep)),
+            (0..1000).map(|i| format!("{}a{i}:\n", " ".repeat(i))).collect(),
+        ];
+        for (i, text) in hostile.iter().enumerate() {
+            let path = dir.join(format!("deep{i}.yaml"));
+            std::fs::write(&path, text.as_bytes()).unwrap();
+            let args = ParamArgs { files: vec![path], ..Default::default() };
+            let start = std::time::Instant::now();
+            let refused = load::<crate::lwr_driver::Params>("lwr_driver", &args).map(|_| ()).unwrap_err();
+            assert!(start.elapsed().as_secs_f64() < 0.5, "case {i}: {:?} to refuse", start.elapsed());
+            assert!(refused.to_string().contains("line"), "case {i}: {refused}");
+        }
+        let override_ = format!("x:={}{}", "[".repeat(deep), "]".repeat(deep));
+        let args = ParamArgs { overrides: vec![override_], ..Default::default() };
+        assert!(matches!(load::<crate::lwr_driver::Params>("lwr_driver", &args), Err(ParamError::Override(_))));
+        // Quotes, apostrophes and comments do not count.
+        let fine =
+            "a: \"[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[\"\nb: it's [1, 2] # {{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{\n";
+        assert_eq!(check_nesting(fine), Ok(()));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[derive(Debug, PartialEq, Serialize, Deserialize)]
     #[serde(default, deny_unknown_fields)]
