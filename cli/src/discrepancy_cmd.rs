@@ -223,9 +223,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
     };
     let id_args = &args.recording;
     let recording = Recording::open(&id_args.file)?;
-    for w in recording.warnings() {
-        eprintln!("warning: {w}");
-    }
+    let said = identify_cmd::say_warnings(&recording, 0);
     let bar = if progress {
         indicatif::ProgressBar::new(recording.message_count())
     } else {
@@ -237,6 +235,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
     let surface = id.contact_position();
     let baseline = baseline.unwrap_or_else(|| id.model.model.clone());
     let series = series(&recording, id_args, &surface)?;
+    identify_cmd::say_warnings(&recording, said);
     let report = analyse(&series, &baseline, &Options::default())?;
     let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording").to_string();
     Ok(Analysis { name, baseline, surface, series, report })
@@ -244,7 +243,9 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     if args.arm {
-        let report = crate::arm_effects::analyse(&Recording::open(&args.recording.file)?)?;
+        let recording = Recording::open(&args.recording.file)?;
+        let report = crate::arm_effects::analyse(&recording)?;
+        identify_cmd::say_warnings(&recording, 0);
         crate::arm_effects::print(&report);
         let overlay = crate::arm_effects::write_overlay(&report.effects(), &args.out)?;
         println!("compensation (a --params-file overlay of the deformation controller): {}", overlay.display());
@@ -258,8 +259,9 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     }
     if args.loading_paths {
         let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
-        let (paths, episodes) =
-            tangential_paths::episodes(&Recording::open(&args.recording.file)?, Vector3::new(x, y, z))?;
+        let recording = Recording::open(&args.recording.file)?;
+        let (paths, episodes) = tangential_paths::episodes(&recording, Vector3::new(x, y, z))?;
+        identify_cmd::say_warnings(&recording, 0);
         anyhow::ensure!(
             paths.len() >= 2,
             "--loading-paths needs at least two contacts that move sideways; the recording has {} contacts, {} of them sideways",

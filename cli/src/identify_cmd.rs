@@ -240,12 +240,20 @@ fn print_parameters(fits: &[Fit]) {
     }
 }
 
-pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
-    let recording = Recording::open(&args.file)?;
-    let said = recording.warnings();
-    for w in &said {
+/// Prints the recording's warnings after the first `said` (what opening it recovered, then the damage
+/// reading it found: a chunk skipped); the number said so far. Every command that reads a recording
+/// says so after each pass over it.
+pub fn say_warnings(recording: &Recording, said: usize) -> usize {
+    let warnings = recording.warnings();
+    for w in warnings.iter().skip(said) {
         eprintln!("warning: {w}");
     }
+    warnings.len().max(said)
+}
+
+pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
+    let recording = Recording::open(&args.file)?;
+    let said = say_warnings(&recording, 0);
     let bar = indicatif::ProgressBar::new(recording.message_count());
     bar.set_style(
         indicatif::ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} messages ({eta})")
@@ -266,9 +274,7 @@ pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         }
     };
     // Damage found while reading (a chunk skipped).
-    for w in recording.warnings().iter().skip(said.len()) {
-        eprintln!("warning: {w}");
-    }
+    say_warnings(&recording, said);
     // A recording of sideways pushes (seed 000's loading paths) may hold too little of the normal law's
     // kind of excitation for the normal fits: its tangential law is reported all the same.
     let normal = match (normal, &tangential) {

@@ -129,6 +129,22 @@ fn bad_input_gets_a_clear_error_and_a_non_zero_exit() {
     }
 }
 
+#[test]
+fn a_damaged_chunk_is_reported_by_discrepancy_as_by_identify() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("damaged.mcap");
+    write(&path, &ContactModel::new(Kind::KelvinVoigt, 9000.0, 250.0).unwrap(), 5);
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The middle of the file lies in a chunk (a recording is chunks, then its summary).
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xFF;
+    std::fs::write(&path, &bytes).unwrap();
+    let out = dir.path().join("out");
+    let run = discrepancy(&[path.as_os_str(), "--out".as_ref(), out.as_os_str()]);
+    let shown = text(&run);
+    assert!(shown.contains("warning:") && shown.contains("damaged"), "{shown}");
+}
+
 /// The hidden-effect corpus made in the lockstep cell (`softcontact bench discrepancy`, the table in
 /// docs/discrepancy-corpus.md) meets the goals: ≥ 90 % of effect cases named exactly, no false
 /// name on ≥ 20 nulls, median gap shrink ≥ 80 % of the ideal.
