@@ -452,6 +452,11 @@ impl LwrDriver {
         }
     }
 
+    /// The KRC's cycle, from the newest measurement [s].
+    pub fn sample_time(&self) -> f64 {
+        self.sample_time
+    }
+
     /// The fault the driver holds for, if any.
     pub fn fault(&self) -> Option<Fault> {
         self.fault

@@ -210,6 +210,28 @@ pub enum SurfaceKind {
     None,
 }
 
+/// The KRL program the simulated KRC runs (`krl/README.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KrlProgramKind {
+    /// The shipped `krl/softcontact.src`.
+    Softcontact,
+    /// The LWR ROS 1 stack's `ros_control.src`: position control on its first start.
+    RosControl,
+    /// A program of the cell's own that only ever starts position control.
+    PositionOnly,
+}
+
+impl KrlProgramKind {
+    pub fn program(self) -> softcontact_sim::KrlProgram {
+        match self {
+            Self::Softcontact => softcontact_sim::KrlProgram::Softcontact,
+            Self::RosControl => softcontact_sim::KrlProgram::RosControl,
+            Self::PositionOnly => softcontact_sim::KrlProgram::Fixed(softcontact_sim::STRATEGY_POSITION),
+        }
+    }
+}
+
 /// The `sim_arm` node's parameters (config/sim_arm.yaml). What each means and the values it takes are
 /// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -225,6 +247,7 @@ pub struct Params {
     pub rdt_rate: f64,
     pub lockstep: bool,
     pub seed: u64,
+    pub krl_program: KrlProgramKind,
 }
 
 impl Default for Params {
@@ -240,6 +263,7 @@ impl Default for Params {
             rdt_rate: 1000.0,
             lockstep: false,
             seed: 1,
+            krl_program: KrlProgramKind::Softcontact,
         }
     }
 }
@@ -268,6 +292,10 @@ impl crate::params::NodeParams for Params {
         d.any("fri_bind", "the simulated KRC's own FRI address");
         d.any("rdt_bind", "the simulated Net F/T box's RDT address");
         d.any("surface", "the simulated surface: its preset law, place and sensor (none: free space)");
+        d.any(
+            "krl_program",
+            "the KRL program the simulated KRC runs: softcontact (shipped), ros_control (position control on its first start) or position_only",
+        );
         let model = self.surface_model().map(|_| ());
         d.rule("surface_model", model, "\"\" or a readable contact model file, with a surface", "a contact model file (the model YAML `softcontact discrepancy` and `identify` write) for the surface's law and effects in place of the preset's; \"\" keeps the preset");
         d.within(

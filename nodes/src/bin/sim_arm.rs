@@ -31,6 +31,7 @@ fn main() -> anyhow::Result<()> {
     let (p, declared) = params::load::<Params>("sim_arm", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
     let mut config = SimConfig::above_surface(softcontact_sim::sponge(), p.seed);
+    config.krc.program = p.krl_program.program();
     let model = match p.surface {
         SurfaceKind::Sponge => Some(softcontact_sim::sponge()),
         SurfaceKind::Dice => Some(softcontact_sim::dice()),

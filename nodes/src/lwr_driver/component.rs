@@ -72,6 +72,7 @@ fn diagnostics(
         level,
         message,
         &[
+            ("sample_time_us", us(client.driver.sample_time())),
             ("measurements", c.measurements),
             ("lost", c.lost),
             ("out_of_order", c.out_of_order),
