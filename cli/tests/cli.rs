@@ -62,7 +62,7 @@ fn demo_runs() {
 fn model_rejects_bad_input() {
     for (args, words) in [
         (&["model", "--q", "0,1"][..], "has 2 values, the robot has 7 joints"),
-        (&["model", "--q", "0,0,0,0,0,0,NaN"], "non-finite"),
+        (&["model", "--q", "0,0,0,0,0,0,NaN"], "finite number"),
         (&["model", "--frame", "nowhere"], "no frame named `nowhere`"),
         (&["model", "--urdf", "/nonexistent.urdf"], "cannot read URDF"),
         (&["model", "--q", "0,a,0,0,0,0,0"], "invalid"),
