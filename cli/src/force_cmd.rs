@@ -38,17 +38,12 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     let mut node = ros::node("softcontact_force")?;
     let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
     let press = press_client(&mut node, &args.service_mapping)?;
-    let first = (0..1000).find_map(|_| {
+    // The controller publishes its state while it commands the arm; without it (no contact yet, the KRC
+    // not in torque mode, a fault) the goal is sent all the same, and the controller says why it refuses.
+    let alive = (0..200).any(|_| {
         std::thread::sleep(Duration::from_millis(10));
-        states.take().ok().flatten().map(|(s, _)| s)
+        states.take().ok().flatten().is_some()
     });
-    let first = first.ok_or_else(|| {
-        anyhow::anyhow!(
-            "no /deformation_controller/state in 10 s: is the controller running (ROS_DOMAIN_ID {})?",
-            node.domain_id()
-        )
-    })?;
-    anyhow::ensure!(first.in_contact, "the controller has no contact yet: force commands wait for the onset");
     // Discovery runs both ways: give the action server's readers time to match these writers, and send
     // the goal again if it went unanswered (a request to a reader not matched yet is lost).
     std::thread::sleep(Duration::from_millis(300));
@@ -66,8 +61,13 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
             std::thread::sleep(Duration::from_millis(2));
         }
     }
-    let (accepted, goal_id) =
-        sent.ok_or_else(|| anyhow::anyhow!("no answer from {PRESS_ACTION} (--service-mapping of the controller?)"))?;
+    let (accepted, goal_id) = sent.ok_or_else(|| match alive {
+        true => anyhow::anyhow!("no answer from {PRESS_ACTION} (--service-mapping of the controller?)"),
+        false => anyhow::anyhow!(
+            "no answer from {PRESS_ACTION} and no /deformation_controller/state: is the controller running (ROS_DOMAIN_ID {})?",
+            node.domain_id()
+        ),
+    })?;
     if !accepted {
         // The controller keeps the reason as the refused goal's result.
         let why = result(&press, goal_id, 2.0, false)?

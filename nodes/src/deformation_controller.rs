@@ -168,6 +168,10 @@ pub struct ControllerState {
 /// tare zeroes the offset, so what is left is small, and a model claiming more is refused (a bias) or
 /// cut to it (a drift, which grows with the time since the tare).
 pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
+/// How far above a force command the hold of an augmented model lets the measured force stand (a share
+/// of the command, and at least [N]) before it backs off, whatever the model says of the surface.
+pub const MODEL_FORCE_EXCESS: f64 = 0.05;
+pub const MODEL_FORCE_EXCESS_MIN: f64 = 2.0;
 /// The time constant over which the arm's normal force is smoothed before it confirms a sensor
 /// correction [s].
 pub const ARM_FORCE_SMOOTHING: f64 = 0.05;
@@ -598,10 +602,17 @@ impl DeformationController {
         let step = limits.max_deformation_rate * dt;
         let pressed = measured > self.f_cmd * (1.0 + HOLD_FORCE_MARGIN) || last - z_measured > HOLD_LEAD;
         let deeper = if pressed { 0.0 } else { step };
+        // Above the command by more than MODEL_FORCE_EXCESS (MODEL_FORCE_EXCESS_MIN at least), whatever
+        // the model says of the surface (a drift it names that is not there): back off, faster the more
+        // it is over, at most max_deformation_rate.
+        let allowed = (MODEL_FORCE_EXCESS * self.f_cmd).max(MODEL_FORCE_EXCESS_MIN);
+        let over = measured - self.f_cmd - allowed;
+        let shallower = (over > 0.0).then(|| last - step * (over / allowed).min(1.0));
         let z = match inverse.hold(self.f_cmd, last, dt) {
-            Ok(z) => limits.check_deformation(z.clamp(last - step, last + deeper)).unwrap_or(last),
-            Err(_) => last,
+            Ok(z) => z.clamp(last - step, last + deeper).min(shallower.unwrap_or(f64::INFINITY)),
+            Err(_) => shallower.unwrap_or(last),
         };
+        let z = limits.check_deformation(z).unwrap_or(last);
         self.force_hold = Some(ForceHold { z: Some(z), ..hold });
     }
 
@@ -1632,7 +1643,7 @@ mod tests {
         );
         // The move ends where the wrong model says (the surface it thinks sank over the move); the hold
         // then keeps the force within its margin, and its reference does not run away from the hand.
-        assert!(peak <= 1.15 * 150.0 && end <= (1.0 + HOLD_FORCE_MARGIN) * 150.0 + 1.0, "{peak} N, {end} N");
+        assert!(peak <= 1.15 * 150.0 && end <= (1.0 + MODEL_FORCE_EXCESS) * 150.0, "{peak} N, {end} N");
         // (What the reference leads by is the feed-forward's share of the drift correction, capped at
         // MAX_SENSOR_CORRECTION of max_force: bounded, not wound up towards max_deformation.)
         assert!(lead < 5e-3, "{lead} m, {start_lead} m at the hold's start");

@@ -81,6 +81,9 @@ const SAMPLE_TIME: std::ops::RangeInclusive<f64> = 0.0005..=0.1;
 pub const STRATEGY_JOINT_IMPEDANCE: i32 = 30;
 pub const KRL_STARTED: i32 = 1;
 pub const KRL_INIT: i32 = 10;
+/// Measurements in a row in monitor mode with `$FRI_TO_INT[2]` = 10 that show the operator restarted
+/// the KRL program.
+pub const OPERATOR_RESTART_CYCLES: u32 = 100;
 /// `robot.power`: one bit a drive.
 pub const ALL_DRIVES: u16 = 0x7F;
 /// More lost measurements in a row than this is no longer a gap but a broken counter.
@@ -382,6 +385,8 @@ pub struct LwrDriver {
     /// state of the newest measurement.
     wrong_starts: u32,
     last_state: InterfaceState,
+    /// Measurements in a row that say the KRL program just began, in monitor mode.
+    restart_seen: u32,
     /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
     last_torque: [f32; 7],
     pub counters: DriverCounters,
@@ -416,6 +421,7 @@ impl LwrDriver {
             session_used: false,
             wrong_starts: 0,
             last_state: InterfaceState::Off,
+            restart_seen: 0,
             last_torque: [0.0; 7],
             counters: DriverCounters::default(),
         }
@@ -662,10 +668,14 @@ impl LwrDriver {
         Ok(Measured { m, output })
     }
 
-    /// The operator's action the driver can see: the KRC out of command state with the KRL program just
-    /// begun (`$FRI_TO_INT[2]` = 10). It clears a latched fault.
+    /// The operator's action the driver can see: the KRC in monitor mode with the KRL program just begun
+    /// (`$FRI_TO_INT[2]` = 10) for [`OPERATOR_RESTART_CYCLES`] measurements in a row (a restarted
+    /// program waits that long at least, for the link's grade). It clears a latched fault; a stray
+    /// datagram saying so does not.
     fn note_operator(&mut self, m: &fri::Measurement) {
-        if self.fault.is_some() && m.intf.state != InterfaceState::Command && m.krl.int[1] == KRL_INIT {
+        let restarted = m.intf.state == InterfaceState::Monitor && m.krl.int[1] == KRL_INIT;
+        self.restart_seen = if restarted { self.restart_seen.saturating_add(1) } else { 0 };
+        if self.fault.is_some() && self.restart_seen >= OPERATOR_RESTART_CYCLES {
             self.fault = None;
             self.counters.faults_cleared += 1;
         }

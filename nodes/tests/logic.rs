@@ -298,13 +298,30 @@ fn a_joint_heading_into_its_position_limit_holds_the_arm_until_the_operator_rest
     d.set_command(&G.map(f64::from)).unwrap();
     assert!(d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap().1.holding, "a new session holds on");
     assert!(d.fault().is_some());
+    // A datagram or a few saying the program just began, or saying so with FRI off, are no restart.
     stopped.krl.int[1] = 10;
-    stopped.header.send_seq = 3;
+    stopped.intf.state = InterfaceState::Off;
+    for seq in 3..300 {
+        stopped.header.send_seq = seq;
+        d.handle(&stopped.encode()).unwrap();
+    }
+    stopped.intf.state = InterfaceState::Monitor;
+    for seq in 300..399 {
+        stopped.header.send_seq = seq;
+        d.handle(&stopped.encode()).unwrap();
+    }
+    d.handle(&measurement(399, InterfaceState::Command, Q, G)).unwrap();
+    assert!(d.fault().is_some(), "99 measurements of a restarted program");
+    for seq in 400..499 {
+        stopped.header.send_seq = seq;
+        d.handle(&stopped.encode()).unwrap();
+    }
+    stopped.header.send_seq = 499;
     let (reply, out) = d.handle(&stopped.encode()).unwrap();
     assert_eq!((d.fault(), out.waiting, reply.krl.int[1]), (None, Some(Waiting::Monitor(InterfaceState::Monitor)), 1));
-    d.handle(&measurement(4, InterfaceState::Command, Q, G)).unwrap();
+    d.handle(&measurement(500, InterfaceState::Command, Q, G)).unwrap();
     d.set_command(&G.map(f64::from)).unwrap();
-    assert!(!d.handle(&measurement(5, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    assert!(!d.handle(&measurement(501, InterfaceState::Command, Q, G)).unwrap().1.holding);
     assert_eq!(d.counters.faults_cleared, 1);
 }
 
