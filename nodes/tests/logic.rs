@@ -548,7 +548,8 @@ fn a_krc_commanding_in_position_control_gets_the_measured_position_and_no_torque
 #[test]
 fn in_every_other_mode_the_answer_is_that_modes_safe_command_without_torque() {
     type Edit = fn(&mut fri::Measurement);
-    let cases: [(&str, Edit, fn(&Waiting) -> bool); 8] = [
+    type Expected = fn(&Waiting) -> bool;
+    let cases: [(&str, Edit, Expected); 8] = [
         (
             "Cartesian impedance",
             |m| m.robot.control = fri::ControlMode::CartesianImpedance,
