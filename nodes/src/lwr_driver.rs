@@ -16,8 +16,9 @@
 //! Safety, in this order: a joint moving faster than `velocity_margin` of its limit, or heading into the
 //! last `limit_margin` before its position limit, is a fault, found as the measurement is read, before
 //! any controller sees it: the driver holds where the arm is, with no torque of any command, and asks
-//! for no start, until the operator restarts the KRL program (the KRC seen out of command mode with
-//! `$FRI_TO_INT[2]` = 10) — never on a silence, a new port or a new session. A command older than
+//! for no start, until the operator restarts the KRL program (the KRC seen in monitor mode with
+//! `$FRI_TO_INT[2]` = 10 for [`OPERATOR_RESTART_CYCLES`] measurements) — never on a silence, a new
+//! port or a new session. A command older than
 //! `watchdog_cycles` (or none yet) makes the driver hold the current position with a stiff joint
 //! impedance instead. A torque beyond its joint's limit is
 //! no command a sound controller sends: it is refused (hold), never clipped into one. The driver never
