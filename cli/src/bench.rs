@@ -302,8 +302,8 @@ fn run_recording(seconds: f64, reps: usize) -> anyhow::Result<()> {
             file: path.clone(),
             json: None,
             normal: vec![0.0, 0.0, -1.0],
-            onset: 1.0,
-            sample_period: 0.01,
+            onset: None,
+            sample_period: Some(0.01),
         };
         let start = Instant::now();
         let recording = softcontact_bag::Recording::open(&path)?;

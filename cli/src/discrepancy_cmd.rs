@@ -18,7 +18,8 @@ use softcontact_nodes::contact_estimator::ForcePairing;
 use softcontact_nodes::geometry;
 
 use crate::identify_cmd::{self, IdentifyArgs, POSE, TF_STATIC, TWIST, WRENCH};
-use crate::{discrepancy_figures, tangential_paths};
+use crate::table::si;
+use crate::{discrepancy_figures, table, tangential_paths};
 
 #[derive(Debug, clap::Args)]
 pub struct DiscrepancyArgs {
@@ -96,7 +97,9 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
             WRENCH => {
                 let w = m.decode::<WrenchStamped>()?;
                 let stamp = w.header.stamp.as_secs_f64();
-                if t.last().is_some_and(|last| stamp < last + args.sample_period * (1.0 - 1e-6)) {
+                if t.last().is_some_and(|last| {
+                    stamp < last + args.sample_period.unwrap_or(identify_cmd::RECORDING_SAMPLE_PERIOD) * (1.0 - 1e-6)
+                }) {
                     continue;
                 }
                 if let Some(p) = pairing.force(stamp, geometry::vector_of(&w.wrench.force)) {
@@ -128,16 +131,17 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
 }
 
 fn print_report(report: &Report, name: &str) {
-    println!("{name}: baseline {} — in-contact residual RMS {:.3} N", report.baseline.kind.id(), report.baseline.rms);
+    let n = |v: f64| si(v, "N");
+    println!("{name}: baseline {} — in-contact residual RMS {}", report.baseline.kind.id(), n(report.baseline.rms));
     println!(
-        "noise floor {:.3} N ({:?}); k, λ and the surface refitted: {:.1}, {:.1}, {:+.3} ± {:.3} mm → RMS {:.3} N",
-        report.noise_floor,
+        "noise floor {} ({:?}); k, λ and the surface refitted: {:.4e}, {:.4e}, {} ± {} → RMS {}",
+        n(report.noise_floor),
         report.noise_source,
         report.refit.stiffness,
         report.refit.damping,
-        1e3 * report.refit.contact_shift,
-        1e3 * report.refit.contact_shift_ci,
-        report.refit.rms
+        si(report.refit.contact_shift, "m"),
+        si(report.refit.contact_shift_ci, "m"),
+        n(report.refit.rms)
     );
     if report.effects.is_empty() {
         println!("no effect named");
@@ -152,7 +156,7 @@ fn print_report(report: &Report, name: &str) {
                     None => format!("{k} {v:.4e}"),
                 })
                 .collect();
-            println!("{:<26}{:<48}{:>10.3} N{:>10.3} N", e.id, parameters.join(", "), e.rms_before, e.rms_after);
+            println!("{:<26}{:<48}{:>12}{:>12}", e.id, parameters.join(", "), n(e.rms_before), n(e.rms_after));
         }
     }
     for a in &report.ambiguous {
@@ -160,23 +164,23 @@ fn print_report(report: &Report, name: &str) {
     }
     println!("\n{:<12}{:>12}{:>12}", "phase", "RMS before", "RMS after");
     for (phase, rms) in &report.phases {
-        println!("{:<12}{:>10.3} N{:>10.3} N", format!("{phase:?}").to_lowercase(), rms.rms_before, rms.rms_after);
+        println!("{:<12}{:>12}{:>12}", format!("{phase:?}").to_lowercase(), n(rms.rms_before), n(rms.rms_after));
     }
     let l = &report.locate;
     println!("\nwhere (in contact; before: the refitted baseline)");
-    for (what, unit, scale, bins) in [("speed", "mm/s", 1e3, &l.by_speed), ("force", "N", 1.0, &l.by_force)] {
+    for (what, unit, bins) in [("speed", "m/s", &l.by_speed), ("force", "N", &l.by_force)] {
         for b in bins.iter() {
             println!(
-                "  {what} {:>9.2}–{:<9.2} {unit:<5}{:>10.3} N{:>10.3} N",
-                b.from * scale,
-                b.to * scale,
-                b.rms_before,
-                b.rms_after
+                "  {what} {:>12} – {:<12}{:>12}{:>12}",
+                si(b.from, unit),
+                si(b.to, unit),
+                n(b.rms_before),
+                n(b.rms_after)
             );
         }
     }
     println!(
-        "  whiteness (lag-1 autocorrelation) {:.2} → {:.2}; force against the model: best at a lag of {:+.3} s (correlation {:.4})",
+        "  whiteness (lag-1 autocorrelation) {:.2} → {:.2}; force against the model: best at a lag of {:+.3e} s (correlation {:.4})",
         l.whiteness_before, l.whiteness_after, l.lag_s, l.lag_correlation
     );
     if !l.channels.is_empty() {
@@ -197,7 +201,7 @@ fn print_report(report: &Report, name: &str) {
         }
         softcontact_discrepancy::Remaining::Ambiguous => "ambiguous: the recording cannot tell the candidates apart",
     };
-    println!("\nfinal RMS {:.3} N; remaining: {remaining}", report.final_rms);
+    println!("\nfinal RMS {}; remaining: {remaining}", n(report.final_rms));
 }
 
 /// What the workflow found in one recording, with what it was found from.
@@ -209,9 +213,26 @@ pub struct Analysis {
     /// The recording along the normal from identify's contact position.
     pub series: Series,
     pub report: Report,
+    /// Read from a measurement table: the depth is along the world's z, and the model is not the arm's.
+    pub from_table: bool,
 }
 
-/// Reads the recording, identifies it (or takes `--model`) and runs the workflow.
+/// A measurement table along its depth from identify's surface, its force zeroed at the free level.
+fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>) -> anyhow::Result<Analysis> {
+    let id_args = &args.recording;
+    let table = table::read(&id_args.file)?;
+    let found = identify_cmd::identify_table(&table, id_args)?;
+    identify_cmd::say_table(&id_args.file, &table, &found.onset);
+    let z: Vec<f64> = table.depth.iter().map(|d| d - found.surface).collect();
+    let f: Vec<f64> = table.f.iter().map(|f| f - found.onset.free_level).collect();
+    let series = Series::new(table.t.clone(), z, table.depth_rate(), f)?;
+    let baseline = baseline.unwrap_or_else(|| found.id.model.model.clone());
+    let report = analyse(&series, &baseline, &Options::default())?;
+    let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("table").to_string();
+    Ok(Analysis { name, baseline, surface: found.surface * Vector3::z(), series, report, from_table: true })
+}
+
+/// Reads the recording (or table), identifies it (or takes `--model`) and runs the workflow.
 pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<Analysis> {
     let baseline = match &args.model {
         Some(path) => {
@@ -221,6 +242,9 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
         }
         None => None,
     };
+    if table::is_table(&args.recording.file) {
+        return table_analysis(args, baseline);
+    }
     let id_args = &args.recording;
     let recording = Recording::open(&id_args.file)?;
     let said = identify_cmd::say_warnings(&recording, 0);
@@ -238,7 +262,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
     identify_cmd::say_warnings(&recording, said);
     let report = analyse(&series, &baseline, &Options::default())?;
     let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording").to_string();
-    Ok(Analysis { name, baseline, surface, series, report })
+    Ok(Analysis { name, baseline, surface, series, report, from_table: false })
 }
 
 pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
@@ -278,11 +302,17 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    if table::is_table(&args.recording.file) {
+        anyhow::ensure!(
+            !args.arm && !args.loading_paths && !args.closed_loop,
+            "--arm, --loading-paths and --closed-loop read a ROS 2 recording, not a table"
+        );
+    }
     let analysis = analyse_file(args, true)?;
     if args.closed_loop {
         return crate::closed_loop::run(args, &analysis);
     }
-    let Analysis { name, baseline, series, report, surface: analysis_surface } = analysis;
+    let Analysis { name, baseline, series, report, surface: analysis_surface, from_table } = analysis;
     let name = name.as_str();
     let id_args = &args.recording;
     print_report(&report, name);
@@ -291,10 +321,18 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     let model_file = args.out.join(format!("{name}.augmented.yaml"));
     std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
     println!("augmented model: {}", model_file.display());
-    let [x, y, z] = id_args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
-    let surface = analysis_surface + report.contact_shift * Vector3::new(x, y, z).normalize();
-    let overlay = write_overlay(&args.out, name, &report.model, &surface)?;
-    println!("the graph's parameters for it (launch-scripts/sim.sh or robot.sh --params-file): {}", overlay.display());
+    let overlay = if from_table {
+        None
+    } else {
+        let [x, y, z] = id_args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
+        let surface = analysis_surface + report.contact_shift * Vector3::new(x, y, z).normalize();
+        let overlay = write_overlay(&args.out, name, &report.model, &surface)?;
+        println!(
+            "the graph's parameters for it (launch-scripts/sim.sh or robot.sh --params-file): {}",
+            overlay.display()
+        );
+        Some(overlay)
+    };
     let at_surface = series.shifted(report.contact_shift);
     let figures = discrepancy_figures::Figures {
         name,
@@ -310,7 +348,9 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     if let Some(path) = &id_args.json {
         let mut value = serde_json::to_value(&report)?;
         value["model_file"] = serde_json::Value::from(model_file.display().to_string());
-        value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
+        if let Some(overlay) = overlay {
+            value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
+        }
         identify_cmd::write_json(path, &value)?;
     }
     Ok(())

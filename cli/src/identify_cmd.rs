@@ -15,6 +15,7 @@ use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::EstimatorConfig;
 use softcontact_nodes::identify::{FramesFrom, Identification, Identifier};
 
+use crate::table::{self, Depth, Table};
 use crate::tangential_paths;
 
 pub const WRENCH: &str = "/ft_sensor/wrench";
@@ -26,7 +27,8 @@ const MAX_WINDOW: usize = 10_000_000;
 
 #[derive(Debug, clap::Args)]
 pub struct IdentifyArgs {
-    /// A ROS 2 recording: an .mcap file or a rosbag2 folder with /ft_sensor/wrench and /lwr/ee_pose.
+    /// A ROS 2 recording (an .mcap file or a rosbag2 folder with /ft_sensor/wrench and /lwr/ee_pose), or
+    /// any instrument's measurement table (.csv, .tsv, .txt, .dat: a header such as `t [s],x [nm],f [nN]`).
     pub file: PathBuf,
     /// Write the result as JSON here.
     #[arg(long)]
@@ -34,13 +36,20 @@ pub struct IdentifyArgs {
     /// Contact direction in the world, the way the hand moves to compress the surface.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1", value_parser = crate::ranges::real(-1.0, 1.0, ""))]
     pub normal: Vec<f64>,
-    /// Onset threshold of the normal force [N] (seed 001: 1 N).
-    #[arg(long, default_value_t = 1.0, value_parser = crate::ranges::real(1e-9, 1e4, " N"))]
-    pub onset: f64,
-    /// Time between the samples fitted [s] (seed 001: 10 ms).
-    #[arg(long, default_value_t = 0.01, value_parser = crate::ranges::real(1e-6, 10.0, " s"))]
-    pub sample_period: f64,
+    /// Onset threshold of the normal force [N]; default: 1 N for a recording (seed 001), from a table's own
+    /// free part for a table (10 noise σ above its free level, at least 2 % of its force range).
+    #[arg(long, value_parser = crate::ranges::real(1e-15, 1e5, " N"))]
+    pub onset: Option<f64>,
+    /// Time between the samples fitted [s]; default: 10 ms for a recording (seed 001), every sample of a
+    /// table.
+    #[arg(long, value_parser = crate::ranges::real(1e-7, 10.0, " s"))]
+    pub sample_period: Option<f64>,
 }
+
+/// The onset threshold of a recording when `--onset` does not say (seed 001) [N].
+pub const RECORDING_ONSET: f64 = 1.0;
+/// The sample period of a recording's fits when `--sample-period` does not say (seed 001) [s].
+pub const RECORDING_SAMPLE_PERIOD: f64 = 0.01;
 
 /// Reads the recording and identifies; `progress` is told the messages read so far.
 pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u64)) -> anyhow::Result<Identification> {
@@ -52,16 +61,18 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
         );
     }
     let [x, y, z] = args.normal[..] else { anyhow::bail!("--normal takes three numbers, e.g. 0,0,-1") };
+    let sample_period = args.sample_period.unwrap_or(RECORDING_SAMPLE_PERIOD);
+    let onset = args.onset.unwrap_or(RECORDING_ONSET);
     anyhow::ensure!(
-        args.sample_period.is_finite() && (1e-4..=1.0).contains(&args.sample_period),
-        "--sample-period must be between 0.0001 and 1 s"
+        sample_period.is_finite() && (1e-4..=1.0).contains(&sample_period),
+        "--sample-period must be between 0.0001 and 1 s for a recording"
     );
-    anyhow::ensure!(args.onset.is_finite() && args.onset > 0.0, "--onset must be a positive force [N]");
+    anyhow::ensure!(onset.is_finite() && onset > 0.0, "--onset must be a positive force [N]");
     let (start, end) = recording.time_range().unwrap_or((0, 0));
     // Room for every sample of the recording (the whole contact is fitted): its duration over the
     // sample period, but never more than it has wrench readings (a summary's times may be anything) nor
     // MAX_WINDOW.
-    let by_time = (end.saturating_sub(start) as f64 * 1e-9 / args.sample_period) as usize + 2;
+    let by_time = (end.saturating_sub(start) as f64 * 1e-9 / sample_period) as usize + 2;
     let by_readings = recording.topic(WRENCH).map_or(0, |t| t.message_count).saturating_add(2);
     let window = by_time.min(usize::try_from(by_readings).unwrap_or(usize::MAX)).clamp(1200, MAX_WINDOW);
     if by_time > MAX_WINDOW && by_readings > MAX_WINDOW as u64 {
@@ -69,9 +80,9 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
     }
     let config = EstimatorConfig {
         normal: Vector3::new(x, y, z),
-        sample_period: args.sample_period,
+        sample_period,
         window,
-        onset: softcontact_contact::OnsetConfig { threshold: args.onset, ..Default::default() },
+        onset: softcontact_contact::OnsetConfig { threshold: onset, ..Default::default() },
         // A whole recording has holds: every fold scored about the mean of all the data.
         fit: FitConfig { score_about_overall_mean: true, ..Default::default() },
         ..Default::default()
@@ -101,6 +112,83 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
         }
     }
     Ok(identifier.finish()?)
+}
+
+/// A measurement table identified: the identification, what its free part said, and where the surface is
+/// along the table's depth [m].
+pub struct TableIdentification {
+    pub id: Identification,
+    pub onset: table::Onset,
+    pub surface: f64,
+}
+
+/// Identifies a table: its force zeroed at the free level, the onset threshold from its own noise (or
+/// `--onset`), every sample fitted (or one per `--sample-period`).
+pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<TableIdentification> {
+    let onset = table::onset(&table.f);
+    let threshold = args.onset.unwrap_or(onset.threshold);
+    let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
+    let n = Vector3::z();
+    let config = EstimatorConfig {
+        normal: n,
+        sample_period,
+        window: (table.t.len() + 2).clamp(1200, MAX_WINDOW),
+        onset: softcontact_contact::OnsetConfig { threshold, ..Default::default() },
+        fit: FitConfig { score_about_overall_mean: true, ..Default::default() },
+        ..Default::default()
+    };
+    let mut identifier = Identifier::new(config, f64::INFINITY)?;
+    let rate = table.depth_rate();
+    for i in 0..table.t.len() {
+        identifier.reading(table.t[i], &(table.depth[i] * n), &(rate[i] * n), table.f[i] - onset.free_level)?;
+    }
+    let id = identifier.finish().map_err(|e| {
+        anyhow::anyhow!(
+            "{e}: no force rose {} above the free level {} (the onset threshold{}); set another with --onset [N]",
+            table.force(threshold),
+            table.force(onset.free_level),
+            if args.onset.is_some() { " given" } else { ": 10 noise σ, at least 2 % of the force range" }
+        )
+    })?;
+    let surface = match table.depth_is {
+        Depth::Position => id.contact_position().dot(&n),
+        Depth::Deformation => 0.0,
+    };
+    Ok(TableIdentification { id, onset, surface })
+}
+
+/// What the reader made of a table, said before its results.
+pub fn say_table(file: &Path, table: &Table, onset: &table::Onset) {
+    let block = if table.block > 1 { format!(", blocks of {} rows averaged", table.block) } else { String::new() };
+    println!(
+        "{}: {} rows ({} samples{block}), one per {:.3e} s; depth as {}",
+        file.display(),
+        table.rows,
+        table.t.len(),
+        table.sample_period(),
+        match table.depth_is {
+            Depth::Position => "position (x): the surface from the force onset",
+            Depth::Deformation => "deformation (z)",
+        }
+    );
+    if !table.ignored.is_empty() {
+        println!("columns not read: {}", table.ignored.join(", "));
+    }
+    if onset.free_samples > 0 {
+        println!(
+            "force zeroed at its free level {} (the first {} samples; noise σ {}); onset threshold {}",
+            table.force(onset.free_level),
+            onset.free_samples,
+            table.force(onset.noise),
+            table.force(onset.threshold)
+        );
+    } else {
+        println!(
+            "the table starts in contact (its first samples move by more than the threshold): the force is taken \
+             as recorded, its zero is the instrument's; onset threshold {}",
+            table.force(onset.threshold)
+        );
+    }
 }
 
 /// Below this best cross-validated fitness (at the surface) no kind explains the force: the model's
@@ -171,9 +259,12 @@ pub fn print_table(id: &Identification, file: &Path) {
         println!();
     }
     let p = id.contact_position();
-    println!("\nat the estimated surface [{:.4}, {:.4}, {:.4}] m:", p.x, p.y, p.z);
+    println!("\nat the estimated surface [{:.4e}, {:.4e}, {:.4e}] m:", p.x, p.y, p.z);
     print_parameters(surface);
-    println!("\nat the force onset, {:.2} mm from the surface (seed 001's method):", id.model.offset.abs() * 1e3);
+    println!(
+        "\nat the force onset, {} from the surface (seed 001's method):",
+        crate::table::si(id.model.offset.abs(), "m")
+    );
     print_parameters(onset);
     let mut ranked: Vec<_> = surface.iter().filter(|f| f.fitness_mean.is_finite()).collect();
     ranked.sort_by(|a, b| b.fitness_mean.total_cmp(&a.fitness_mean));
@@ -185,11 +276,11 @@ pub fn print_table(id: &Identification, file: &Path) {
             file.display()
         );
     } else if let [best, second, ..] = ranked[..]
-        && best.fitness_mean - second.fitness_mean < best.fitness_std.max(second.fitness_std)
+        && best.fitness_mean - second.fitness_mean < best.fitness_std.min(second.fitness_std)
     {
         println!(
-            "\nnote: {} and {} fit equally well here (fitness {:.4} vs {:.4}, within one std over folds): \
-             the recording does not tell them apart (more, faster pushes would)",
+            "\nnote: {} and {} fit equally well here (fitness {:.4} vs {:.4}, closer than either's std over \
+             folds): the recording does not tell them apart (more, faster pushes would)",
             best.kind.label(),
             second.kind.label(),
             best.fitness_mean,
@@ -198,7 +289,7 @@ pub fn print_table(id: &Identification, file: &Path) {
     }
     let m = &id.model.model;
     println!(
-        "\nselected: {} (* above); at the estimated surface [{:.4}, {:.4}, {:.4}] m: k = {:.1}, λ = {:.1}",
+        "\nselected: {} (* above); at the estimated surface [{:.4e}, {:.4e}, {:.4e}] m: k = {:.4e}, λ = {:.4e}",
         id.selected().label(),
         p.x,
         p.y,
@@ -229,7 +320,7 @@ fn print_parameters(fits: &[Fit]) {
             (true, true) => "  (k, λ not excited: held)",
         };
         println!(
-            "  {:<22}{:>12.1}{:>12.1}{:>7.2}{:>7.2}{:>7.2}{held}",
+            "  {:<22}{:>12.4e}{:>12.4e}{:>7.2}{:>7.2}{:>7.2}{held}",
             f.kind.label(),
             f.stiffness,
             f.damping,
@@ -251,7 +342,31 @@ pub fn say_warnings(recording: &Recording, said: usize) -> usize {
     warnings.len().max(said)
 }
 
+fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
+    let table = table::read(&args.file)?;
+    let onset = table::onset(&table.f);
+    say_table(&args.file, &table, &onset);
+    let found = identify_table(&table, args)?;
+    println!(
+        "surface at {} {} along the table's depth\n",
+        if table.depth_is == Depth::Position { "x =" } else { "z =" },
+        table.length(found.surface)
+    );
+    print_table(&found.id, &args.file);
+    if let Some(path) = &args.json {
+        let mut value = to_json(&found.id);
+        value["surface"] = json!(found.surface);
+        value["free_level"] = json!(found.onset.free_level);
+        value["onset_threshold"] = json!(args.onset.unwrap_or(found.onset.threshold));
+        write_json(path, &value)?;
+    }
+    Ok(())
+}
+
 pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
+    if table::is_table(&args.file) {
+        return run_table(args);
+    }
     let recording = Recording::open(&args.file)?;
     let said = say_warnings(&recording, 0);
     let bar = indicatif::ProgressBar::new(recording.message_count());

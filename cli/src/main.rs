@@ -17,6 +17,7 @@ mod loading_paths_record;
 mod model_cmd;
 mod ranges;
 mod record_cmd;
+mod table;
 mod tangential_paths;
 
 use std::process::ExitCode;

@@ -90,8 +90,21 @@ impl Identifier {
             self.unpaired += 1;
             return Ok(());
         };
+        self.reading(t, &p.position, &p.velocity, p.normal_force)
+    }
+
+    /// One reading already paired: the tool's position and velocity in the world and the normal force
+    /// (a measurement table's row, its depth placed along the normal).
+    pub fn reading(
+        &mut self,
+        t: f64,
+        position: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+        normal_force: f64,
+    ) -> Result<(), ContactError> {
+        self.first_time.get_or_insert(t);
         self.readings += 1;
-        let out = self.estimator.update(t, &p.position, &p.velocity, p.normal_force)?;
+        let out = self.estimator.update(t, position, velocity, normal_force)?;
         if out.in_contact && self.contact_time.is_none() {
             self.contact_time = Some(t);
         }

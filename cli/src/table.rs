@@ -1,0 +1,476 @@
+//! Measurement tables of any instrument, read by `identify` and `discrepancy` besides recordings: CSV or
+//! TSV (or `;`-separated), `#` comments, and a header naming each column and its unit:
+//!
+//! | column | meaning | units |
+//! |---|---|---|
+//! | `t` | time | s, ms, µs |
+//! | `z` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm |
+//! | `x` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm |
+//! | `f` | normal force, f > 0 pushes | kN, N, mN, µN, nN |
+//! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
+//!
+//! e.g. `t [s],x [nm],f [nN]`. Other columns are ignored (and said). Every malformed cell is an error
+//! naming its line and column. A table of more than [`MAX_ROWS`] rows is read in blocks of rows averaged,
+//! so memory stays bounded whatever the file.
+
+use std::io::BufRead;
+use std::path::Path;
+
+use anyhow::{Context, bail, ensure};
+
+/// The most rows analysed; longer tables are averaged in blocks down to this.
+pub const MAX_ROWS: usize = 200_000;
+
+/// How the depth column is meant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Depth {
+    /// `z`: deformation from a known surface.
+    Deformation,
+    /// `x`: position; the surface is where the force sets on.
+    Position,
+}
+
+/// A table in SI units (s, m, N, m/s), rows in time order.
+#[derive(Debug, Clone)]
+pub struct Table {
+    pub t: Vec<f64>,
+    pub depth: Vec<f64>,
+    pub depth_is: Depth,
+    pub f: Vec<f64>,
+    /// The deformation rate, when the table has it.
+    pub rate: Option<Vec<f64>>,
+    /// Data rows in the file.
+    pub rows: u64,
+    /// Rows averaged into each sample (1 unless the table has more than [`MAX_ROWS`]).
+    pub block: usize,
+    /// Columns the header names that are not read.
+    pub ignored: Vec<String>,
+    /// The table's own units of depth and force, as (name, metres or newtons per unit), for messages.
+    pub length_unit: (String, f64),
+    pub force_unit: (String, f64),
+}
+
+/// A file is read as a table when its extension says so.
+pub fn is_table(path: &Path) -> bool {
+    path.is_file()
+        && path
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| ["csv", "tsv", "txt", "dat"].contains(&e.to_ascii_lowercase().as_str()))
+}
+
+const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
+const LENGTH_UNITS: [(&str, f64); 6] =
+    [("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("um", 1e-6), ("nm", 1e-9), ("cm", 1e-2)];
+const FORCE_UNITS: [(&str, f64); 6] = [("kN", 1e3), ("N", 1.0), ("mN", 1e-3), ("µN", 1e-6), ("uN", 1e-6), ("nN", 1e-9)];
+const SPEED_UNITS: [(&str, f64); 5] = [("m/s", 1.0), ("mm/s", 1e-3), ("µm/s", 1e-6), ("um/s", 1e-6), ("nm/s", 1e-9)];
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Time,
+    Depth(Depth),
+    Force,
+    Rate,
+}
+
+impl Role {
+    fn of(name: &str) -> Option<Self> {
+        Some(match name {
+            "t" => Role::Time,
+            "z" => Role::Depth(Depth::Deformation),
+            "x" => Role::Depth(Depth::Position),
+            "f" => Role::Force,
+            "zdot" => Role::Rate,
+            _ => return None,
+        })
+    }
+
+    fn units(self) -> &'static [(&'static str, f64)] {
+        match self {
+            Role::Time => &TIME_UNITS,
+            Role::Depth(_) => &LENGTH_UNITS,
+            Role::Force => &FORCE_UNITS,
+            Role::Rate => &SPEED_UNITS,
+        }
+    }
+}
+
+/// One header cell, `name [unit]`: its role and the SI value of one unit.
+fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64)>> {
+    let cell = cell.trim();
+    let (name, unit) = match cell.split_once('[') {
+        Some((name, rest)) => {
+            let Some(unit) = rest.strip_suffix(']') else {
+                bail!("header, column {number} (`{cell}`): the unit must close with `]`, e.g. `f [N]`")
+            };
+            (name.trim(), Some(unit.trim()))
+        }
+        None => (cell, None),
+    };
+    let Some(role) = Role::of(name) else { return Ok(None) };
+    let units = role.units();
+    let names = || units.iter().map(|(u, _)| *u).collect::<Vec<_>>().join(", ");
+    let Some(unit) = unit else {
+        bail!("header, column {number} (`{cell}`): `{name}` needs its unit in brackets, one of {}", names())
+    };
+    // The micro sign and the Greek mu are both written for µ.
+    let unit = unit.replace('μ', "µ");
+    let Some(&(u, scale)) = units.iter().find(|(u, _)| *u == unit) else {
+        bail!("header, column {number} (`{cell}`): unit `{unit}` is not one of {}", names())
+    };
+    Ok(Some((role, u.to_string(), scale)))
+}
+
+/// The separator of the header line: a tab, else `;`, else `,`.
+fn separator(path: &Path) -> anyhow::Result<u8> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    for line in std::io::BufReader::new(file).lines() {
+        let line = line.with_context(|| format!("{} is not a text table", path.display()))?;
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        return Ok(if line.contains('\t') {
+            b'\t'
+        } else if line.contains(';') {
+            b';'
+        } else {
+            b','
+        });
+    }
+    bail!("{} has no header line (e.g. `t [s],x [mm],f [N]`)", path.display())
+}
+
+fn reader(path: &Path, sep: u8) -> anyhow::Result<csv::Reader<std::fs::File>> {
+    csv::ReaderBuilder::new()
+        .delimiter(sep)
+        .comment(Some(b'#'))
+        .trim(csv::Trim::All)
+        .flexible(true)
+        .from_path(path)
+        .with_context(|| format!("opening {}", path.display()))
+}
+
+/// Reads a table (see the module's doc).
+pub fn read(path: &Path) -> anyhow::Result<Table> {
+    let sep = separator(path)?;
+    let mut rdr = reader(path, sep)?;
+    let header = rdr.headers().with_context(|| format!("{}: reading the header", path.display()))?.clone();
+    let mut at: [Option<(usize, String, f64)>; 4] = Default::default();
+    let (mut depth_is, mut ignored) = (Depth::Position, Vec::new());
+    for (i, cell) in header.iter().enumerate() {
+        let Some((role, unit, scale)) = column(cell, i + 1).with_context(|| path.display().to_string())? else {
+            ignored.push(cell.trim().to_string());
+            continue;
+        };
+        let slot = match role {
+            Role::Time => 0,
+            Role::Depth(d) => {
+                depth_is = d;
+                1
+            }
+            Role::Force => 2,
+            Role::Rate => 3,
+        };
+        ensure!(
+            at[slot].is_none(),
+            "{}: header, column {}: `{}` is a second {} column",
+            path.display(),
+            i + 1,
+            cell,
+            ["time", "depth (z or x)", "force", "rate"][slot]
+        );
+        at[slot] = Some((i, unit, scale));
+    }
+    for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
+        ensure!(
+            at[slot].is_some(),
+            "{}: the header has no {what} column (it has: {})",
+            path.display(),
+            header.iter().collect::<Vec<_>>().join(" | ")
+        );
+    }
+    // First pass: the rows, so that a long table is averaged in blocks of equal length.
+    let mut rows = 0_u64;
+    let mut record = csv::StringRecord::new();
+    while rdr.read_record(&mut record).with_context(|| format!("{}: reading", path.display()))? {
+        if !record.iter().all(str::is_empty) {
+            rows += 1;
+        }
+    }
+    ensure!(rows >= 2, "{}: {rows} data rows; a table needs at least two", path.display());
+    let block = usize::try_from(rows.div_ceil(MAX_ROWS as u64)).unwrap_or(usize::MAX);
+    let capacity = usize::try_from(rows).unwrap_or(usize::MAX).div_ceil(block);
+    let used: Vec<(usize, usize, f64, &str)> = at
+        .iter()
+        .enumerate()
+        .filter_map(|(slot, c)| c.as_ref().map(|(i, _, s)| (slot, *i, *s, header.get(*i).unwrap_or(""))))
+        .collect();
+    let mut columns: [Vec<f64>; 4] =
+        std::array::from_fn(|slot| if at[slot].is_some() { Vec::with_capacity(capacity) } else { Vec::new() });
+    let mut sums = [0.0_f64; 4];
+    let (mut in_block, mut last_t) = (0_usize, f64::NEG_INFINITY);
+    let mut rdr = reader(path, sep)?;
+    while rdr.read_record(&mut record).with_context(|| format!("{}: reading", path.display()))? {
+        if record.iter().all(str::is_empty) {
+            continue;
+        }
+        let line = record.position().map_or(0, |p| p.line());
+        for &(slot, i, scale, name) in &used {
+            let cell = record.get(i).unwrap_or("");
+            let value = cell.parse::<f64>().map_err(|_| {
+                anyhow::anyhow!(
+                    "{}: line {line}, column {} (`{name}`): `{cell}` is not a number",
+                    path.display(),
+                    i + 1
+                )
+            })?;
+            ensure!(
+                value.is_finite() && (value * scale).is_finite(),
+                "{}: line {line}, column {} (`{name}`): `{cell}` is not a finite number",
+                path.display(),
+                i + 1
+            );
+            if slot == 0 {
+                ensure!(
+                    value * scale > last_t,
+                    "{}: line {line}, column {} (`{name}`): time {cell} is not after the previous row's",
+                    path.display(),
+                    i + 1
+                );
+                last_t = value * scale;
+            }
+            sums[slot] += value * scale;
+        }
+        in_block += 1;
+        if in_block == block {
+            for &(slot, ..) in &used {
+                columns[slot].push(sums[slot] / block as f64);
+                sums[slot] = 0.0;
+            }
+            in_block = 0;
+        }
+    }
+    let [t, depth, f, rate] = columns;
+    ensure!(t.len() >= 2, "{}: fewer than two samples after averaging blocks of {block} rows", path.display());
+    let unit = |slot: usize| at[slot].as_ref().map(|(_, u, s)| (u.clone(), *s)).unwrap_or_default();
+    Ok(Table {
+        t,
+        depth,
+        depth_is,
+        f,
+        rate: at[3].as_ref().map(|_| rate),
+        rows,
+        block,
+        ignored,
+        length_unit: unit(1),
+        force_unit: unit(2),
+    })
+}
+
+impl Table {
+    /// The median time between samples [s].
+    pub fn sample_period(&self) -> f64 {
+        let mut dt: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
+        dt.sort_by(f64::total_cmp);
+        dt[dt.len() / 2]
+    }
+
+    /// The rate of the depth [m/s]: the table's column, else central differences.
+    pub fn depth_rate(&self) -> Vec<f64> {
+        if let Some(rate) = &self.rate {
+            return rate.clone();
+        }
+        let (t, x, n) = (&self.t, &self.depth, self.t.len());
+        (0..n)
+            .map(|i| {
+                let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+                (x[b] - x[a]) / (t[b] - t[a])
+            })
+            .collect()
+    }
+
+    /// A length in the table's unit, for messages.
+    pub fn length(&self, metres: f64) -> String {
+        format!("{:.4} {}", metres / self.length_unit.1, self.length_unit.0)
+    }
+
+    /// A force in the table's unit, for messages.
+    pub fn force(&self, newtons: f64) -> String {
+        format!("{:.4} {}", newtons / self.force_unit.1, self.force_unit.0)
+    }
+}
+
+/// `value` with the SI prefix that puts it between 1 and 1000 (k down to p), e.g. `4.640 nN`.
+pub fn si(value: f64, unit: &str) -> String {
+    const PREFIXES: [(&str, f64); 6] = [("k", 1e3), ("", 1.0), ("m", 1e-3), ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12)];
+    if !value.is_finite() || value == 0.0 {
+        return format!("{value} {unit}");
+    }
+    let (prefix, scale) =
+        PREFIXES.iter().find(|(_, s)| value.abs() >= *s * (1.0 - 5e-4)).copied().unwrap_or(PREFIXES[5]);
+    format!("{:.3} {prefix}{unit}", value / scale)
+}
+
+/// Where the contact begins, from the force alone: what the table's own free part says.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Onset {
+    /// The force read with nothing touching [N] (0 when the table starts in contact).
+    pub free_level: f64,
+    /// The free part's noise [N], from its first differences (a slow trend does not inflate it).
+    pub noise: f64,
+    /// The force above the free level that counts as contact [N].
+    pub threshold: f64,
+    /// Samples before the contact (the free part), 0 when the table starts in contact.
+    pub free_samples: usize,
+}
+
+/// The share of the table read as its free start before the onset is known.
+const HEAD_SHARE: f64 = 0.02;
+/// The onset threshold: this many noise σ above the free level...
+const ONSET_SIGMAS: f64 = 10.0;
+/// ...and at least this share of the table's force range.
+const ONSET_SHARE: f64 = 0.02;
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The free level, the noise and the onset threshold of a force column (see [`Onset`]). The head of the
+/// table (its first 2 %, at least 20 samples) gives a first level and noise; where the head itself moves
+/// by more than the threshold the table starts in contact and the force is taken as recorded.
+pub fn onset(f: &[f64]) -> Onset {
+    let n = f.len();
+    let head = ((n as f64 * HEAD_SHARE) as usize).max(20).min(n);
+    let noise_of = |s: &[f64]| {
+        let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
+        if d.is_empty() {
+            return 0.0;
+        }
+        let m = median(&mut d);
+        let mut dev: Vec<f64> = d.iter().map(|x| (x - m).abs()).collect();
+        1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
+    };
+    let level0 = median(&mut f[..head].to_vec());
+    let noise0 = noise_of(&f[..head]);
+    let range = f.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - f.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+    let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range);
+    let head_moves = f[..head].iter().any(|v| (v - level0).abs() > threshold);
+    if head_moves {
+        return Onset { free_level: 0.0, noise: noise0, threshold, free_samples: 0 };
+    }
+    let first = f.iter().position(|v| v - level0 > threshold).unwrap_or(n);
+    // The last tenth before the onset may already feel the surface (long-range forces).
+    let free = &f[..(first - first / 10).max(head.min(first))];
+    let free_level = free.iter().sum::<f64>() / free.len().max(1) as f64;
+    Onset { free_level, noise: noise_of(free).max(f64::MIN_POSITIVE), threshold, free_samples: free.len() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.csv");
+        std::fs::write(&path, text).unwrap();
+        (dir, path)
+    }
+
+    #[test]
+    fn units_are_converted_to_si_and_comments_skipped() {
+        let (_d, p) = table("# an instrument's export\nt [ms],x [µm],f [mN],extra\n0,1,2,a\n# mid\n10,3,4,b\n");
+        let t = read(&p).unwrap();
+        assert_eq!(t.t, vec![0.0, 0.01]);
+        assert!((t.depth[1] - 3e-6).abs() < 1e-18);
+        assert!((t.f[1] - 4e-3).abs() < 1e-15);
+        assert_eq!(t.depth_is, Depth::Position);
+        assert_eq!(t.ignored, vec!["extra".to_string()]);
+    }
+
+    #[test]
+    fn tabs_and_greek_mu_and_a_deformation_column() {
+        let (_d, p) = table("z [μm]\tt [s]\tf [nN]\tzdot [nm/s]\n1\t0\t5\t2\n2\t1\t6\t3\n");
+        let t = read(&p).unwrap();
+        assert_eq!(t.depth_is, Depth::Deformation);
+        assert!((t.f[0] - 5e-9).abs() < 1e-20);
+        assert!((t.rate.unwrap()[1] - 3e-9).abs() < 1e-20);
+    }
+
+    #[test]
+    fn malformed_cells_are_named_by_line_and_column() {
+        for (text, says) in [
+            ("t [s],x [m],f [N]\n0,0,0\n1,0,abc\n", "line 3, column 3 (`f [N]`): `abc` is not a number"),
+            ("t [s],x [m],f [N]\n0,0,0\n1,NaN,0\n", "line 3, column 2 (`x [m]`): `NaN` is not a finite number"),
+            ("t [s],x [m],f [N]\n0,0,0\n0,1,inf\n", "line 3, column 1 (`t [s]`): time 0 is not after"),
+            ("t [s],x [m],f [kN]\n0,0,1e306\n1,0,0\n", "line 2, column 3 (`f [kN]`): `1e306` is not a finite"),
+            ("t [s],x [furlong],f [N]\n0,0,0\n", "unit `furlong` is not one of m, mm"),
+            ("t,x [m],f [N]\n0,0,0\n", "`t` needs its unit in brackets"),
+            ("t [s],f [N]\n0,0\n1,1\n", "no `z [m]` (deformation) or `x [m]` (position) column"),
+            ("t [s],x [m],f [N]\n0,0,0\n", "1 data rows"),
+            ("# only comments\n", "no header line"),
+            ("t [s],x [m],x [m],f [N]\n0,0,0,0\n", "second depth"),
+        ] {
+            let (_d, p) = table(text);
+            let e = format!("{:#}", read(&p).expect_err(text));
+            assert!(e.contains(says), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_long_table_is_averaged_in_blocks_of_equal_length() {
+        let n = MAX_ROWS * 2 + 1;
+        let mut text = String::from("t [s],x [m],f [N]\n");
+        for i in 0..n {
+            text.push_str(&format!("{i},{i},1\n"));
+        }
+        let (_d, p) = table(&text);
+        let t = read(&p).unwrap();
+        assert_eq!(t.block, 3);
+        assert_eq!(t.rows, n as u64);
+        assert_eq!(t.t.len(), n / 3);
+        assert_eq!(t.t[0], 1.0, "the first block's mean time");
+    }
+
+    #[test]
+    fn si_prefixes() {
+        assert_eq!(si(4.64e-9, "N"), "4.640 nN");
+        assert_eq!(si(-0.0123, "m"), "-12.300 mm");
+        assert_eq!(si(2500.0, "N"), "2.500 kN");
+        assert_eq!(si(0.0, "N"), "0 N");
+        assert_eq!(si(3e-15, "N"), "0.003 pN");
+    }
+
+    #[test]
+    fn the_onset_is_scale_free() {
+        // The same shape at 1 nN and at 10 kN: the same onset sample, thresholds in proportion.
+        let shape: Vec<f64> = (0..1000)
+            .map(|i| {
+                let noise = ((i * 7919) % 101) as f64 / 100.0 - 0.5;
+                let push = if i > 600 { ((i - 600) as f64 / 400.0).powf(1.5) } else { 0.0 };
+                0.3 + push + 0.002 * noise
+            })
+            .collect();
+        let at = |scale: f64| {
+            let f: Vec<f64> = shape.iter().map(|v| v * scale).collect();
+            let o = onset(&f);
+            (o, f.iter().position(|v| v - o.free_level > o.threshold))
+        };
+        let (small, i_small) = at(1e-9);
+        let (large, i_large) = at(1e4);
+        assert_eq!(i_small, i_large);
+        assert!(i_small.unwrap() > 600 && i_small.unwrap() < 650, "{i_small:?}");
+        assert!((small.threshold / 1e-9 - large.threshold / 1e4).abs() < 1e-9 * large.threshold / 1e4);
+        assert!((small.free_level / 1e-9 - 0.3).abs() < 1e-3);
+        assert!(small.free_samples > 500);
+    }
+
+    #[test]
+    fn a_table_that_starts_in_contact_has_no_free_level() {
+        let f: Vec<f64> = (0..500).map(|i| 5.0 * (-(i as f64) / 100.0).exp() + 1.0).collect();
+        let o = onset(&f);
+        assert_eq!(o.free_level, 0.0);
+        assert_eq!(o.free_samples, 0);
+    }
+}
