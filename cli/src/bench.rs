@@ -120,6 +120,10 @@ pub enum BenchCommand {
         /// Keep each case's recording in this folder (`case<seed>.mcap`) to run `softcontact discrepancy` on.
         #[arg(long)]
         keep: Option<PathBuf>,
+        /// Instead of the corpus: the measured curves of this folder (e.g. `data/afm`) against its
+        /// `expected.json` (the table of `docs/discrepancy-real.md`).
+        #[arg(long)]
+        real: Option<PathBuf>,
     },
 }
 
@@ -234,7 +238,15 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Climb { reps } => crate::climb_cmd::bench(reps),
         BenchCommand::Recording { seconds, reps } => run_recording(seconds, reps),
         BenchCommand::Demo { reps } => crate::demo::bench(reps),
-        BenchCommand::Discrepancy { threads, json, timing_only, case, keep } => {
+        BenchCommand::Discrepancy { real: Some(dir), json, .. } => {
+            let outcomes = crate::real_curves::run(&dir)?;
+            crate::real_curves::print(&outcomes);
+            if let Some(path) = json {
+                crate::identify_cmd::write_json(&path, &crate::real_curves::to_json(&outcomes))?;
+            }
+            Ok(())
+        }
+        BenchCommand::Discrepancy { threads, json, timing_only, case, keep, real: None } => {
             crate::demo::corpus::bench(threads, json, timing_only, case.as_deref(), keep.as_deref())
         }
     }

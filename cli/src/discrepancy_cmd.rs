@@ -201,6 +201,12 @@ fn print_report(report: &Report, name: &str) {
         }
         softcontact_discrepancy::Remaining::Ambiguous => "ambiguous: the recording cannot tell the candidates apart",
     };
+    if report.kept_baseline {
+        println!(
+            "\nthe refitted and augmented model fitted this record worse than the baseline as given: the baseline \
+             stands, nothing is named"
+        );
+    }
     println!("\nfinal RMS {}; remaining: {remaining}", n(report.final_rms));
 }
 
@@ -218,11 +224,13 @@ pub struct Analysis {
 }
 
 /// A measurement table along its depth from identify's surface, its force zeroed at the free level.
-fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>) -> anyhow::Result<Analysis> {
+fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: bool) -> anyhow::Result<Analysis> {
     let id_args = &args.recording;
     let table = table::read(&id_args.file)?;
     let found = identify_cmd::identify_table(&table, id_args)?;
-    identify_cmd::say_table(&id_args.file, &table, &found.onset);
+    if say {
+        identify_cmd::say_table(&id_args.file, &table, &found.onset);
+    }
     let z: Vec<f64> = table.depth.iter().map(|d| d - found.surface).collect();
     let f: Vec<f64> = table.f.iter().map(|f| f - found.onset.free_level).collect();
     let series = Series::new(table.t.clone(), z, table.depth_rate(), f)?;
@@ -243,7 +251,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
         None => None,
     };
     if table::is_table(&args.recording.file) {
-        return table_analysis(args, baseline);
+        return table_analysis(args, baseline, progress);
     }
     let id_args = &args.recording;
     let recording = Recording::open(&id_args.file)?;

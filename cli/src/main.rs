@@ -16,6 +16,7 @@ mod loading_paths_figures;
 mod loading_paths_record;
 mod model_cmd;
 mod ranges;
+mod real_curves;
 mod record_cmd;
 mod table;
 mod tangential_paths;

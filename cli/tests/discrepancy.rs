@@ -495,3 +495,69 @@ fn the_closed_loop_replay_matches_the_recording_after_the_effects_are_added() {
     let run = discrepancy(&[arm.as_os_str(), "--closed-loop".as_ref()]);
     assert!(!run.status.success());
 }
+
+/// The measured AFM curves of data/afm (the table in docs/discrepancy-real.md), each against what a
+/// person saw in it before the workflow ran: the final model is never worse than the baseline, and where
+/// something outside the library is there the answer is never that nothing remains.
+#[test]
+fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("real.json");
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm");
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .args(["bench", "discrepancy", "--real", data, "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    let shown = text(&out);
+    assert!(out.status.success(), "{shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let curves = v["real_curves"].as_array().unwrap();
+    assert!(curves.len() >= 8, "{shown}");
+    for c in curves {
+        assert_eq!(c["not_worse"], true, "{c}");
+        assert_eq!(c["outside_not_denied"], true, "{c}");
+        if let Some(names) = c["answer"]["Ok"].as_array() {
+            // No named effect on a curve where nothing of the library is expected.
+            let expected_nothing = c["expected"].as_str().unwrap().starts_with("nothing");
+            assert!(!expected_nothing || names.is_empty(), "{c}");
+        }
+    }
+    // The tip that only touches: refused, saying which threshold and how to set another.
+    let refused = curves.iter().find(|c| c["file"] == "qi_adhesion.csv").unwrap();
+    let why = refused["answer"]["Err"].as_str().unwrap();
+    assert!(why.contains("onset threshold") && why.contains("--onset"), "{why}");
+}
+
+/// A table from any instrument runs through identify and discrepancy with no flags, in its own units.
+#[test]
+fn a_table_runs_through_identify_and_discrepancy_with_no_flags() {
+    let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm/qi_stiff_indentation.csv");
+    let id = Command::new(env!("CARGO_BIN_EXE_softcontact")).args(["identify", file]).output().unwrap();
+    let shown = text(&id);
+    assert!(id.status.success(), "{shown}");
+    assert!(shown.contains("force zeroed at its free level -175.") && shown.contains(" nN"), "{shown}");
+    assert!(shown.contains("selected:"), "{shown}");
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("d.json");
+    let run = discrepancy(&[
+        std::ffi::OsStr::new(file),
+        "--out".as_ref(),
+        dir.path().as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    let shown = text(&run);
+    assert!(run.status.success(), "{shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    // Scale-free: the noise floor of a 1 µN contact is a fraction of a nN, not the robot's floors.
+    let sigma = v["noise_floor"].as_f64().unwrap();
+    assert!(sigma > 1e-11 && sigma < 1e-8, "{sigma}");
+    assert!(v.get("overlay_file").is_none(), "a table's model is not the arm's: {v}");
+    // A malformed cell is named by line and column.
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, "t [s],x [nm],f [nN]\n0,1,2\n0.1,2,oops\n").unwrap();
+    let id = Command::new(env!("CARGO_BIN_EXE_softcontact")).arg("identify").arg(&bad).output().unwrap();
+    assert!(!id.status.success());
+    assert!(text(&id).contains("line 3, column 3 (`f [nN]`): `oops` is not a number"), "{}", text(&id));
+}

@@ -1,0 +1,175 @@
+//! `softcontact bench discrepancy --real DIR`: the discrepancy workflow on measured curves no one here
+//! made (`data/afm`), each against what a person sees in it (`DIR/expected.json`, written before the
+//! workflow ran on them). The table is committed in `docs/discrepancy-real.md`.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+
+use anyhow::Context;
+use serde::Deserialize;
+use serde_json::json;
+use softcontact_discrepancy::Remaining;
+
+use crate::discrepancy_cmd::{self, DiscrepancyArgs};
+use crate::identify_cmd::IdentifyArgs;
+use crate::table::si;
+
+#[derive(Debug, Deserialize)]
+struct Expected {
+    curves: Vec<Curve>,
+}
+
+/// One curve's expected answer: every group must have one of its ids named; `outside` says an effect no
+/// id of the library describes is there (so the answer must not be that nothing remains).
+#[derive(Debug, Deserialize)]
+struct Curve {
+    file: String,
+    named: Vec<Vec<String>>,
+    outside: Option<String>,
+}
+
+/// One curve's outcome.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Outcome {
+    pub file: String,
+    pub expected: String,
+    /// The workflow's answer: the ids named, or why it refused.
+    pub answer: Result<Vec<String>, String>,
+    pub remaining: Option<String>,
+    pub baseline_rms: f64,
+    pub final_rms: f64,
+    pub noise_floor: f64,
+    pub kept_baseline: bool,
+    /// Every expected group has one of its ids named.
+    pub named_as_expected: bool,
+    /// Where something outside the library is there, the answer is not that nothing remains.
+    pub outside_not_denied: bool,
+    /// The final model fits no worse than the baseline.
+    pub not_worse: bool,
+}
+
+/// Runs every curve of `dir/expected.json`.
+pub fn run(dir: &Path) -> anyhow::Result<Vec<Outcome>> {
+    let path = dir.join("expected.json");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let expected: Expected = serde_json::from_str(&text).with_context(|| format!("{} is malformed", path.display()))?;
+    let out = std::env::temp_dir().join(format!("softcontact-real-curves-{}", std::process::id()));
+    let mut outcomes = Vec::new();
+    for curve in &expected.curves {
+        let args = DiscrepancyArgs {
+            recording: IdentifyArgs {
+                file: dir.join(&curve.file),
+                json: None,
+                normal: vec![0.0, 0.0, -1.0],
+                onset: None,
+                sample_period: None,
+            },
+            model: None,
+            out: out.clone(),
+            loading_paths: false,
+            arm: false,
+            closed_loop: false,
+        };
+        let expected_text = if curve.named.is_empty() {
+            "nothing of the library".to_string()
+        } else {
+            curve.named.iter().map(|g| g.join(" or ")).collect::<Vec<_>>().join(" and ")
+        } + &curve.outside.as_ref().map_or(String::new(), |o| format!("; outside: {o}"));
+        let outcome = match discrepancy_cmd::analyse_file(&args, false) {
+            Ok(a) => {
+                let r = &a.report;
+                let names: BTreeSet<String> = r.effects.iter().map(|e| e.id.clone()).collect();
+                let remaining = match r.remaining {
+                    Remaining::None => "none",
+                    Remaining::Unexplained => "unexplained",
+                    Remaining::Ambiguous => "ambiguous",
+                };
+                Outcome {
+                    file: curve.file.clone(),
+                    expected: expected_text,
+                    named_as_expected: curve.named.iter().all(|g| g.iter().any(|id| names.contains(id))),
+                    outside_not_denied: curve.outside.is_none() || r.remaining != Remaining::None,
+                    not_worse: r.final_rms <= r.baseline.rms,
+                    answer: Ok(names.into_iter().collect()),
+                    remaining: Some(remaining.into()),
+                    baseline_rms: r.baseline.rms,
+                    final_rms: r.final_rms,
+                    noise_floor: r.noise_floor,
+                    kept_baseline: r.kept_baseline,
+                }
+            }
+            // A refusal names nothing and returns no model: right where nothing is expected.
+            Err(e) => Outcome {
+                file: curve.file.clone(),
+                expected: expected_text,
+                named_as_expected: curve.named.is_empty(),
+                outside_not_denied: true,
+                not_worse: true,
+                answer: Err(format!("{e:#}")),
+                remaining: None,
+                baseline_rms: f64::NAN,
+                final_rms: f64::NAN,
+                noise_floor: f64::NAN,
+                kept_baseline: false,
+            },
+        };
+        outcomes.push(outcome);
+    }
+    let _ = std::fs::remove_dir_all(&out);
+    Ok(outcomes)
+}
+
+/// The markdown table and its summary line.
+pub fn print(outcomes: &[Outcome]) {
+    println!("| curve | expected | named | remaining | RMS baseline → final | noise σ | as expected |");
+    println!("|---|---|---|---|---|---|---|");
+    for o in outcomes {
+        let answer = match &o.answer {
+            Ok(names) if names.is_empty() => "—".to_string(),
+            Ok(names) => names.join(", "),
+            Err(e) => format!("refused: {}", e.split(':').next().unwrap_or(e)),
+        };
+        let verdict = match (o.named_as_expected, o.outside_not_denied, o.not_worse) {
+            (true, true, true) => "yes".to_string(),
+            (named, outside, worse) => {
+                let mut why = vec![];
+                if !named {
+                    why.push("not named");
+                }
+                if !outside {
+                    why.push("said nothing remains");
+                }
+                if !worse {
+                    why.push("worse than the baseline");
+                }
+                format!("no: {}", why.join(", "))
+            }
+        };
+        let (rms, noise) = if o.answer.is_ok() {
+            (format!("{} → {}", si(o.baseline_rms, "N"), si(o.final_rms, "N")), si(o.noise_floor, "N"))
+        } else {
+            ("—".into(), "—".into())
+        };
+        println!(
+            "| {} | {} | {answer} | {}{} | {rms} | {noise} | {verdict} |",
+            o.file,
+            o.expected,
+            o.remaining.as_deref().unwrap_or("—"),
+            if o.kept_baseline { " (baseline kept)" } else { "" },
+        );
+    }
+    let count = |f: &dyn Fn(&Outcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
+    let with_effect = outcomes.iter().filter(|o| !o.expected.starts_with("nothing")).count();
+    println!(
+        "\nReal curves answered as expected: {}/{}; expected library effect named: {}/{with_effect}; nothing-remains said where something outside the library is: {}; final model worse than the baseline: {}",
+        count(&|o| o.named_as_expected && o.outside_not_denied && o.not_worse),
+        outcomes.len(),
+        count(&|o| !o.expected.starts_with("nothing") && o.named_as_expected),
+        count(&|o| !o.outside_not_denied),
+        count(&|o| !o.not_worse),
+    );
+}
+
+pub fn to_json(outcomes: &[Outcome]) -> serde_json::Value {
+    json!({ "real_curves": outcomes })
+}
