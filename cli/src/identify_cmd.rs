@@ -139,8 +139,8 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
     };
     let mut identifier = Identifier::new(config, f64::INFINITY)?;
     let rate = table.depth_rate();
-    for i in 0..table.t.len() {
-        identifier.reading(table.t[i], &(table.depth[i] * n), &(rate[i] * n), table.f[i] - onset.free_level)?;
+    for (((&t, &depth), &f), &rate) in table.t.iter().zip(&table.depth).zip(&table.f).zip(&rate) {
+        identifier.reading(t, &(depth * n), &(rate * n), f - onset.free_level)?;
     }
     let id = identifier.finish().map_err(|e| {
         anyhow::anyhow!(
