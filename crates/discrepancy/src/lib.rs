@@ -84,16 +84,77 @@ pub struct Series {
 /// Relaxation branches (time constants) the workflow names at most.
 pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
-/// The time constants a relaxation branch may have [s].
-pub const RELAXATION_TIME_RANGE: (f64, f64) = (0.05, 20.0);
+/// The time constants a relaxation branch may have, in samples (from five sample periods)...
+pub const RELAXATION_MIN_SAMPLES: f64 = 5.0;
+/// ...and as a share of the record's duration (a slower branch is a drift within the record).
+pub const RELAXATION_MAX_SHARE: f64 = 0.5;
 
 /// The least range of the gravity change along the normal [m/s²] under which `tool_gravity` is not
 /// tried: about a 6° tilt from the tare's orientation.
 pub const MIN_GRAVITY_CHANGE: f64 = 0.05;
 
-/// The shortest delay named [s]: shorter lags belong to the nominal chain (the sensor's filter, the stamp
-/// skew between wrench and pose, the pairing with the newest pose), not to an effect.
-pub const MIN_DELAY: f64 = 0.005;
+/// The delays screened, in sample periods: from half a period (shorter lags belong to the nominal chain:
+/// the sensor's filter, the stamp skew between wrench and pose, the pairing with the newest pose) to 25.
+pub const DELAY_SAMPLES: (f64, f64) = (0.5, 25.0);
+
+/// The exponents a′ screened.
+const EXPONENT_RANGE: (f64, f64) = (0.8, 2.5);
+
+/// A shape within this factor of its range's end is a bound, not a finding: it is not named.
+const EDGE: f64 = 1.05;
+
+/// The scales of one record that the shape grids and the velocity floor follow: nothing assumes a
+/// robot-sized contact (1 nN to 10 kN, 1 nm to 10 cm, any sample period).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Scales {
+    /// The record's median sample period [s].
+    pub sample_period: f64,
+    /// The 95th percentile of |ż| [m/s].
+    pub p95_speed: f64,
+    /// The speed a quarter of the moving in-contact samples exceed [m/s].
+    pub saturating_speed: f64,
+    /// The relaxation time constants screened [s].
+    pub time_constants: (f64, f64),
+    /// The delays screened [s].
+    pub delays: (f64, f64),
+}
+
+impl Scales {
+    pub fn of(series: &Series, v_th: f64) -> Self {
+        let mut dt = step_sizes(series);
+        dt.sort_by(f64::total_cmp);
+        let sample_period = dt.get(dt.len() / 2).copied().unwrap_or(0.0).max(f64::MIN_POSITIVE);
+        let duration = series.t.last().copied().unwrap_or(0.0) - series.t.first().copied().unwrap_or(0.0);
+        let lo = RELAXATION_MIN_SAMPLES * sample_period;
+        Scales {
+            sample_period,
+            p95_speed: p95_speed(series).max(f64::MIN_POSITIVE),
+            saturating_speed: saturating_speed(series, v_th),
+            time_constants: (lo, (RELAXATION_MAX_SHARE * duration).max(4.0 * lo)),
+            delays: (DELAY_SAMPLES.0 * sample_period, (DELAY_SAMPLES.1 * sample_period).min(MAX_DELAY)),
+        }
+    }
+
+    /// A shape at an end of the range it was screened on: a bound, not a finding (see [`Bound`]).
+    fn at_edge(&self, family: Family, shape: f64) -> Option<(f64, f64)> {
+        let range = match family {
+            Family::Relaxation => self.time_constants,
+            Family::Hysteresis => (0.01 * self.p95_speed, self.saturating_speed),
+            Family::TimeDelay => self.delays,
+            Family::StiffnessExponent => {
+                let inside = shape > EXPONENT_RANGE.0 + 0.02 && shape < EXPONENT_RANGE.1 - 0.02;
+                return (!inside).then_some(EXPONENT_RANGE);
+            }
+            _ => return None,
+        };
+        (!Scales::inside(shape, range)).then_some(range)
+    }
+
+    /// Inside a range, not at its ends (a log scale).
+    fn inside(x: f64, (lo, hi): (f64, f64)) -> bool {
+        x > lo * EDGE && x < hi / EDGE
+    }
+}
 
 /// Hysteresis is named only when a quarter of the moving in-contact samples are faster than its velocity
 /// scale v₀ (so that the recording's loops saturate): v₀ at most this percentile of their speed.
@@ -262,11 +323,15 @@ impl Phase {
     pub const ALL: [Phase; 5] = [Phase::Free, Phase::Approach, Phase::Loading, Phase::Holding, Phase::Unloading];
 }
 
-/// The velocity threshold between moving and holding: 5 % of the 95th percentile of |ż|, at least
-/// 0.1 mm/s. The percentile ignores the few fastest samples (spikes of a differentiated position); 5 % of
-/// it is well above the jitter of a held position and well below the speed of any deliberate push.
+/// The velocity threshold between moving and holding: 5 % of the 95th percentile of |ż|, and above the
+/// jitter of ż (three times the robust σ of its sample-to-sample change). The percentile ignores the few
+/// fastest samples (spikes of a differentiated position); 5 % of it is well below the speed of any
+/// deliberate push, whatever the record's scale.
 pub fn velocity_threshold(series: &Series) -> f64 {
-    (0.05 * p95_speed(series)).max(1e-4)
+    let mut d: Vec<f64> = series.zdot.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    d.sort_by(f64::total_cmp);
+    let jitter = d.get(d.len() / 2).copied().unwrap_or(0.0) * 1.4826 / std::f64::consts::SQRT_2;
+    (0.05 * p95_speed(series)).max(3.0 * jitter).max(f64::MIN_POSITIVE)
 }
 
 /// The speed that a quarter of the moving in-contact samples exceed [m/s]
@@ -322,6 +387,9 @@ pub fn phases(series: &Series, v_th: f64) -> Vec<Phase> {
 pub enum NoiseSource {
     /// Out-of-contact samples, after removing their mean and linear trend.
     FreeSpace,
+    /// Out-of-contact samples with structure of their own (more than [`STRUCTURED_FREE_SPACE`] times the
+    /// robust σ of their differences): that robust σ, 1.4826 · MAD(Δf) / √2.
+    FreeSpaceDifferences,
     /// First differences of the force in holds: σ ≈ std(Δf)/√2.
     HoldingDifferences,
     /// First differences of all samples (an upper bound when nothing else is available).
@@ -338,6 +406,10 @@ pub struct NoiseFloor {
 
 /// The fewest samples a noise estimate uses.
 pub const MIN_NOISE_SAMPLES: usize = 20;
+
+/// Free space whose σ about its trend exceeds this many times the robust σ of its differences carries
+/// structure, not noise (see [`NoiseSource::FreeSpaceDifferences`]).
+pub const STRUCTURED_FREE_SPACE: f64 = 3.0;
 
 /// σ of the force noise: from the farther half of the out-of-contact samples (mean, linear trend in the
 /// time since the last tare and, when the hand tilts, the gravity change removed) when there are at least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else
@@ -388,11 +460,23 @@ pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
             })
             .sum();
         let n = free.len() as f64;
-        return NoiseFloor {
-            sigma: (sse / (n - p as f64)).sqrt(),
-            source: NoiseSource::FreeSpace,
-            samples: free.len(),
-        };
+        let sigma = (sse / (n - p as f64)).sqrt();
+        // Free space with structure of its own (an adhesion or a tether pulling after lift-off, a
+        // long-range force before contact) is not noise: then the robust σ of consecutive free samples'
+        // differences, which steps and slow pulls barely move.
+        let mut steps: Vec<f64> =
+            free.windows(2).filter(|w| w[1] == w[0] + 1).map(|w| series.f[w[1]] - series.f[w[0]]).collect();
+        if steps.len() >= MIN_NOISE_SAMPLES {
+            steps.sort_by(f64::total_cmp);
+            let mid = steps[steps.len() / 2];
+            let mut dev: Vec<f64> = steps.iter().map(|x| (x - mid).abs()).collect();
+            dev.sort_by(f64::total_cmp);
+            let robust = 1.4826 * dev[dev.len() / 2] / 2f64.sqrt();
+            if sigma > STRUCTURED_FREE_SPACE * robust {
+                return NoiseFloor { sigma: robust, source: NoiseSource::FreeSpaceDifferences, samples: steps.len() };
+            }
+        }
+        return NoiseFloor { sigma, source: NoiseSource::FreeSpace, samples: free.len() };
     }
     let diffs = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
         (1..series.len()).filter(|&i| keep(i)).map(|i| series.f[i] - series.f[i - 1]).collect()
@@ -704,6 +788,17 @@ pub struct Report {
     /// The refitted or augmented model fitted the record worse than the baseline as given, so the
     /// baseline is the result (`model`) and nothing is named.
     pub kept_baseline: bool,
+    /// Effects whose shape ended at an end of the range screened: bounds, not findings, not named.
+    pub bounds: Vec<Bound>,
+}
+
+/// An effect whose shape (a time constant, a hysteresis scale, a delay, an exponent) ended at an end of
+/// the range it was screened on: the record says only that it is beyond, so it is not named.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Bound {
+    pub id: String,
+    pub shape: f64,
+    pub range: (f64, f64),
 }
 
 /// A candidate family of the library.
@@ -815,25 +910,26 @@ impl Family {
         st
     }
 
-    /// Shape grid: τ 0.05–20 s (log; a second branch at least 3× from the first), v₀ 1–100 % of the
-    /// 95th-percentile speed (log), a′ 0.8–2.5.
-    fn grid(self, p95_speed: f64, st: &Structure) -> Vec<f64> {
+    /// Shape grid: τ over the record's [`Scales::time_constants`] (log; a second branch at least 3× from
+    /// the first), v₀ 1–100 % of the 95th-percentile speed (log), a′ 0.8–2.5, delays over
+    /// [`Scales::delays`] (log).
+    fn grid(self, scales: &Scales, st: &Structure) -> Vec<f64> {
         let a = st.a;
         let log = |lo: f64, hi: f64, n: usize| -> Vec<f64> {
             (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
         };
         match self {
-            Family::Relaxation => log(RELAXATION_TIME_RANGE.0, RELAXATION_TIME_RANGE.1, 14)
+            Family::Relaxation => log(scales.time_constants.0, scales.time_constants.1, 14)
                 .into_iter()
                 .filter(|&tau| {
                     st.terms.iter().all(|t| !matches!(*t, Term::Relax(other) if (tau / other).ln().abs() < 3f64.ln()))
                 })
                 .collect(),
-            Family::Hysteresis => log(0.01 * p95_speed, p95_speed, 9),
+            Family::Hysteresis => log(0.01 * scales.p95_speed, scales.p95_speed, 9),
             Family::StiffnessExponent => {
-                (0..=17).map(|i| 0.8 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
+                (0..=17).map(|i| EXPONENT_RANGE.0 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
             }
-            Family::TimeDelay => log(MIN_DELAY, 0.25, 8),
+            Family::TimeDelay => log(scales.delays.0, scales.delays.1, 8),
             _ => vec![0.0],
         }
     }
@@ -890,7 +986,8 @@ fn term_index(st: &Structure, fam: Family, shape: f64) -> Option<usize> {
 }
 
 /// Fits the option and computes each new member's t and fold stability.
-fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], v_sat: f64) -> Cand {
+fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: &Scales) -> Cand {
+    let v_sat = scales.saturating_speed;
     let st = fams.iter().fold(cur.clone(), |s, &(f, sh)| f.apply(&s, sh));
     let fit = fit::fit(d, &st);
     let k = fit.beta[0];
@@ -931,7 +1028,7 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], v_sat: f64) -> Cand
             let j = fl.beta.len() - 1;
             stable.push(fl.fold_beta.iter().all(|fb| fb[j] > 0.0));
             // An optimum at the grid's lower end is a lag at most that long: the nominal chain's.
-            physical &= sh > 1.1 * MIN_DELAY && sh <= MAX_DELAY;
+            physical &= Scales::inside(sh, scales.delays);
         } else {
             // The exponent: t from the linearised column zᵃ′·ln z at the fitted a′ (its coefficient is k·δa);
             // fold stability from the linear test at the current a with the other members.
@@ -955,8 +1052,8 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], v_sat: f64) -> Cand
 /// between the grid neighbours.
 /// A family whose best grid point does not beat `cv_now` (the current model's held-out MSE) is neither
 /// refined nor tested: it cannot pass.
-fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, v_sat: f64, cv_now: f64) -> Cand {
-    let grid = fam.grid(p95, cur);
+fn screen(d: &Data, cur: &Structure, fam: Family, scales: &Scales, cv_now: f64) -> Cand {
+    let grid = fam.grid(scales, cur);
     let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
     let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
     let mut shape = grid[best];
@@ -985,7 +1082,7 @@ fn screen(d: &Data, cur: &Structure, fam: Family, p95: f64, v_sat: f64, cv_now: 
             shape = grid[best];
         }
     }
-    assess(d, cur, &[(fam, shape)], v_sat)
+    assess(d, cur, &[(fam, shape)], scales)
 }
 
 use fit::golden;
@@ -1240,9 +1337,10 @@ fn polish(
     st: &mut Structure,
     cur: &mut Fit,
     order: &mut [(Family, f64)],
-    (p95, v_sat): (f64, f64),
+    scales: &Scales,
     regrid: bool,
 ) -> bool {
+    let v_sat = scales.saturating_speed;
     let shaped: Vec<usize> =
         (0..st.terms.len()).filter(|&j| matches!(st.terms[j], Term::Relax(_) | Term::Hyst(_))).collect();
     if shaped.is_empty() {
@@ -1257,7 +1355,7 @@ fn polish(
         let taus: Vec<f64> =
             s.terms.iter().filter_map(|t| if let Term::Relax(tau) = *t { Some(tau) } else { None }).collect();
         s.terms.iter().all(|t| match *t {
-            Term::Relax(tau) => (RELAXATION_TIME_RANGE.0..=RELAXATION_TIME_RANGE.1).contains(&tau),
+            Term::Relax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
             Term::Hyst(v0) => v0 > 0.0 && v0 <= v_sat,
             _ => true,
         }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
@@ -1284,7 +1382,7 @@ fn polish(
         let (i, j) = if tau(i) < tau(j) { (i, j) } else { (j, i) };
         let mut without = st.clone();
         without.terms.retain(|t| !matches!(t, Term::Relax(_)));
-        let grid = Family::Relaxation.grid(p95, &without);
+        let grid = Family::Relaxation.grid(scales, &without);
         for (m, &a) in grid.iter().enumerate() {
             for &b in grid[m + 1..].iter().filter(|&&b| b >= 3.0 * a) {
                 try_terms(st, cur, &[(i, Term::Relax(a)), (j, Term::Relax(b))]);
@@ -1295,7 +1393,7 @@ fn polish(
         let fam = if matches!(st.terms[j], Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
         let mut without = st.clone();
         without.terms.remove(j);
-        for x in fam.grid(p95, &without).into_iter().filter(|&x| fam != Family::Hysteresis || x <= v_sat) {
+        for x in fam.grid(scales, &without).into_iter().filter(|&x| fam != Family::Hysteresis || x <= v_sat) {
             try_terms(st, cur, &[(j, fam.term(x).unwrap_or(st.terms[j]))]);
         }
     }
@@ -1367,8 +1465,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     let o = options;
     let v_th = velocity_threshold(series);
     let fscale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
-    let p95 = p95_speed(series).max(1e-4);
-    let v_sat = saturating_speed(series, v_th);
+    let scales = Scales::of(series, v_th);
 
     // The baseline's k, λ and the surface position refitted (the position's column stays in every later
     // fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more.
@@ -1439,7 +1536,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&d))
             .collect();
-        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, p95, v_sat, cur.cv_mse)).collect();
+        let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, &scales, cur.cv_mse)).collect();
         // A candidate must not fit free space worse than the current model: there the force is the sensor's
         // alone, and an offset that helps in contact but not there stands in for the surface position.
         let free_ok = |c: &Cand| {
@@ -1465,7 +1562,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                 if [i, j].iter().any(|&k| singles[k].fams[0].0 == Family::TimeDelay) {
                     continue;
                 }
-                let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]], v_sat);
+                let pair = assess(&d, &st, &[singles[i].fams[0], singles[j].fams[0]], &scales);
                 let best_single = singles[i].fit.cv_mse.min(singles[j].fit.cv_mse);
                 if passes(&pair) && pair.fit.cv_mse <= best_single * (1.0 - o.min_gain) {
                     options.push(pair);
@@ -1547,7 +1644,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             // The shapes of the effects named so far, refined together with the new one, before the next
             // round judges what is left (a branch's τ a few per cent off leaves a residual that a proxy
             // second branch would take).
-            polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), false);
+            polish(&d, &mut st, &mut cur, &mut order, &scales, false);
             true
         };
         // Before giving up, polish the shapes in the current structure and look once more: a shape chosen
@@ -1555,7 +1652,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         if accepted {
             rounds += 1;
             polished = false;
-        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), true) {
+        } else if polished || !polish(&d, &mut st, &mut cur, &mut order, &scales, true) {
             break;
         } else {
             polished = true;
@@ -1582,7 +1679,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
     }
 
-    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, (p95, v_sat), true) {
+    if !polished && ambiguous.is_empty() && polish(&d, &mut st, &mut cur, &mut order, &scales, true) {
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         st.clamped = clamp_mask(&model, &series.shifted(st.shift))?;
         // The re-masked fit moves the surface again (its position column would otherwise carry an offset
@@ -1592,6 +1689,29 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         if order.iter().any(|x| x.0 == Family::OffsetDrift) {
             rate_se = se_rate;
         }
+        cur = fit::fit(&d, &st);
+        model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
+        model.validate()?;
+        cur_gap = gap(series, &ph, &simulate(&model, &series.shifted(st.shift))?);
+        if let Some(last) = stages.last_mut() {
+            last.1 = cur_gap.rms;
+        }
+    }
+
+    // A shape still at an end of its range after every polish is a bound, not a finding: the effect is
+    // dropped (the model refitted without it) and reported among `bounds`.
+    let mut bounds = vec![];
+    while let Some(i) = order.iter().position(|&(f, sh)| scales.at_edge(f, sh).is_some()) {
+        let (f, sh) = order[i];
+        let reduced = match f {
+            Family::StiffnessExponent => Some(Structure { a: baseline.exponents.a, ..st.clone() }),
+            _ => f.remove(&st, sh),
+        };
+        let Some(reduced) = reduced else { break };
+        order.remove(i);
+        stages.remove(i);
+        bounds.push(Bound { id: f.id().to_string(), shape: sh, range: scales.at_edge(f, sh).unwrap_or_default() });
+        (st, shift_se, _) = refine_surface(&d, &reduced);
         cur = fit::fit(&d, &st);
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         model.validate()?;
@@ -1669,5 +1789,6 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         velocity_threshold: v_th,
         final_lag1: cur_gap.lag1,
         kept_baseline,
+        bounds,
     })
 }
