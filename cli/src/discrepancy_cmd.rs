@@ -152,6 +152,10 @@ fn print_report(report: &Report, name: &str) {
                 .parameters
                 .iter()
                 .map(|(k, v)| match e.uncertainty.get(k) {
+                    _ if e.not_identifiable.contains(k) => format!(
+                        "{k} not identifiable ({v:.1e} ± {:.1e})",
+                        e.uncertainty.get(k).copied().unwrap_or(f64::NAN)
+                    ),
                     Some(u) => format!("{k} {v:.4e} ± {u:.1e}"),
                     None => format!("{k} {v:.4e}"),
                 })
@@ -229,7 +233,7 @@ fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: b
     let table = table::read(&id_args.file)?;
     let found = identify_cmd::identify_table(&table, id_args)?;
     if say {
-        identify_cmd::say_table(&id_args.file, &table, &found.onset);
+        identify_cmd::say_table(&id_args.file, &table, &found.onset, id_args.onset);
     }
     let z: Vec<f64> = table.depth.iter().map(|d| d - found.surface).collect();
     let f: Vec<f64> = table.f.iter().map(|f| f - found.onset.free_level).collect();

@@ -103,6 +103,17 @@ fn phase_color(phase: Phase) -> RGBColor {
     }
 }
 
+/// The SI prefix and its scale that put `largest` between 1 and 1000 (k down to p): the figures of a
+/// 1 nN AFM curve and of a 100 N press both read in plain numbers.
+fn prefix(largest: f64) -> (&'static str, f64) {
+    const PREFIXES: [(&str, f64); 6] = [("k", 1e3), ("", 1.0), ("m", 1e-3), ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12)];
+    PREFIXES.iter().copied().find(|(_, s)| largest >= *s).unwrap_or(PREFIXES[5])
+}
+
+fn largest(values: impl Iterator<Item = f64>) -> f64 {
+    values.filter(|v| v.is_finite()).fold(0.0, |a, v| a.max(v.abs()))
+}
+
 fn phase_name(phase: Phase) -> String {
     format!("{phase:?}").to_lowercase()
 }
@@ -114,9 +125,11 @@ fn residual(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
     let t: Vec<f64> = s.t.iter().map(|t| t - t0).collect();
     let end = t[t.len() - 1].max(1e-9);
     let size = t.len().div_ceil(BUCKETS);
-    let before = min_max(&t, |i| s.f[i] - fig.before[i], size);
-    let after = min_max(&t, |i| s.f[i] - fig.after[i], size);
-    let y = range(before.iter().chain(&after).map(|p| p.1).chain([-fig.noise_floor, fig.noise_floor]));
+    let (unit, scale) = prefix(largest((0..t.len()).map(|i| s.f[i] - fig.before[i])).max(fig.noise_floor));
+    let before = min_max(&t, |i| (s.f[i] - fig.before[i]) / scale, size);
+    let after = min_max(&t, |i| (s.f[i] - fig.after[i]) / scale, size);
+    let sigma = fig.noise_floor / scale;
+    let y = range(before.iter().chain(&after).map(|p| p.1).chain([-sigma, sigma]));
 
     let root = SVGBackend::new(&path, (1200, 450)).into_drawing_area();
     root.fill(&WHITE)?;
@@ -127,7 +140,7 @@ fn residual(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(0.0..end * 1.25, y.clone())?;
-    chart.configure_mesh().x_desc("time [s]").y_desc("residual force [N]").draw()?;
+    chart.configure_mesh().x_desc("time [s]").y_desc(format!("residual force [{unit}N]")).draw()?;
     let runs = phase_runs(fig.phases, size);
     for phase in Phase::ALL.into_iter().filter(|p| runs.iter().any(|r| r.2 == *p)) {
         let color = phase_color(phase).mix(0.35);
@@ -140,8 +153,8 @@ fn residual(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
     }
     let band = BLACK.mix(0.15);
     chart
-        .draw_series([Rectangle::new([(0.0, -fig.noise_floor), (end, fig.noise_floor)], band.filled())])?
-        .label(format!("±σ noise floor ({:.3} N)", fig.noise_floor))
+        .draw_series([Rectangle::new([(0.0, -sigma), (end, sigma)], band.filled())])?
+        .label(format!("±σ noise floor ({sigma:.3} {unit}N)"))
         .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 20, y + 5)], band.filled()));
     chart
         .draw_series(LineSeries::new(before, RED))?
@@ -161,9 +174,9 @@ fn residual(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
     Ok(path.clone())
 }
 
-/// Every `stride`-th in-contact sample of `y` against z [mm], split where contact was lost so that no line
-/// jumps across free space.
-fn contact_segments(fig: &Figures, y: &[f64], stride: usize) -> Vec<Vec<(f64, f64)>> {
+/// Every `stride`-th in-contact sample of `y` against z, both divided by their scales, split where
+/// contact was lost so that no line jumps across free space.
+fn contact_segments(fig: &Figures, y: &[f64], stride: usize, (zs, fs): (f64, f64)) -> Vec<Vec<(f64, f64)>> {
     let mut segments: Vec<Vec<(f64, f64)>> = Vec::new();
     let mut previous = None;
     let contact = (0..y.len()).filter(|&i| fig.phases[i].in_contact());
@@ -172,7 +185,7 @@ fn contact_segments(fig: &Figures, y: &[f64], stride: usize) -> Vec<Vec<(f64, f6
         if !joined {
             segments.push(Vec::new());
         }
-        segments.last_mut().expect("pushed above").push((fig.series.z[i] * 1e3, y[i]));
+        segments.last_mut().expect("pushed above").push((fig.series.z[i] / zs, y[i] / fs));
         previous = Some(i);
     }
     segments
@@ -181,10 +194,13 @@ fn contact_segments(fig: &Figures, y: &[f64], stride: usize) -> Vec<Vec<(f64, f6
 fn loops(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
     let path = out.join(format!("{}.loops.svg", fig.name));
     let stride = fig.phases.iter().filter(|p| p.in_contact()).count().div_ceil(MAX_LOOP_POINTS).max(1);
+    let contact = || (0..fig.phases.len()).filter(|&i| fig.phases[i].in_contact());
+    let (z_unit, zs) = prefix(largest(contact().map(|i| fig.series.z[i])));
+    let (f_unit, fs) = prefix(largest(contact().map(|i| fig.series.f[i])));
     let lines = [
-        (contact_segments(fig, &fig.series.f, stride), BLACK.mix(0.5).stroke_width(3), "measured"),
-        (contact_segments(fig, fig.before, stride), RED.stroke_width(1), "baseline model"),
-        (contact_segments(fig, fig.after, stride), BLUE.stroke_width(1), "augmented model"),
+        (contact_segments(fig, &fig.series.f, stride, (zs, fs)), BLACK.mix(0.5).stroke_width(3), "measured"),
+        (contact_segments(fig, fig.before, stride, (zs, fs)), RED.stroke_width(1), "baseline model"),
+        (contact_segments(fig, fig.after, stride, (zs, fs)), BLUE.stroke_width(1), "augmented model"),
     ];
     let points = || lines.iter().flat_map(|l| l.0.iter().flatten());
     let root = SVGBackend::new(&path, (800, 600)).into_drawing_area();
@@ -195,7 +211,11 @@ fn loops(out: &Path, fig: &Figures) -> anyhow::Result<PathBuf> {
         .x_label_area_size(35)
         .y_label_area_size(55)
         .build_cartesian_2d(range(points().map(|p| p.0)), range(points().map(|p| p.1).chain([0.0])))?;
-    chart.configure_mesh().x_desc("deformation z [mm]").y_desc("normal force [N]").draw()?;
+    chart
+        .configure_mesh()
+        .x_desc(format!("deformation z [{z_unit}m]"))
+        .y_desc(format!("normal force [{f_unit}N]"))
+        .draw()?;
     for (segments, style, label) in &lines {
         let style = *style;
         chart

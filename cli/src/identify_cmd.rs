@@ -157,8 +157,8 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
     Ok(TableIdentification { id, onset, surface })
 }
 
-/// What the reader made of a table, said before its results.
-pub fn say_table(file: &Path, table: &Table, onset: &table::Onset) {
+/// What the reader made of a table, said before its results (`onset_given`: `--onset`).
+pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: Option<f64>) {
     let block = if table.block > 1 { format!(", blocks of {} rows averaged", table.block) } else { String::new() };
     println!(
         "{}: {} rows ({} samples{block}), one per {:.3e} s; depth as {}",
@@ -174,20 +174,25 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset) {
     if !table.ignored.is_empty() {
         println!("columns not read: {}", table.ignored.join(", "));
     }
+    let threshold = match onset_given {
+        Some(given) => format!("{} (--onset)", table.force(given)),
+        None => format!("{} (10 noise σ, at least 2 % of the force range)", table.force(onset.threshold)),
+    };
     if onset.free_samples > 0 {
         println!(
-            "force zeroed at its free level {} (the first {} samples; noise σ {}); onset threshold {}",
+            "force zeroed at its free level {} (the first {} samples; noise σ {}); onset threshold {threshold}",
             table.force(onset.free_level),
             onset.free_samples,
             table.force(onset.noise),
-            table.force(onset.threshold)
         );
     } else {
         println!(
             "the table starts in contact (its first samples move by more than the threshold): the force is taken \
-             as recorded, its zero is the instrument's; onset threshold {}",
-            table.force(onset.threshold)
+             as recorded, its zero is the instrument's; onset threshold {threshold}"
         );
+    }
+    for doubt in table.doubts(onset.free_level) {
+        eprintln!("warning: {doubt}");
     }
 }
 
@@ -235,7 +240,7 @@ pub fn to_json(id: &Identification) -> serde_json::Value {
 
 /// Seed 001's Table I layout (fitness mean ± std per kind), at the estimated surface and at the onset,
 /// then each kind's parameters at both.
-pub fn print_table(id: &Identification, file: &Path) {
+pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
     let name = file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
     let short = |k: Kind| match k {
         Kind::KelvinVoigt => "linear K/V",
@@ -259,7 +264,11 @@ pub fn print_table(id: &Identification, file: &Path) {
         println!();
     }
     let p = id.contact_position();
-    println!("\nat the estimated surface [{:.4e}, {:.4e}, {:.4e}] m:", p.x, p.y, p.z);
+    if from_table {
+        println!("\nat the estimated surface:");
+    } else {
+        println!("\nat the estimated surface [{:.4e}, {:.4e}, {:.4e}] m:", p.x, p.y, p.z);
+    }
     print_parameters(surface);
     println!(
         "\nat the force onset, {} from the surface (seed 001's method):",
@@ -288,6 +297,16 @@ pub fn print_table(id: &Identification, file: &Path) {
         );
     }
     let m = &id.model.model;
+    if from_table {
+        println!(
+            "\nselected: {} (* above): k = {:.4e}, λ = {:.4e} (SI: N, m, s)",
+            id.selected().label(),
+            m.stiffness,
+            m.damping
+        );
+        println!("{} samples in contact from t = {:.3} s", id.samples, id.contact_time);
+        return;
+    }
     println!(
         "\nselected: {} (* above); at the estimated surface [{:.4e}, {:.4e}, {:.4e}] m: k = {:.4e}, λ = {:.4e}",
         id.selected().label(),
@@ -345,14 +364,14 @@ pub fn say_warnings(recording: &Recording, said: usize) -> usize {
 fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
     let table = table::read(&args.file)?;
     let onset = table::onset(&table.f);
-    say_table(&args.file, &table, &onset);
+    say_table(&args.file, &table, &onset, args.onset);
     let found = identify_table(&table, args)?;
     println!(
         "surface at {} {} along the table's depth\n",
         if table.depth_is == Depth::Position { "x =" } else { "z =" },
         table.length(found.surface)
     );
-    print_table(&found.id, &args.file);
+    print_table(&found.id, &args.file, true);
     if let Some(path) = &args.json {
         let mut value = to_json(&found.id);
         value["surface"] = json!(found.surface);
@@ -401,7 +420,7 @@ pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
         (Err(e), None) => return Err(e),
     };
     if let Some(id) = &normal {
-        print_table(id, &args.file);
+        print_table(id, &args.file, false);
     }
     if let Some(t) = &tangential {
         println!();

@@ -9,8 +9,9 @@
 //! | `f` | normal force, f > 0 pushes | kN, N, mN, µN, nN |
 //! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
 //!
-//! e.g. `t [s],x [nm],f [nN]`. Other columns are ignored (and said). Every malformed cell is an error
-//! naming its line and column. A table of more than [`MAX_ROWS`] rows is read in blocks of rows averaged,
+//! e.g. `t [s],x [nm],f [nN]`; names in any case, units as written. Other columns are ignored (and
+//! said). Time counts from the first row. Every malformed cell, and every row with more or fewer cells
+//! than the header, is an error naming its line (and column); rows of empty cells are skipped. A table of more than [`MAX_ROWS`] rows is read in blocks of rows averaged,
 //! so memory stays bounded whatever the file.
 
 use std::io::BufRead;
@@ -45,9 +46,6 @@ pub struct Table {
     pub block: usize,
     /// Columns the header names that are not read.
     pub ignored: Vec<String>,
-    /// The table's own units of depth and force, as (name, metres or newtons per unit), for messages.
-    pub length_unit: (String, f64),
-    pub force_unit: (String, f64),
 }
 
 /// A file is read as a table when its extension says so.
@@ -107,7 +105,7 @@ fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64
         }
         None => (cell, None),
     };
-    let Some(role) = Role::of(name) else { return Ok(None) };
+    let Some(role) = Role::of(&name.to_ascii_lowercase()) else { return Ok(None) };
     let units = role.units();
     let names = || units.iter().map(|(u, _)| *u).collect::<Vec<_>>().join(", ");
     let Some(unit) = unit else {
@@ -146,9 +144,26 @@ fn reader(path: &Path, sep: u8) -> anyhow::Result<csv::Reader<std::fs::File>> {
         .delimiter(sep)
         .comment(Some(b'#'))
         .trim(csv::Trim::All)
-        .flexible(true)
+        .flexible(false)
         .from_path(path)
         .with_context(|| format!("opening {}", path.display()))
+}
+
+/// A row the reader cannot split as the header: its line and its cells against the header's.
+fn malformed(path: &Path, e: csv::Error) -> anyhow::Error {
+    match e.kind() {
+        csv::ErrorKind::UnequalLengths { pos, expected_len, len } => anyhow::anyhow!(
+            "{}: line {}: {len} cells where the header has {expected_len}",
+            path.display(),
+            pos.as_ref().map_or(0, |p| p.line())
+        ),
+        csv::ErrorKind::Utf8 { pos, .. } => anyhow::anyhow!(
+            "{}: line {}: not UTF-8 text (save the table as UTF-8)",
+            path.display(),
+            pos.as_ref().map_or(0, |p| p.line())
+        ),
+        _ => anyhow::anyhow!("{}: {e}", path.display()),
+    }
 }
 
 /// Reads a table (see the module's doc).
@@ -193,7 +208,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
     // First pass: the rows, so that a long table is averaged in blocks of equal length.
     let mut rows = 0_u64;
     let mut record = csv::StringRecord::new();
-    while rdr.read_record(&mut record).with_context(|| format!("{}: reading", path.display()))? {
+    while rdr.read_record(&mut record).map_err(|e| malformed(path, e))? {
         if !record.iter().all(str::is_empty) {
             rows += 1;
         }
@@ -211,7 +226,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
     let mut sums = [0.0_f64; 4];
     let (mut in_block, mut last_t) = (0_usize, f64::NEG_INFINITY);
     let mut rdr = reader(path, sep)?;
-    while rdr.read_record(&mut record).with_context(|| format!("{}: reading", path.display()))? {
+    while rdr.read_record(&mut record).map_err(|e| malformed(path, e))? {
         if record.iter().all(str::is_empty) {
             continue;
         }
@@ -251,21 +266,13 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
             in_block = 0;
         }
     }
-    let [t, depth, f, rate] = columns;
+    let [mut t, depth, f, rate] = columns;
+    // Time from the first row: instruments stamp from a trigger (negative before it) or the epoch.
+    if let Some(&first) = t.first() {
+        t.iter_mut().for_each(|x| *x -= first);
+    }
     ensure!(t.len() >= 2, "{}: fewer than two samples after averaging blocks of {block} rows", path.display());
-    let unit = |slot: usize| at[slot].as_ref().map(|(_, u, s)| (u.clone(), *s)).unwrap_or_default();
-    Ok(Table {
-        t,
-        depth,
-        depth_is,
-        f,
-        rate: at[3].as_ref().map(|_| rate),
-        rows,
-        block,
-        ignored,
-        length_unit: unit(1),
-        force_unit: unit(2),
-    })
+    Ok(Table { t, depth, depth_is, f, rate: at[3].as_ref().map(|_| rate), rows, block, ignored })
 }
 
 impl Table {
@@ -290,14 +297,41 @@ impl Table {
             .collect()
     }
 
-    /// A length in the table's unit, for messages.
+    /// A length with its SI prefix, for messages.
     pub fn length(&self, metres: f64) -> String {
-        format!("{:.4} {}", metres / self.length_unit.1, self.length_unit.0)
+        si(metres, "m")
     }
 
-    /// A force in the table's unit, for messages.
+    /// A force with its SI prefix, for messages.
     pub fn force(&self, newtons: f64) -> String {
-        format!("{:.4} {}", newtons / self.force_unit.1, self.force_unit.0)
+        si(newtons, "N")
+    }
+
+    /// What looks wrong in the table's conventions: a force that mostly pulls (f > 0 must push), a rate
+    /// column that disagrees with the depth's own change.
+    pub fn doubts(&self, free_level: f64) -> Vec<String> {
+        let mut out = vec![];
+        let (lo, hi) = self.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        if free_level - lo > 2.0 * (hi - free_level) {
+            out.push(format!(
+                "the force goes {} below its free level and only {} above it: f > 0 must push (negate the column if the instrument counts pulling as positive)",
+                si(free_level - lo, "N"),
+                si(hi - free_level, "N")
+            ));
+        }
+        if let Some(rate) = &self.rate {
+            let own = Table { rate: None, ..self.clone() }.depth_rate();
+            let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+            let (rr, oo, ro) = (dot(rate, rate), dot(&own, &own), dot(rate, &own));
+            let corr = ro / (rr * oo).sqrt().max(f64::MIN_POSITIVE);
+            let ratio = (rr / oo.max(f64::MIN_POSITIVE)).sqrt();
+            if !(corr > 0.5 && (0.5..=2.0).contains(&ratio)) {
+                out.push(format!(
+                    "the zdot column disagrees with the depth's own rate of change (correlation {corr:.2}, size ×{ratio:.3}): check its sign and unit"
+                ));
+            }
+        }
+        out
     }
 }
 
@@ -391,7 +425,7 @@ mod tests {
 
     #[test]
     fn tabs_and_greek_mu_and_a_deformation_column() {
-        let (_d, p) = table("z [μm]\tt [s]\tf [nN]\tzdot [nm/s]\n1\t0\t5\t2\n2\t1\t6\t3\n");
+        let (_d, p) = table("z [μm]\tT [s]\tF[nN]\tzdot [nm/s]\n1\t0\t5\t2\n2\t1\t6\t3\n");
         let t = read(&p).unwrap();
         assert_eq!(t.depth_is, Depth::Deformation);
         assert!((t.f[0] - 5e-9).abs() < 1e-20);
@@ -410,6 +444,7 @@ mod tests {
             ("t [s],f [N]\n0,0\n1,1\n", "no `z [m]` (deformation) or `x [m]` (position) column"),
             ("t [s],x [m],f [N]\n0,0,0\n", "1 data rows"),
             ("# only comments\n", "no header line"),
+            ("t [s],x [m],f [N]\n0,0,0\n1,0\n", "line 3: 2 cells where the header has 3"),
             ("t [s],x [m],x [m],f [N]\n0,0,0,0\n", "second depth"),
         ] {
             let (_d, p) = table(text);
@@ -430,7 +465,7 @@ mod tests {
         assert_eq!(t.block, 3);
         assert_eq!(t.rows, n as u64);
         assert_eq!(t.t.len(), n / 3);
-        assert_eq!(t.t[0], 1.0, "the first block's mean time");
+        assert_eq!(t.t[1], 3.0, "blocks' mean times, from the first block's");
     }
 
     #[test]

@@ -94,7 +94,8 @@ fn noisy(scale: f64) -> FtSensorConfig {
 
 /// The corpus: every effect of the cell's surface and sensor alone on both seed-001 laws, two-effect cases,
 /// the demo's lab surfaces, an effect outside the library, and 28 nulls (two laws, four noise levels, three
-/// seeds; and with sway and tilt, two seeds).
+/// seeds; with sway and tilt, two seeds); and 8 nulls of an open goal (coloured noise, a slowly wandering
+/// offset: [`OPEN_NULL`]).
 pub fn cases() -> Vec<Case> {
     let sponge = ((0.01, 0.05), 300.0);
     let dice = ((0.015, 0.07), 150.0);
@@ -289,6 +290,18 @@ pub fn cases() -> Vec<Case> {
                 case(format!("null: {law}, noise ×{scale}"), base.clone(), noisy(scale), geometry, vec![], "-");
             }
         }
+        // Noise that is not white: low-passed (50 ms), and a slow wander of the offset (20 s), each as
+        // large as the white noise; neither is an effect of the surface or a drift a tare follows.
+        for (what, time_constant) in [("coloured noise (50 ms)", 0.05), ("offset wandering (20 s)", 20.0)] {
+            for _ in 0..2 {
+                let sensor = FtSensorConfig {
+                    coloured_noise: FtSensorConfig::gamma().noise,
+                    coloured_time_constant: time_constant,
+                    ..FtSensorConfig::gamma()
+                };
+                case(format!("null: {law}, {what}"), base.clone(), sensor, geometry, vec![], OPEN_NULL);
+            }
+        }
     }
     for c in out.iter_mut().filter(|c| c.visible_in == ONE_HOLD) {
         c.hold = Some(40.0);
@@ -298,6 +311,11 @@ pub fn cases() -> Vec<Case> {
 }
 
 const ONE_HOLD: &str = "one long hold (no lift-off after it)";
+
+/// Nulls whose noise is not white: reported in the table and its summary but not yet among the asserted
+/// nulls (an open goal: the start-up tare catches the noise's slow part as a real offset of about 1 σ,
+/// which the workflow names).
+const OPEN_NULL: &str = "- (noise not white: open goal)";
 
 /// The plan of every case: three identification runs and one cycle of six force commands.
 const PLAN: Plan = Plan {
@@ -405,6 +423,9 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
 #[derive(Debug, Clone, Serialize)]
 pub struct Summary {
     pub effect_cases: usize,
+    /// Nulls of the open goal (noise that is not white) and the false names on them.
+    pub open_null_cases: usize,
+    pub open_false_names: usize,
     pub named_exactly: usize,
     pub null_cases: usize,
     pub false_names_on_nulls: usize,
@@ -456,7 +477,9 @@ pub fn run(threads: usize, only: Option<&str>, keep: Option<&Path>) -> anyhow::R
     outcomes.sort_by_key(|(i, _)| *i);
     let outcomes: Vec<Outcome> = outcomes.into_iter().map(|(_, o)| o).collect();
     let effects: Vec<&Outcome> = outcomes.iter().filter(|o| !o.expected.is_empty()).collect();
-    let nulls: Vec<&Outcome> = outcomes.iter().filter(|o| o.expected.is_empty() && !o.out_of_library).collect();
+    let null = |o: &&Outcome| o.expected.is_empty() && !o.out_of_library;
+    let nulls: Vec<&Outcome> = outcomes.iter().filter(null).filter(|o| o.visible_in != OPEN_NULL).collect();
+    let open: Vec<&Outcome> = outcomes.iter().filter(null).filter(|o| o.visible_in == OPEN_NULL).collect();
     let outside: Vec<&Outcome> = outcomes.iter().filter(|o| o.out_of_library).collect();
     let mut shrink: Vec<f64> = effects.iter().filter_map(|o| o.shrink_of_ideal).collect();
     shrink.sort_by(f64::total_cmp);
@@ -465,6 +488,8 @@ pub fn run(threads: usize, only: Option<&str>, keep: Option<&Path>) -> anyhow::R
         named_exactly: effects.iter().filter(|o| o.exact).count(),
         null_cases: nulls.len(),
         false_names_on_nulls: nulls.iter().filter(|o| !o.named.is_empty()).count(),
+        open_null_cases: open.len(),
+        open_false_names: open.iter().filter(|o| !o.named.is_empty()).count(),
         out_of_library_cases: outside.len(),
         out_of_library_unexplained: outside.iter().filter(|o| o.exact).count(),
         ambiguous_cases: outcomes.iter().filter(|o| o.expected_ambiguous.is_some()).count(),
@@ -514,7 +539,7 @@ pub fn table(s: &Summary) -> String {
         );
     }
     t += &format!(
-        "\nEffect cases named exactly: {}/{} ({:.0} %; of them answered ambiguous as expected: {}/{}); false names on nulls: {}/{}; out of library left unexplained: {}/{}; median shrink of the ideal: {:.0} %\n",
+        "\nEffect cases named exactly: {}/{} ({:.0} %; of them answered ambiguous as expected: {}/{}); false names on nulls: {}/{}; out of library left unexplained: {}/{}; median shrink of the ideal: {:.0} %; open goal, nulls with noise that is not white: false names {}/{}\n",
         s.named_exactly,
         s.effect_cases,
         100.0 * s.named_exactly as f64 / s.effect_cases.max(1) as f64,
@@ -524,7 +549,9 @@ pub fn table(s: &Summary) -> String {
         s.null_cases,
         s.out_of_library_unexplained,
         s.out_of_library_cases,
-        100.0 * s.median_shrink_of_ideal
+        100.0 * s.median_shrink_of_ideal,
+        s.open_false_names,
+        s.open_null_cases
     );
     t
 }

@@ -134,7 +134,17 @@ impl<'a> Data<'a> {
                 since
             })
             .collect();
-        let folds = (0..folds).map(|i| i * n / folds..(i + 1) * n / folds).collect();
+        // Blocks contiguous in time, each with an equal share of the in-contact samples: a record whose
+        // contact is a tenth of it (an indentation between long stretches of free space) would otherwise have
+        // all of its contact in one fold, and that fold predicted from no contact at all.
+        let contact: Vec<usize> = (0..n).filter(|&i| s.z[i] > 0.0).collect();
+        let bound = |i: usize| match i {
+            0 => 0,
+            i if i >= folds => n,
+            i if contact.len() >= folds => contact[i * contact.len() / folds],
+            i => i * n / folds,
+        };
+        let folds = (0..folds).map(|i| bound(i)..bound(i + 1)).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
         let lateral_axis = principal_axis(&s.tangential);
@@ -386,6 +396,27 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
+    fit_columns_held_out(d, cols, None)
+}
+
+/// The squared held-out residual of every sample: each predicted by the fit with its fold left out.
+pub(crate) fn held_out(d: &Data, st: &Structure) -> Vec<f64> {
+    let mut out = vec![0.0; d.s.len()];
+    let cols = columns(d, st);
+    if st.delay <= 0.0 {
+        fit_columns_held_out(d, &cols, Some(&mut out));
+        return out;
+    }
+    // As `fit` does for a delay: masked with the delayed fit's own surface force.
+    let fitted = fit(d, st);
+    let undelayed = Structure { delay: 0.0, ..st.clone() };
+    let raw = columns_masked(d, &undelayed, &vec![false; d.s.len()]);
+    let mask = surface_clamped(&st.terms, &raw, &fitted.beta, |_| false);
+    fit_columns_held_out(d, &columns_masked(d, st, &mask), Some(&mut out));
+    out
+}
+
+fn fit_columns_held_out(d: &Data, cols: &[Vec<f64>], mut per_sample: Option<&mut Vec<f64>>) -> Fit {
     let y = &d.s.f;
     let n = y.len();
     let p = cols.len();
@@ -443,6 +474,12 @@ pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
         let (bf, _) = solve(&gt, &ht);
         let out = yyf[f] - 2.0 * bf.dot(&hf[f]) + (&gf[f] * &bf).dot(&bf);
         held += out.max(0.0);
+        if let Some(res) = per_sample.as_deref_mut() {
+            for i in d.folds[f].clone() {
+                let p: f64 = (0..p).map(|j| bf[j] / scale[j] * cols[j][i]).sum();
+                res[i] = (y[i] - p).powi(2);
+            }
+        }
         fold_beta.push((0..p).map(|j| bf[j] / scale[j]).collect());
     }
     let nf = n as f64;

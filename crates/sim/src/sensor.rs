@@ -1,5 +1,5 @@
 //! The ATI Gamma on the flange: the wrench the hand puts on the sensing frame (contact force and the
-//! hand's weight), plus bias, drift and white noise, quantised to RDT counts.
+//! hand's weight), plus bias, drift, white and coloured noise, quantised to RDT counts.
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use rand::Rng;
@@ -17,6 +17,12 @@ pub struct FtSensorConfig {
     pub bias: [f64; 6],
     /// Offset growth per axis per second (temperature drift).
     pub drift: [f64; 6],
+    /// Coloured noise per axis: the standard deviation of an Ornstein–Uhlenbeck process (first-order
+    /// low-passed white noise) added to the reading; 0 for none.
+    pub coloured_noise: [f64; 6],
+    /// Its correlation time [s]: tens of ms is a filtered electronics' noise, tens of seconds a slow
+    /// wander of the offset that no tare schedule follows.
+    pub coloured_time_constant: f64,
     /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (seed 000's
     /// misalignment of the sensor's axes with the pushing axes: a mounting error no tool knows of).
     pub mounting: UnitQuaternion<f64>,
@@ -30,6 +36,8 @@ impl FtSensorConfig {
             noise: [0.03, 0.03, 0.05, 0.0015, 0.0015, 0.0012],
             bias: [0.4, -0.3, 0.8, 0.01, -0.02, 0.005],
             drift: [0.0; 6],
+            coloured_noise: [0.0; 6],
+            coloured_time_constant: 0.0,
             mounting: UnitQuaternion::identity(),
         }
     }
@@ -61,6 +69,8 @@ impl FtSensorConfig {
             noise: [0.005, 0.005, 0.005, 1e-5, 1e-5, 1e-5],
             bias: [0.0; 6],
             drift: [0.0; 6],
+            coloured_noise: [0.0; 6],
+            coloured_time_constant: 0.0,
             mounting: UnitQuaternion::identity(),
         }
     }
@@ -76,11 +86,23 @@ pub struct FtSensor {
     ft_sequence: u32,
     tare: [i32; 6],
     last_raw: [i32; 6],
+    /// The coloured noise's state and the time it was last advanced to.
+    coloured: [f64; 6],
+    coloured_at: Option<f64>,
 }
 
 impl FtSensor {
     pub fn new(config: FtSensorConfig, load: BodyInertia) -> Self {
-        Self { config, load, rdt_sequence: 0, ft_sequence: 0, tare: [0; 6], last_raw: [0; 6] }
+        Self {
+            config,
+            load,
+            rdt_sequence: 0,
+            ft_sequence: 0,
+            tare: [0; 6],
+            last_raw: [0; 6],
+            coloured: [0.0; 6],
+            coloured_at: None,
+        }
     }
 
     /// A new stream starts (RDT start request): the stream counter restarts.
@@ -110,6 +132,25 @@ impl FtSensor {
         [force.x, force.y, force.z, torque.x, torque.y, torque.z]
     }
 
+    /// The Ornstein–Uhlenbeck noise advanced exactly to `time` (stationary from its first sample).
+    fn advance_coloured(&mut self, time: f64, rng: &mut impl Rng) {
+        let c = &self.config;
+        if c.coloured_time_constant <= 0.0 || c.coloured_noise.iter().all(|&s| s <= 0.0) {
+            return;
+        }
+        let keep = match self.coloured_at {
+            Some(at) => (-(time - at).max(0.0) / c.coloured_time_constant).exp(),
+            None => 0.0,
+        };
+        let fresh = (1.0 - keep * keep).sqrt();
+        for i in 0..6 {
+            let sigma = c.coloured_noise[i];
+            let z: f64 = if sigma > 0.0 { Normal::new(0.0, sigma).expect("finite σ").sample(rng) } else { 0.0 };
+            self.coloured[i] = keep * self.coloured[i] + fresh * z;
+        }
+        self.coloured_at = Some(time);
+    }
+
     /// The next record of the stream.
     pub fn record(
         &mut self,
@@ -121,11 +162,12 @@ impl FtSensor {
         rng: &mut impl Rng,
     ) -> Record {
         let exact = self.true_wrench(sensor, tool, contact_force, gravity);
+        self.advance_coloured(time, rng);
         let c = &self.config;
         let reading: [f64; 6] = std::array::from_fn(|i| {
             let noise =
                 if c.noise[i] > 0.0 { Normal::new(0.0, c.noise[i]).expect("finite σ").sample(rng) } else { 0.0 };
-            exact[i] + c.bias[i] + c.drift[i] * time + noise
+            exact[i] + c.bias[i] + c.drift[i] * time + noise + self.coloured[i]
         });
         let (raw, saturated) = c.calibration.to_counts(&reading);
         self.last_raw = raw;
