@@ -502,6 +502,28 @@ mod tests {
     }
 
     #[test]
+    fn time_counts_from_the_first_row_and_doubtful_conventions_are_said() {
+        // Stamped from a trigger (negative before it), the force counted positive when pulling, and a
+        // rate column in the wrong unit.
+        let mut text = String::from("t [s],x [mm],f [N],zdot [mm/s]\n");
+        for i in 0..200 {
+            let x = -1.0 + i as f64 * 0.01;
+            let f = if x > 0.0 { -50.0 * x } else { 0.0 };
+            text.push_str(&format!("{},{x},{f},{}\n", -2.6 + i as f64 * 0.01, 1000.0));
+        }
+        let (_d, p) = table(&text);
+        let t = read(&p).unwrap();
+        assert_eq!(t.t[0], 0.0);
+        assert!((t.t[199] - 1.99).abs() < 1e-9);
+        let doubts = t.doubts(onset(&t.f).free_level);
+        assert!(doubts.iter().any(|d| d.contains("f > 0 must push")), "{doubts:?}");
+        assert!(doubts.iter().any(|d| d.contains("zdot column disagrees")), "{doubts:?}");
+        // As it should be: no doubt.
+        let good = Table { f: t.f.iter().map(|f| -f).collect(), rate: None, ..t };
+        assert!(good.doubts(0.0).is_empty(), "{:?}", good.doubts(0.0));
+    }
+
+    #[test]
     fn a_table_that_starts_in_contact_has_no_free_level() {
         let f: Vec<f64> = (0..500).map(|i| 5.0 * (-(i as f64) / 100.0).exp() + 1.0).collect();
         let o = onset(&f);

@@ -523,6 +523,29 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
             assert!(!expected_nothing || names.is_empty(), "{c}");
         }
     }
+    // The holds a person sees relax (two force clamps, one height clamp) are named although the adhesion
+    // on each retract, outside the library, dominates the residual (the phase-local rule), and every named
+    // parameter carries its interval.
+    for file in ["brain_creep.csv", "polymergel_creep.csv", "cell_relaxation.csv"] {
+        let c = curves.iter().find(|c| c["file"] == file).unwrap();
+        assert_eq!(c["named_as_expected"], true, "{c}");
+    }
+    let json = dir.path().join("polymergel.json");
+    let run = discrepancy(&[
+        std::ffi::OsStr::new(&format!("{data}/polymergel_creep.csv")),
+        "--out".as_ref(),
+        dir.path().as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    assert!(run.status.success(), "{}", text(&run));
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    for e in v["effects"].as_array().unwrap() {
+        for (name, _) in e["parameters"].as_object().unwrap() {
+            assert!(e["uncertainty"][name].as_f64().is_some_and(|u| u >= 0.0), "{e}");
+        }
+        assert!(e["not_identifiable"].is_array(), "{e}");
+    }
     // The tip that only touches: refused, saying which threshold and how to set another.
     let refused = curves.iter().find(|c| c["file"] == "qi_adhesion.csv").unwrap();
     let why = refused["answer"]["Err"].as_str().unwrap();
