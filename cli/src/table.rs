@@ -359,8 +359,10 @@ pub struct Onset {
     pub free_samples: usize,
 }
 
-/// The share of the table read as its free start before the onset is known.
+/// The share of the table read as its free start before the onset is known...
 const HEAD_SHARE: f64 = 0.02;
+/// ...at most this many samples (a long record of many pushes may touch within its first 2 %).
+const HEAD_MAX: usize = 500;
 /// The onset threshold: this many noise σ above the free level...
 const ONSET_SIGMAS: f64 = 10.0;
 /// ...and at least this share of the table's force range.
@@ -372,11 +374,11 @@ fn median(v: &mut [f64]) -> f64 {
 }
 
 /// The free level, the noise and the onset threshold of a force column (see [`Onset`]). The head of the
-/// table (its first 2 %, at least 20 samples) gives a first level and noise; where the head itself moves
+/// table (its first 2 %, at least 20 samples and at most 500) gives a first level and noise; where the head itself moves
 /// by more than the threshold the table starts in contact and the force is taken as recorded.
 pub fn onset(f: &[f64]) -> Onset {
     let n = f.len();
-    let head = ((n as f64 * HEAD_SHARE) as usize).max(20).min(n);
+    let head = ((n as f64 * HEAD_SHARE) as usize).min(HEAD_MAX).max(20).min(n);
     let noise_of = |s: &[f64]| {
         let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
         if d.is_empty() {
@@ -521,6 +523,22 @@ mod tests {
         // As it should be: no doubt.
         let good = Table { f: t.f.iter().map(|f| -f).collect(), rate: None, ..t };
         assert!(good.doubts(0.0).is_empty(), "{:?}", good.doubts(0.0));
+    }
+
+    #[test]
+    fn a_long_record_of_many_pushes_has_its_free_start_found() {
+        // 100,000 samples, the first push at 1.5 %: within 2 % of the record, not within 500 samples.
+        let f: Vec<f64> = (0..100_000)
+            .map(|i| {
+                let noise = ((i * 7919) % 101) as f64 / 100.0 - 0.5;
+                let phase = ((i + 1000) % 10_000) as f64 / 10_000.0;
+                let z = (1.0 - (2.0 * phase - 1.0).abs()) * 2.0 - 1.0;
+                2.0 + 10.0 * z.max(0.0).powf(1.5) + 0.01 * noise
+            })
+            .collect();
+        let o = onset(&f);
+        assert!(o.free_samples > 100, "{o:?}");
+        assert!((o.free_level - 2.0).abs() < 0.01, "{o:?}");
     }
 
     #[test]
