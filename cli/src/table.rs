@@ -378,7 +378,7 @@ fn median(v: &mut [f64]) -> f64 {
 /// by more than the threshold the table starts in contact and the force is taken as recorded.
 pub fn onset(f: &[f64]) -> Onset {
     let n = f.len();
-    let head = ((n as f64 * HEAD_SHARE) as usize).min(HEAD_MAX).max(20).min(n);
+    let head = ((n as f64 * HEAD_SHARE) as usize).clamp(20, HEAD_MAX).min(n);
     let noise_of = |s: &[f64]| {
         let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
         if d.is_empty() {
