@@ -10,6 +10,8 @@ use anyhow::ensure;
 use plotters::prelude::*;
 use softcontact_discrepancy::{Phase, Series};
 
+use crate::table::prefix;
+
 /// What to draw: the recording along the normal and the two predictions.
 pub struct Figures<'a> {
     /// Recording name, used in file names and titles.
@@ -103,13 +105,8 @@ fn phase_color(phase: Phase) -> RGBColor {
     }
 }
 
-/// The SI prefix and its scale that put `largest` between 1 and 1000 (k down to p): the figures of a
-/// 1 nN AFM curve and of a 100 N press both read in plain numbers.
-fn prefix(largest: f64) -> (&'static str, f64) {
-    const PREFIXES: [(&str, f64); 6] = [("k", 1e3), ("", 1.0), ("m", 1e-3), ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12)];
-    PREFIXES.iter().copied().find(|(_, s)| largest >= *s).unwrap_or(PREFIXES[5])
-}
-
+/// The largest magnitude, for the axes' SI prefix ([`prefix`]): the figures of a 1 nN AFM curve and of a
+/// 100 N press both read in plain numbers.
 fn largest(values: impl Iterator<Item = f64>) -> f64 {
     values.filter(|v| v.is_finite()).fold(0.0, |a, v| a.max(v.abs()))
 }

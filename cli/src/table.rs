@@ -149,6 +149,17 @@ fn reader(path: &Path, sep: u8) -> anyhow::Result<csv::Reader<std::fs::File>> {
         .with_context(|| format!("opening {}", path.display()))
 }
 
+/// dx/dt by central differences (one-sided at the ends).
+fn central_differences(t: &[f64], x: &[f64]) -> Vec<f64> {
+    let n = t.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
+            (x[b] - x[a]) / (t[b] - t[a])
+        })
+        .collect()
+}
+
 /// A row the reader cannot split as the header: its line and its cells against the header's.
 fn malformed(path: &Path, e: csv::Error) -> anyhow::Error {
     match e.kind() {
@@ -285,16 +296,7 @@ impl Table {
 
     /// The rate of the depth [m/s]: the table's column, else central differences.
     pub fn depth_rate(&self) -> Vec<f64> {
-        if let Some(rate) = &self.rate {
-            return rate.clone();
-        }
-        let (t, x, n) = (&self.t, &self.depth, self.t.len());
-        (0..n)
-            .map(|i| {
-                let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
-                (x[b] - x[a]) / (t[b] - t[a])
-            })
-            .collect()
+        self.rate.clone().unwrap_or_else(|| central_differences(&self.t, &self.depth))
     }
 
     /// A length with its SI prefix, for messages.
@@ -320,7 +322,7 @@ impl Table {
             ));
         }
         if let Some(rate) = &self.rate {
-            let own = Table { rate: None, ..self.clone() }.depth_rate();
+            let own = central_differences(&self.t, &self.depth);
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
             let (rr, oo, ro) = (dot(rate, rate), dot(&own, &own), dot(rate, &own));
             let corr = ro / (rr * oo).sqrt().max(f64::MIN_POSITIVE);
@@ -337,13 +339,18 @@ impl Table {
 
 /// `value` with the SI prefix that puts it between 1 and 1000 (k down to p), e.g. `4.640 nN`.
 pub fn si(value: f64, unit: &str) -> String {
-    const PREFIXES: [(&str, f64); 6] = [("k", 1e3), ("", 1.0), ("m", 1e-3), ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12)];
     if !value.is_finite() || value == 0.0 {
         return format!("{value} {unit}");
     }
-    let (prefix, scale) =
-        PREFIXES.iter().find(|(_, s)| value.abs() >= *s * (1.0 - 5e-4)).copied().unwrap_or(PREFIXES[5]);
+    // Rounded to three decimals, 999.9996 reads as 1.000 of the next prefix.
+    let (prefix, scale) = prefix(value.abs() / (1.0 - 5e-4));
     format!("{:.3} {prefix}{unit}", value / scale)
+}
+
+/// The SI prefix (k down to p) and its scale that put `magnitude` between 1 and 1000.
+pub fn prefix(magnitude: f64) -> (&'static str, f64) {
+    const PREFIXES: [(&str, f64); 6] = [("k", 1e3), ("", 1.0), ("m", 1e-3), ("µ", 1e-6), ("n", 1e-9), ("p", 1e-12)];
+    PREFIXES.iter().copied().find(|(_, s)| magnitude >= *s).unwrap_or(PREFIXES[5])
 }
 
 /// Where the contact begins, from the force alone: what the table's own free part says.
