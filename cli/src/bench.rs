@@ -124,6 +124,10 @@ pub enum BenchCommand {
         /// `expected.json` (the table of `docs/discrepancy-real.md`).
         #[arg(long)]
         real: Option<PathBuf>,
+        /// Seeds of each null whose noise is not white (coloured noise, a wandering offset, a slow drift);
+        /// the committed table uses 2.
+        #[arg(long, default_value_t = 2, value_parser = crate::ranges::count(1, 100))]
+        slow_noise_seeds: usize,
     },
 }
 
@@ -246,8 +250,8 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        BenchCommand::Discrepancy { threads, json, timing_only, case, keep, real: None } => {
-            crate::demo::corpus::bench(threads, json, timing_only, case.as_deref(), keep.as_deref())
+        BenchCommand::Discrepancy { threads, json, timing_only, case, keep, real: None, slow_noise_seeds } => {
+            crate::demo::corpus::bench(threads, json, timing_only, case.as_deref(), keep.as_deref(), slow_noise_seeds)
         }
     }
 }

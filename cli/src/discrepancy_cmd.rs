@@ -134,9 +134,11 @@ fn print_report(report: &Report, name: &str) {
     let n = |v: f64| si(v, "N");
     println!("{name}: baseline {} — in-contact residual RMS {}", report.baseline.kind.id(), n(report.baseline.rms));
     println!(
-        "noise floor {} ({:?}); k, λ and the surface refitted: {:.4e}, {:.4e}, {} ± {} → RMS {}",
+        "noise floor {} ({:?}; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
+         {:.4e}, {:.4e}, {} ± {} → RMS {}",
         n(report.noise_floor),
         report.noise_source,
+        n(report.level_noise),
         report.refit.stiffness,
         report.refit.damping,
         si(report.refit.contact_shift, "m"),

@@ -402,6 +402,11 @@ pub struct NoiseFloor {
     pub sigma: f64,
     pub source: NoiseSource,
     pub samples: usize,
+    /// σ of the noise averaged over [`Options::tare_window`] [N]: the error a tare's own reading leaves
+    /// as an offset, and the level a slow noise (a low-passed sensor, a wandering offset) moves the force
+    /// by. From the free samples' autocovariance up to that window; σ itself where free space has
+    /// structure of its own or there is none.
+    pub level_sigma: f64,
 }
 
 /// The fewest samples a noise estimate uses.
@@ -414,7 +419,7 @@ pub const STRUCTURED_FREE_SPACE: f64 = 3.0;
 /// σ of the force noise: from the farther half of the out-of-contact samples (mean, linear trend in the
 /// time since the last tare and, when the hand tilts, the gravity change removed) when there are at least [`MIN_NOISE_SAMPLES`], else from first differences in holds, else
 /// from all first differences.
-pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
+pub fn noise_floor(series: &Series, phases: &[Phase], tare_window: f64) -> NoiseFloor {
     // The trend is in the time since the last tare: a drifting sensor's offset restarts at each tare.
     let mut since = 0.0;
     let tared = series.tared_before();
@@ -452,13 +457,14 @@ pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
             }
         }
         let beta = g.clone().pseudo_inverse(1e-12).map(|inv| inv * h).unwrap_or_else(|_| nalgebra::DVector::zeros(p));
-        let sse: f64 = free
+        let residual: Vec<f64> = free
             .iter()
             .map(|&i| {
                 let r = row(i);
-                (series.f[i] - (0..p).map(|j| beta[j] * r[j]).sum::<f64>()).powi(2)
+                series.f[i] - (0..p).map(|j| beta[j] * r[j]).sum::<f64>()
             })
-            .sum();
+            .collect();
+        let sse: f64 = residual.iter().map(|r| r * r).sum();
         let n = free.len() as f64;
         let sigma = (sse / (n - p as f64)).sqrt();
         // Free space with structure of its own (an adhesion or a tether pulling after lift-off, a
@@ -473,10 +479,16 @@ pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
             dev.sort_by(f64::total_cmp);
             let robust = 1.4826 * dev[dev.len() / 2] / 2f64.sqrt();
             if sigma > STRUCTURED_FREE_SPACE * robust {
-                return NoiseFloor { sigma: robust, source: NoiseSource::FreeSpaceDifferences, samples: steps.len() };
+                return NoiseFloor {
+                    sigma: robust,
+                    source: NoiseSource::FreeSpaceDifferences,
+                    samples: steps.len(),
+                    level_sigma: robust,
+                };
             }
         }
-        return NoiseFloor { sigma, source: NoiseSource::FreeSpace, samples: free.len() };
+        let level_sigma = level_sigma(series, &free, &residual, tare_window).min(sigma);
+        return NoiseFloor { sigma, source: NoiseSource::FreeSpace, samples: free.len(), level_sigma };
     }
     let diffs = |keep: &dyn Fn(usize) -> bool| -> Vec<f64> {
         (1..series.len()).filter(|&i| keep(i)).map(|i| series.f[i] - series.f[i - 1]).collect()
@@ -487,14 +499,39 @@ pub fn noise_floor(series: &Series, phases: &[Phase]) -> NoiseFloor {
     };
     let hold = diffs(&|i| phases[i] == Phase::Holding && phases[i - 1] == Phase::Holding);
     if hold.len() >= MIN_NOISE_SAMPLES {
-        return NoiseFloor {
-            sigma: std(&hold) / 2f64.sqrt(),
-            source: NoiseSource::HoldingDifferences,
-            samples: hold.len(),
-        };
+        let sigma = std(&hold) / 2f64.sqrt();
+        return NoiseFloor { sigma, source: NoiseSource::HoldingDifferences, samples: hold.len(), level_sigma: sigma };
     }
     let all = diffs(&|_| true);
-    NoiseFloor { sigma: std(&all) / 2f64.sqrt(), source: NoiseSource::AllDifferences, samples: all.len() }
+    let sigma = std(&all) / 2f64.sqrt();
+    NoiseFloor { sigma, source: NoiseSource::AllDifferences, samples: all.len(), level_sigma: sigma }
+}
+
+/// σ of the mean of `window` seconds of noise, from the autocovariance γ(k) of the free samples' residual
+/// (pairs of consecutive free samples only) over the m lags the window spans:
+/// var = (γ(0) + 2 Σₖ₌₁^{m−1} (1 − k/m) γ(k)) / m.
+fn level_sigma(series: &Series, free: &[usize], residual: &[f64], window: f64) -> f64 {
+    let mut spacing: Vec<f64> =
+        free.windows(2).filter(|w| w[1] == w[0] + 1).map(|w| series.t[w[1]] - series.t[w[0]]).collect();
+    if spacing.is_empty() {
+        return f64::INFINITY;
+    }
+    spacing.sort_by(f64::total_cmp);
+    let dt = spacing[spacing.len() / 2].max(1e-300);
+    let m = ((window / dt).round() as usize).clamp(1, free.len() / 4 + 1);
+    let gamma = |k: usize| {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for a in 0..free.len().saturating_sub(k) {
+            if free[a + k] == free[a] + k {
+                sum += residual[a] * residual[a + k];
+                count += 1;
+            }
+        }
+        if count == 0 { 0.0 } else { sum / count as f64 }
+    };
+    let mf = m as f64;
+    let var = (gamma(0) + 2.0 * (1..m).map(|k| (1.0 - k as f64 / mf) * gamma(k)).sum::<f64>()) / mf;
+    var.max(gamma(0) / mf).sqrt()
 }
 
 /// The dt handed to [`ContactModel::step`] at each sample: the spacing of the time stamps (the first
@@ -565,6 +602,13 @@ pub struct Options {
     pub collinear_corr: f64,
     /// Held-out scores within this factor "explain nearly as much" (PySR's 1.5×).
     pub rival_ratio: f64,
+    /// How long a tare reads the sensor [s] (the F/T node's `bias_window`): the time scale of
+    /// [`NoiseFloor::level_sigma`].
+    pub tare_window: f64,
+    /// A slow offset (a sensor bias, a sensor drift, a drifting surface zero) is named only where it moves
+    /// the force by more than this many [`NoiseFloor::level_sigma`]: less is what a tare's own reading or a
+    /// slow noise leaves.
+    pub level_margin: f64,
 }
 
 impl Default for Options {
@@ -580,6 +624,8 @@ impl Default for Options {
             min_t: 3.0,
             collinear_corr: 0.9,
             rival_ratio: 1.5,
+            tare_window: 0.1,
+            level_margin: 3.0,
         }
     }
 }
@@ -766,6 +812,9 @@ pub struct Report {
     pub refit: Refit,
     pub noise_floor: f64,
     pub noise_source: NoiseSource,
+    /// [`NoiseFloor::level_sigma`]: a slow offset smaller than [`Options::level_margin`] times this is not
+    /// named.
+    pub level_noise: f64,
     pub effects: Vec<NamedEffect>,
     pub ambiguous: Vec<Ambiguity>,
     /// Per phase (only phases with samples): RMS of the baseline as given and of the final model. Out of
@@ -1088,6 +1137,33 @@ fn screen(d: &Data, cur: &Structure, fam: Family, scales: &Scales, cv_now: f64) 
 }
 
 use fit::golden;
+
+/// Whether every slow offset among the candidate's members moves the force somewhere by more than
+/// `level`: a tare's own reading leaves an offset of the noise averaged over its window, and a slow noise
+/// moves the level as much; neither is an effect. A bias is its own size and a sensor drift its size since
+/// the tare (both zero at the tare); a drifting surface zero half its force's range (the surface position,
+/// refitted with it, takes its mean), named only where the free stretches' levels agree within `level`: a
+/// sensor whose offset wanders further moves the force in contact as much, and the recording cannot tell
+/// the two apart.
+fn slow_offsets_material(d: &Data, c: &Cand, level: f64, stretches: &[&[usize]]) -> bool {
+    let slow = |f: Family| matches!(f, Family::SensorBias | Family::SensorDrift | Family::OffsetDrift);
+    if !c.fams.iter().any(|&(f, _)| slow(f)) {
+        return true;
+    }
+    let cols = fit::columns(d, &c.st);
+    let free_levels =
+        stretches.iter().map(|run| run.iter().map(|&i| d.s.f[i] - c.fit.pred[i]).sum::<f64>() / run.len() as f64);
+    let (lo, hi) = free_levels.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)));
+    let free_spread = if hi >= lo { hi - lo } else { 0.0 };
+    c.fams.iter().filter(|&&(f, _)| slow(f)).all(|&(f, sh)| {
+        term_index(&c.st, f, sh).is_some_and(|j| {
+            let force = cols[j].iter().filter(|x| **x != 0.0).map(|x| c.fit.beta[j] * x);
+            let (lo, hi) = force.fold((0.0f64, 0.0f64), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            let size = if f == Family::OffsetDrift { (hi - lo) / 2.0 } else { hi.max(-lo) };
+            size > level && (f != Family::OffsetDrift || free_spread <= level)
+        })
+    })
+}
 
 /// The phase-local rule (see the crate's README): where the residual is dominated by what no effect of
 /// the library describes (an adhesion pulling while still indented, a controller's own loop), a true
@@ -1534,7 +1610,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     let at_surface = |shift: f64| {
         let shifted = series.shifted(shift);
         let ph = phases(&shifted, v_th);
-        let noise = noise_floor(&shifted, &ph);
+        let noise = noise_floor(&shifted, &ph, o.tare_window);
         let free: Vec<usize> = (0..series.len()).filter(|&i| !ph[i].in_contact()).collect();
         (ph, noise, free)
     };
@@ -1607,6 +1683,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         let passes = |c: &Cand| {
             c.physical
                 && free_ok(c)
+                && slow_offsets_material(&d, c, o.level_margin * noise.level_sigma, &stretches)
                 && c.fit.aicc <= cur.aicc - o.min_delta_aicc
                 && c.stable.iter().all(|&s| s)
                 && (global(c) || local(c))
@@ -1859,6 +1936,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         refit,
         noise_floor: sigma,
         noise_source: noise.source,
+        level_noise: noise.level_sigma,
         effects,
         ambiguous,
         phases: phases_out,
