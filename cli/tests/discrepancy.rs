@@ -584,3 +584,41 @@ fn a_table_runs_through_identify_and_discrepancy_with_no_flags() {
     assert!(!id.status.success());
     assert!(text(&id).contains("line 3, column 3 (`f [nN]`): `oops` is not a number"), "{}", text(&id));
 }
+
+/// Peak resident memory [bytes] of a finished child, from wait4's rusage (Linux reports KiB).
+fn run_measuring_peak_memory(command: &mut Command) -> (std::process::ExitStatus, u64) {
+    use std::os::unix::process::ExitStatusExt;
+    let child = command.stdout(std::process::Stdio::null()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: rusage is plain data, zeroed is a valid value; wait4 writes it and the status for our child.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    assert_eq!(waited, pid, "wait4: {}", std::io::Error::last_os_error());
+    (std::process::ExitStatus::from_raw(status), usage.ru_maxrss as u64 * 1024)
+}
+
+#[test]
+fn a_ten_million_row_table_runs_through_discrepancy_in_bounded_memory() {
+    use std::io::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("long.csv");
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+    writeln!(file, "t [s],x [mm],f [N]").unwrap();
+    // 1000 s at 10 kHz: fifty 20 s pushes to 4 mm into a Hertzian surface, from 2 mm above it, with a
+    // deterministic ripple for noise.
+    for i in 0..10_000_000u64 {
+        let t = i as f64 * 1e-4;
+        let x = -2.0 + 6.0 * (std::f64::consts::PI * (t % 20.0) / 20.0).sin().powi(2);
+        let ripple = 0.05 * ((i * 2_654_435_761) % 1000) as f64 / 1000.0;
+        writeln!(file, "{t:.4},{x:.5},{:.4}", 50.0 * x.max(0.0).powf(1.5) + ripple).unwrap();
+    }
+    file.flush().unwrap();
+    drop(file);
+    let (status, peak) = run_measuring_peak_memory(
+        Command::new(env!("CARGO_BIN_EXE_softcontact")).arg("discrepancy").arg(&path).arg("--out").arg(dir.path()),
+    );
+    assert!(status.success(), "{status}");
+    // A measurement, not a zero: the table alone is 255 MB, read in two streaming passes.
+    assert!(peak > 4 << 20 && peak <= 512 << 20, "peak resident memory {} MiB", peak >> 20);
+}
