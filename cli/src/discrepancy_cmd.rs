@@ -142,7 +142,11 @@ fn print_report(report: &Report, name: &str) {
         report.refit.stiffness,
         report.refit.damping,
         si(report.refit.contact_shift, "m"),
-        si(report.refit.contact_shift_ci, "m"),
+        if report.refit.contact_shift_ci.is_finite() {
+            si(report.refit.contact_shift_ci, "m")
+        } else {
+            "? (not identified)".to_string()
+        },
         n(report.refit.rms)
     );
     if report.effects.is_empty() {

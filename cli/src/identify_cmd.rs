@@ -125,6 +125,10 @@ pub struct TableIdentification {
 /// Identifies a table: its force zeroed at the free level, the onset threshold from its own noise (or
 /// `--onset`), every sample fitted (or one per `--sample-period`).
 pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<TableIdentification> {
+    anyhow::ensure!(
+        args.normal == [0.0, 0.0, -1.0],
+        "--normal is for recordings: a table's depth column (x or z) is already along the contact normal"
+    );
     let onset = table::onset(&table.f);
     let threshold = args.onset.unwrap_or(onset.threshold);
     let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
@@ -334,9 +338,9 @@ fn print_parameters(fits: &[Fit]) {
     for f in fits {
         let held = match (f.stiffness_held, f.damping_held) {
             (false, false) => "",
-            (true, false) => "  (k not excited: held)",
-            (false, true) => "  (λ not excited: held)",
-            (true, true) => "  (k, λ not excited: held)",
+            (true, false) => "  (k not excited by the data: kept at its starting value)",
+            (false, true) => "  (λ not excited by the data: kept at its starting value)",
+            (true, true) => "  (k, λ not excited by the data: kept at their starting values)",
         };
         println!(
             "  {:<22}{:>12.4e}{:>12.4e}{:>7.2}{:>7.2}{:>7.2}{held}",

@@ -10,7 +10,9 @@
 //! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
 //!
 //! e.g. `t [s],x [nm],f [nN]`; names in any case, units as written. Other columns are ignored (and
-//! said). Time counts from the first row. Every malformed cell, and every row with more or fewer cells
+//! said). Columns separated by runs of spaces (an instrument's `.dat` or `.txt` export: `t [s]  x [nm]  f
+//! [nN]`) are read too, a unit in brackets belonging to the name before it; in a table separated by tabs,
+//! `;` or spaces a decimal comma (`1,5`) reads as a decimal point. Time counts from the first row. Every malformed cell, and every row with more or fewer cells
 //! than the header, is an error naming its line (and column); rows of empty cells are skipped. A table of more than [`MAX_ROWS`] rows is read in blocks of rows averaged,
 //! so memory stays bounded whatever the file.
 
@@ -119,8 +121,16 @@ fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64
     Ok(Some((role, u.to_string(), scale)))
 }
 
-/// The separator of the header line: a tab, else `;`, else `,`.
-fn separator(path: &Path) -> anyhow::Result<u8> {
+/// How the columns of a table are separated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Separator {
+    Byte(u8),
+    /// Runs of spaces (and tabs), read through [`Spaces`].
+    Spaces,
+}
+
+/// The separator of the header line: a tab, else `;`, else `,`, else runs of spaces.
+fn separator(path: &Path) -> anyhow::Result<Separator> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     for line in std::io::BufReader::new(file).lines() {
         let line = line.with_context(|| format!("{} is not a text table", path.display()))?;
@@ -129,24 +139,93 @@ fn separator(path: &Path) -> anyhow::Result<u8> {
             continue;
         }
         return Ok(if line.contains('\t') {
-            b'\t'
+            Separator::Byte(b'\t')
         } else if line.contains(';') {
-            b';'
+            Separator::Byte(b';')
+        } else if line.contains(',') {
+            Separator::Byte(b',')
         } else {
-            b','
+            Separator::Spaces
         });
     }
     bail!("{} has no header line (e.g. `t [s],x [mm],f [N]`)", path.display())
 }
 
-fn reader(path: &Path, sep: u8) -> anyhow::Result<csv::Reader<std::fs::File>> {
-    csv::ReaderBuilder::new()
-        .delimiter(sep)
+fn reader(path: &Path, sep: Separator) -> anyhow::Result<csv::Reader<Box<dyn std::io::Read>>> {
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let (input, delimiter): (Box<dyn std::io::Read>, u8) = match sep {
+        Separator::Byte(b) => (Box::new(file), b),
+        Separator::Spaces => (Box::new(Spaces::new(std::io::BufReader::new(file))), b'\t'),
+    };
+    Ok(csv::ReaderBuilder::new()
+        .delimiter(delimiter)
         .comment(Some(b'#'))
         .trim(csv::Trim::All)
         .flexible(false)
-        .from_path(path)
-        .with_context(|| format!("opening {}", path.display()))
+        .from_reader(input))
+}
+
+/// A table whose columns are separated by runs of spaces or tabs, read as tab-separated: each run
+/// becomes one tab, except at the start or end of a line and before `[` (a unit belongs to the name
+/// before it). Lines (and so the line numbers of errors) are kept.
+struct Spaces<R> {
+    inner: R,
+    /// A run of blanks seen and not yet written (written as a comma once the next byte says so).
+    pending: bool,
+    at_line_start: bool,
+    out: Vec<u8>,
+    at: usize,
+}
+
+impl<R: BufRead> Spaces<R> {
+    fn new(inner: R) -> Self {
+        Spaces { inner, pending: false, at_line_start: true, out: Vec::new(), at: 0 }
+    }
+}
+
+impl<R: BufRead> std::io::Read for Spaces<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        while self.at == self.out.len() {
+            self.out.clear();
+            self.at = 0;
+            let chunk = self.inner.fill_buf()?;
+            if chunk.is_empty() {
+                return Ok(0);
+            }
+            for &b in chunk {
+                match b {
+                    b' ' | b'\t' => self.pending = !self.at_line_start,
+                    b'\n' | b'\r' => {
+                        self.pending = false;
+                        self.at_line_start = true;
+                        self.out.push(b);
+                    }
+                    _ => {
+                        if self.pending {
+                            self.out.push(if b == b'[' { b' ' } else { b'\t' });
+                        }
+                        self.pending = false;
+                        self.at_line_start = false;
+                        self.out.push(b);
+                    }
+                }
+            }
+            let n = chunk.len();
+            self.inner.consume(n);
+        }
+        let n = buf.len().min(self.out.len() - self.at);
+        buf[..n].copy_from_slice(&self.out[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
+}
+
+/// A cell's number; where commas do not separate the columns, a single decimal comma reads as a point.
+fn number(cell: &str, sep: Separator) -> Option<f64> {
+    cell.parse::<f64>().ok().or_else(|| {
+        let decimal_comma = sep != Separator::Byte(b',') && cell.matches(',').count() == 1 && !cell.contains('.');
+        decimal_comma.then(|| cell.replace(',', ".").parse().ok()).flatten()
+    })
 }
 
 /// dx/dt by central differences (one-sided at the ends).
@@ -244,7 +323,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
         let line = record.position().map_or(0, |p| p.line());
         for &(slot, i, scale, name) in &used {
             let cell = record.get(i).unwrap_or("");
-            let value = cell.parse::<f64>().map_err(|_| {
+            let value = number(cell, sep).ok_or_else(|| {
                 anyhow::anyhow!(
                     "{}: line {line}, column {} (`{name}`): `{cell}` is not a number",
                     path.display(),
@@ -339,8 +418,12 @@ impl Table {
 
 /// `value` with the SI prefix that puts it between 1 and 1000 (k down to p), e.g. `4.640 nN`.
 pub fn si(value: f64, unit: &str) -> String {
-    if !value.is_finite() || value == 0.0 {
+    if !value.is_finite() {
         return format!("{value} {unit}");
+    }
+    // Rounded to three decimals, a magnitude under 0.0005 pN is zero, with no sign.
+    if value.abs() < 5e-16 {
+        return format!("0 {unit}");
     }
     // Rounded to three decimals, 999.9996 reads as 1.000 of the next prefix.
     let (prefix, scale) = prefix(value.abs() / (1.0 - 5e-4));
@@ -442,6 +525,26 @@ mod tests {
     }
 
     #[test]
+    fn columns_separated_by_runs_of_spaces_and_decimal_commas() {
+        let text = "# a .dat export\n  t [s]    x   [nm]   f [nN]  \n\n  0.0   1,5   2\n 0.5\t\t2.5  -3  \n";
+        let (_d, p) = table(text);
+        let t = read(&p).unwrap();
+        assert_eq!(t.t, vec![0.0, 0.5]);
+        assert!((t.depth[0] - 1.5e-9).abs() < 1e-20 && (t.depth[1] - 2.5e-9).abs() < 1e-20, "{:?}", t.depth);
+        assert!((t.f[1] + 3e-9).abs() < 1e-20);
+        // A row with a cell too few is still named by its line.
+        let (_d, p) = table("t [s]  x [m]  f [N]\n0 0 0\n1 0\n");
+        let e = format!("{:#}", read(&p).unwrap_err());
+        assert!(e.contains("line 3: 2 cells where the header has 3"), "{e}");
+        // `;` tables take decimal commas; comma-separated ones cannot have them.
+        let (_d, p) = table("t [s];x [mm];f [N]\n0;0,25;1,5\n1;0,5;2\n");
+        let t = read(&p).unwrap();
+        assert!((t.depth[0] - 0.25e-3).abs() < 1e-15 && (t.f[0] - 1.5).abs() < 1e-12);
+        let (_d, p) = table("t [s];x [mm];f [N]\n0;0,2,5;1\n1;0;2\n");
+        assert!(format!("{:#}", read(&p).unwrap_err()).contains("`0,2,5` is not a number"));
+    }
+
+    #[test]
     fn malformed_cells_are_named_by_line_and_column() {
         for (text, says) in [
             ("t [s],x [m],f [N]\n0,0,0\n1,0,abc\n", "line 3, column 3 (`f [N]`): `abc` is not a number"),
@@ -483,6 +586,8 @@ mod tests {
         assert_eq!(si(-0.0123, "m"), "-12.300 mm");
         assert_eq!(si(2500.0, "N"), "2.500 kN");
         assert_eq!(si(0.0, "N"), "0 N");
+        assert_eq!(si(-0.0, "N"), "0 N");
+        assert_eq!(si(-1e-17, "N"), "0 N");
         assert_eq!(si(3e-15, "N"), "0.003 pN");
     }
 

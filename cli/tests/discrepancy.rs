@@ -117,7 +117,9 @@ fn bad_input_gets_a_clear_error_and_a_non_zero_exit() {
     let garbage = dir.path().join("model.yaml");
     std::fs::write(&garbage, "kind: kelvin_voigt\nstiffness: -5\n").unwrap();
     let missing = dir.path().join("missing.mcap");
+    let curve = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/afm/brain_creep.csv");
     for (args, says) in [
+        (vec![curve.as_os_str(), "--normal".as_ref(), "1,0,0".as_ref()], "--normal is for recordings"),
         (vec![recording.as_os_str(), "--model".as_ref(), garbage.as_os_str()], "not a contact model"),
         (vec![missing.as_os_str()], "missing.mcap"),
         (vec![recording.as_os_str(), "--normal".as_ref(), "0,0".as_ref()], "--normal"),
