@@ -41,7 +41,7 @@ fn the_graph_demo_runs_the_node_processes_for_both_surfaces_and_again_through_th
             let (reached, measured) = (c["reached"].as_f64().unwrap(), c["reached_measured"].as_f64().unwrap());
             assert!((reached - measured).abs() < 1.0, "{name}: truth {reached} N, the sensor read {measured} N");
             let error = c["error"].as_f64().unwrap() / command * 100.0;
-            // Cycle 1 through the model of the identification pushes: seed 001's goal, 10 %. Through the
+            // Cycle 1 through the model of the identification pushes: the force-control paper's goal, 10 %. Through the
             // model the discrepancy workflow augmented from the first graph's recording: 2 %.
             let goal = if model == "identified" { 10.0 } else { 2.0 };
             assert!(error < goal, "{name}: {command:.1} N through the {model} model within {goal} % ({error:.2} %)");

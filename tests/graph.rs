@@ -438,7 +438,7 @@ fn client() {
     eprintln!("contact after {:.1} s", start.elapsed().as_secs_f64());
     std::thread::sleep(Duration::from_millis(300)); // the controller's reader matches this writer
 
-    // Identification pushes at 1 Hz (seed 001), until the window is full; the controller adopts the
+    // Identification pushes at 1 Hz (the force-control paper), until the window is full; the controller adopts the
     // newest model at each push.
     let start = Instant::now();
     'push: loop {

@@ -6,7 +6,7 @@ use softcontact_bag::{AnyMessage, Qos};
 use softcontact_msgs::RosType;
 use softcontact_nodes::ros;
 
-/// The topics of design.md section 3, their types and the QoS their publishers offer.
+/// The topics of docs/architecture.md, "The ROS 2 graph", their types and the QoS their publishers offer.
 pub const GRAPH_TOPICS: [(&str, &str, Qos); 14] = [
     ("/lwr/joint_states", "sensor_msgs/msg/JointState", Qos::SENSOR),
     ("/lwr/joint_torque_command", "sensor_msgs/msg/JointState", Qos::RELIABLE),

@@ -57,7 +57,7 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 5, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
-    /// Seed 000's 205 loading paths in-process: the arm as the stage (driver, F/T node, stage and simulator
+    /// The snake paper's 205 loading paths in-process: the arm as the stage (driver, F/T node, stage and simulator
     /// in lockstep) against the ideal stage in the same run (goal: < 60 s wall), and the stage's update
     /// per 1 ms tick.
     LoadingPaths {
@@ -67,7 +67,7 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 100_000, value_parser = crate::ranges::count(1, 100_000_000))]
         calls: usize,
     },
-    /// Seed 000's climbing snake: one stability analysis (linearisation, balanced eigenvalues, the run
+    /// The snake paper's climbing snake: one stability analysis (linearisation, balanced eigenvalues, the run
     /// from a perturbed start) and the whole default climb.
     Climb {
         #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
@@ -84,7 +84,7 @@ pub enum BenchCommand {
     /// Contact estimation: sliding-window update per sample, full refit of every kind with 5-fold
     /// cross-validation over the window, exponent and contact-offset estimation.
     Contact {
-        /// Samples in the window (seed 001: 1200).
+        /// Samples in the window (the force-control paper: 1200).
         #[arg(long, default_value_t = 1200, value_parser = crate::ranges::count(10, 1_000_000))]
         window: usize,
         /// Repetitions; the best is kept.
@@ -415,7 +415,7 @@ fn run_controller(calls: usize, reps: usize) -> anyhow::Result<()> {
         let f = if i > 500 { (i - 500) as f64 * 0.1 } else { 0.0 };
         states.push((q, dq, f));
     }
-    // The plain sponge (seed 001's inverse), and the lab sponge's augmented model (two relaxation
+    // The plain sponge (the force-control paper's inverse), and the lab sponge's augmented model (two relaxation
     // branches, hysteresis: the effects' states every tick, the hold re-solved every tick after the move).
     let mut results = Vec::new();
     for (label, model) in

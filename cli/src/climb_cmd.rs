@@ -1,4 +1,4 @@
-//! `softcontact climb`: seed 000's snake climbing between two walls on its rubber feet (section V of
+//! `softcontact climb`: the snake paper's snake climbing between two walls on its rubber feet (section V of
 //! "Modeling and Experimental Validation of a Compliant Contact Model…"), every set point of the gait
 //! simulated, its equilibrium analysed (stability, friction cones), the choice of tangential law and
 //! contact damping compared, and set points chosen badly explained. The model, gait and analysis are
@@ -117,7 +117,7 @@ pub fn run(args: &ClimbArgs) -> anyhow::Result<()> {
 fn print_climb(climb: &Climb, wall: f64) {
     let c = &climb.config;
     println!(
-        "Seed 000, section V: a {}-link snake ({} m, {} kg a link) between walls {:.1} mm apart, gravity along them; \
+        "The snake paper, section V: a {}-link snake ({} m, {} kg a link) between walls {:.1} mm apart, gravity along them; \
          rubber feet R {:.1} mm, kn {:.3} and kt {:.3} N/mm^1.5, mu {}, {} law; joints PD kp {} N m/rad, kd {} N m s/rad.",
         c.links,
         c.link_length,

@@ -1,6 +1,6 @@
 //! `softcontact discrepancy FILE`: where the identified contact model (or `--model`) and the recording
 //! disagree, which physical effect is missing, and the augmented model that closes the gap
-//! (design.md section 7; the method is `crates/discrepancy`). This command only reads the recording
+//! (docs/discrepancy.md; the method is `crates/discrepancy`). This command only reads the recording
 //! into a [`Series`] along the contact normal, runs [`analyse`] and shows the result.
 
 use std::path::PathBuf;
@@ -32,7 +32,7 @@ pub struct DiscrepancyArgs {
     /// Folder for the augmented model (`<name>.augmented.yaml`).
     #[arg(long, default_value = "out/discrepancy")]
     pub out: PathBuf,
-    /// The recording is of loading paths (seed 000's experiments: contacts that move sideways, each zeroed
+    /// The recording is of loading paths (the snake paper's experiments: contacts that move sideways, each zeroed
     /// anew): name the creep of the zero, a misaligned sensor and the path dependence of the tangential force.
     #[arg(long)]
     pub loading_paths: bool,

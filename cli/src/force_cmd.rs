@@ -1,6 +1,6 @@
 //! `softcontact force`: send one force command to the running deformation controller as a goal of its
 //! action /deformation_controller/press, and report the result: the force reached at the end of the
-//! move (seed 001 reads the force there) and its error.
+//! move (the force-control paper reads the force there) and its error.
 
 use std::time::{Duration, Instant};
 

@@ -1,6 +1,6 @@
 //! `softcontact identify FILE`: every contact model fitted to a recording, with 5-fold cross-validated
-//! fitness (seed 001 Table I), the best chosen; JSON per design.md section 6. The headline fits are at
-//! the estimated surface: seed 001's fits at the force onset carry the onset's error in the deformation
+//! fitness (the force-control paper's Table I), the best chosen; JSON per docs/contracts.md. The headline fits are at
+//! the estimated surface: the force-control paper's fits at the force onset carry the onset's error in the deformation
 //! (k off by several % on recordings made by others), and are shown beside them.
 
 use std::path::{Path, PathBuf};
@@ -36,19 +36,19 @@ pub struct IdentifyArgs {
     /// Contact direction in the world, the way the hand moves to compress the surface.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1", value_parser = crate::ranges::real(-1.0, 1.0, ""))]
     pub normal: Vec<f64>,
-    /// Onset threshold of the normal force [N]; default: 1 N for a recording (seed 001), from a table's own
+    /// Onset threshold of the normal force [N]; default: 1 N for a recording (the force-control paper), from a table's own
     /// free part for a table (10 noise σ above its free level, at least 2 % of its force range).
     #[arg(long, value_parser = crate::ranges::real(1e-15, 1e5, " N"))]
     pub onset: Option<f64>,
-    /// Time between the samples fitted [s]; default: 10 ms for a recording (seed 001), every sample of a
+    /// Time between the samples fitted [s]; default: 10 ms for a recording (the force-control paper), every sample of a
     /// table.
     #[arg(long, value_parser = crate::ranges::real(1e-7, 10.0, " s"))]
     pub sample_period: Option<f64>,
 }
 
-/// The onset threshold of a recording when `--onset` does not say (seed 001) [N].
+/// The onset threshold of a recording when `--onset` does not say (the force-control paper) [N].
 pub const RECORDING_ONSET: f64 = 1.0;
-/// The sample period of a recording's fits when `--sample-period` does not say (seed 001) [s].
+/// The sample period of a recording's fits when `--sample-period` does not say (the force-control paper) [s].
 pub const RECORDING_SAMPLE_PERIOD: f64 = 0.01;
 
 /// Reads the recording and identifies; `progress` is told the messages read so far.
@@ -225,7 +225,7 @@ fn model_json(f: &Fit) -> serde_json::Value {
     })
 }
 
-/// `models` are fitted at the estimated surface, `models_at_onset` at the force onset (seed 001's
+/// `models` are fitted at the estimated surface, `models_at_onset` at the force onset (the force-control paper's
 /// method); `selected_at_contact_position` (older readers) is the selected entry of `models`.
 pub fn to_json(id: &Identification) -> serde_json::Value {
     let p = id.contact_position();
@@ -242,7 +242,7 @@ pub fn to_json(id: &Identification) -> serde_json::Value {
     })
 }
 
-/// Seed 001's Table I layout (fitness mean ± std per kind), at the estimated surface and at the onset,
+/// The force-control paper's Table I layout (fitness mean ± std per kind), at the estimated surface and at the onset,
 /// then each kind's parameters at both.
 pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
     let name = file.file_stem().and_then(|s| s.to_str()).unwrap_or("recording");
@@ -253,13 +253,15 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
         other => other.id(),
     };
     let (surface, onset) = (&id.at_surface, &id.model.estimate.fits);
-    println!("Fitness (seed 001 eq. 18), 5-fold cross-validated, mean ± std over folds:");
+    println!("Fitness (the force-control paper's eq. 18), 5-fold cross-validated, mean ± std over folds:");
     print!("{:<28}", "");
     for f in surface {
         print!("{:>18}", short(f.kind));
     }
     println!();
-    for (label, fits) in [(format!("{name}, at the surface"), surface), ("  at the onset (seed 001)".into(), onset)] {
+    for (label, fits) in
+        [(format!("{name}, at the surface"), surface), ("  at the onset (the force-control paper)".into(), onset)]
+    {
         print!("{label:<28}");
         for f in fits {
             let mark = if f.kind == id.selected() { "*" } else { " " };
@@ -275,7 +277,7 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
     }
     print_parameters(surface);
     println!(
-        "\nat the force onset, {} from the surface (seed 001's method):",
+        "\nat the force onset, {} from the surface (the force-control paper's method):",
         crate::table::si(id.model.offset.abs(), "m")
     );
     print_parameters(onset);
@@ -413,7 +415,7 @@ pub fn run(args: &IdentifyArgs) -> anyhow::Result<()> {
     };
     // Damage found while reading (a chunk skipped).
     say_warnings(&recording, said);
-    // A recording of sideways pushes (seed 000's loading paths) may hold too little of the normal law's
+    // A recording of sideways pushes (the snake paper's loading paths) may hold too little of the normal law's
     // kind of excitation for the normal fits: its tangential law is reported all the same.
     let normal = match (normal, &tangential) {
         (Ok(id), _) => Some(id),

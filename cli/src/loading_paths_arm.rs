@@ -1,4 +1,4 @@
-//! Seed 000's loading paths with the simulated LWR IV as the displacement stage.
+//! The snake paper's loading paths with the simulated LWR IV as the displacement stage.
 //!
 //! The cell: the F/T sensor on the flange as in the product's cell (a Nano17-like sensor: 1/1280 N,
 //! 5 mN noise), the plate on the sensor — the hand's sole — and the half-ball fixed on the table below
@@ -8,7 +8,7 @@
 //! (`Surface::creep`): both hidden, only the forces show them.
 //!
 //! Each experiment runs through the product's own driver and F/T node, in lockstep, one 1 ms FRI cycle
-//! at a time: the tool comes down at 1 mm/s until the third reading in a row above 0.03 N (seed 000's
+//! at a time: the tool comes down at 1 mm/s until the third reading in a row above 0.03 N (the snake paper's
 //! zero, taken where the tool actually is), follows the path from there at 1 mm/s — held by the stiff
 //! stage of `softcontact_control::stage` — a sample recorded every 5 µm of the path with δ measured from
 //! the tool's actual pose, then lifts and returns. The readings are the sensor's, along its own axes

@@ -1,4 +1,4 @@
-//! `softcontact loading-paths`: seed 000's 205 loading-path experiments ("Modeling and Experimental
+//! `softcontact loading-paths`: the snake paper's 205 loading-path experiments ("Modeling and Experimental
 //! Validation of a Compliant Contact Model…", section IV) on the simulated specimen, its Tables I–III
 //! beside the paper's, and what the paper could not model: the spread at the convergence points, as the
 //! Mindlin–Deresiewicz law fitted from the linear paths alone predicts it.
@@ -22,7 +22,7 @@ use crate::{loading_paths_arm, loading_paths_figures, loading_paths_record};
 
 use softcontact_contact::N_PER_MM_1_5 as PER_MM;
 
-/// The deepest the found zero is searched for below the surface [m] (seed 000's rule finds it ≈ 35 µm deep).
+/// The deepest the found zero is searched for below the surface [m] (the snake paper's rule finds it ≈ 35 µm deep).
 pub const MAX_ZERO_DEPTH: f64 = 100e-6;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -65,7 +65,7 @@ pub(crate) enum LawArg {
     MindlinDeresiewicz,
 }
 
-/// The specimen's truth (seed 000's linear-path fit, k_n 8.280 and k_t 3.7482 N/mm^{3/2}; μ 0.9 for
+/// The specimen's truth (the snake paper's linear-path fit, k_n 8.280 and k_t 3.7482 N/mm^{3/2}; μ 0.9 for
 /// rubber on sandpaper) — what the fits are compared with, never read by them.
 pub(crate) fn specimen(law: LawArg) -> ContactModel {
     let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * PER_MM, 0.0).expect("a valid model");
@@ -76,7 +76,7 @@ pub(crate) fn specimen(law: LawArg) -> ContactModel {
     m
 }
 
-/// Seed 000's numbers, measured on real rubber.
+/// The snake paper's numbers, measured on real rubber.
 const PAPER_TABLE_I: Stats =
     Stats { r_squared: 0.9997, mean_abs: 0.1677, mean_norm_pct: 3.421, max: 0.7523, min: -0.8248 };
 const PAPER_TABLE_II: [Stats; 2] = [
@@ -312,7 +312,7 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
         true_zero_depth_um: runs.iter().map(|r| r.zero_error).sum::<f64>() / runs.len() as f64 * 1e6,
     };
     let report = Report {
-        comparison: "simulation vs seed 000's bench (real rubber)",
+        comparison: "simulation vs the snake paper's bench (real rubber)",
         stage: match args.stage {
             StageArg::Arm => "the simulated LWR IV, stiff position control (computed torque with integral action)",
             StageArg::Ideal => "ideal displacement stage (the paper's)",
@@ -357,7 +357,7 @@ fn convergence_groups(paths: &[LoadingPath], runs: &[BenchRun], set: u8) -> anyh
     Ok(groups)
 }
 
-/// Seed 000's statistics of the measured forces f against the fit's predictions at x, for (x, f) samples.
+/// The snake paper's statistics of the measured forces f against the fit's predictions at x, for (x, f) samples.
 fn stats(samples: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> anyhow::Result<Stats> {
     let measured: Vec<f64> = samples.iter().map(|s| s.1).collect();
     let predicted: Vec<f64> = samples.iter().map(|s| predict(s.0)).collect();
@@ -366,7 +366,10 @@ fn stats(samples: &[(f64, f64)], predict: impl Fn(f64) -> f64) -> anyhow::Result
 
 pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
     let Outcome { report: r, paths, runs } = experiments(args)?;
-    println!("Seed 000's loading-path experiments, {} of them — {}; stage: {}.", r.experiments, r.comparison, r.stage);
+    println!(
+        "The snake paper's loading-path experiments, {} of them — {}; stage: {}.",
+        r.experiments, r.comparison, r.stage
+    );
     println!(
         "Specimen: Hertz + {} (k_n 8.280, k_t 3.7482 N/mm^1.5, μ 0.9), creep sd {} µm, misalignment {}°, noise {} N, seed {}.\n",
         r.specimen_law, r.creep_um, r.misalignment_deg, r.noise, r.seed
@@ -488,7 +491,7 @@ pub(crate) mod tests {
     fn the_normal_and_linear_fits_agree_and_walton_predicts_no_spread() {
         let r = experiments(&args(LawArg::MindlinDeresiewicz, 5.0, 0.5, 0.005)).unwrap().report;
         assert_eq!(r.experiments, 205);
-        // Seed 000: 8.506 vs 8.280 (2.7 %); goal within 3 %.
+        // The snake paper: 8.506 vs 8.280 (2.7 %); goal within 3 %.
         assert!((r.k_n_normal / r.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", r.k_n_normal, r.k_n_linear);
         assert!(r.table_i.r_squared > 0.999 && r.table_ii_tangential.r_squared > 0.99, "{r:?}");
         for s in &r.table_iii {
@@ -572,7 +575,7 @@ pub(crate) mod tests {
         };
         let (arm, ideal) = (on(StageArg::Arm), on(StageArg::Ideal));
         assert_eq!(arm.experiments, 205);
-        // Seed 000's goal for the stage: ≤ 1 µm RMS along the paths (the narrowest set spreads over a few µm).
+        // The snake paper's goal for the stage: ≤ 1 µm RMS along the paths (the narrowest set spreads over a few µm).
         assert!(arm.tracking_rms_um > 0.0 && arm.tracking_rms_um <= 1.0, "{} µm", arm.tracking_rms_um);
         assert!(arm.tracking_force_equivalent < 0.1 * arm.table_i.mean_abs, "{arm:?}");
         assert!((arm.k_n_normal / arm.k_n_linear - 1.0).abs() < 0.03, "{} vs {}", arm.k_n_normal, arm.k_n_linear);

@@ -1,4 +1,4 @@
-//! Figures of `softcontact loading-paths`, like seed 000's Figs. 4–8: the loading paths in the (δ_t, δ_n)
+//! Figures of `softcontact loading-paths`, like the snake paper's Figs. 4–8: the loading paths in the (δ_t, δ_n)
 //! plane, the normal-loading data with the k_n fit, the linear-path data with the k_n and k_t fits, and
 //! the forces at the convergence points beside what the fitted Mindlin–Deresiewicz law predicts there.
 //! Each experiment is drawn with at most `PER_EXPERIMENT` points, so the SVGs stay small.
@@ -141,7 +141,7 @@ fn linear_figure(out: &Path, paths: &[LoadingPath], runs: &[BenchRun], fits: &Fi
         &normal,
         |dn| kn * dn.max(0.0).powf(1.5),
     )?;
-    // f_t/√c = k_t δt^{3/2} along a ray (seed 000 eq. 4).
+    // f_t/√c = k_t δt^{3/2} along a ray (the snake paper's eq. 4).
     let tangential = thinned(paths, runs, Family::Linear, |s| {
         let c = s.normal_displacement / s.tangential_displacement;
         (s.tangential_displacement * 1e3, if c > 0.0 { s.tangential_force / c.sqrt() } else { f64::NAN })

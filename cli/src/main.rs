@@ -1,4 +1,4 @@
-//! `softcontact`: the product's command line (design.md section 6).
+//! `softcontact`: the product's command line (docs/contracts.md).
 
 mod any_topic;
 mod arm_effects;
@@ -55,10 +55,10 @@ enum Command {
     /// Send a force command to the running deformation controller (over DDS) and report the force
     /// reached at the end of the move.
     Force(force_cmd::ForceArgs),
-    /// Seed 000's 205 loading-path experiments on the simulated half-ball: Tables I–III beside the
+    /// The snake paper's 205 loading-path experiments on the simulated half-ball: Tables I–III beside the
     /// paper's, and the convergence-point spread the Mindlin–Deresiewicz law predicts.
     LoadingPaths(loading_paths_cmd::LoadingPathsArgs),
-    /// Seed 000's climbing snake: a planar chain squeezed between two walls on rubber feet climbs by a
+    /// The snake paper's climbing snake: a planar chain squeezed between two walls on rubber feet climbs by a
     /// gait of PD set points, each equilibrium checked stable and inside its friction cones.
     Climb(climb_cmd::ClimbArgs),
     /// Benchmarks of the product's hot paths.

@@ -53,7 +53,7 @@ struct FrameJson {
     rotation: [[f64; 3]; 3],
 }
 
-/// The JSON of `softcontact model` (design.md: stable keys, SI units, world frame).
+/// The JSON of `softcontact model` (docs/contracts.md: stable keys, SI units, world frame).
 #[derive(Serialize)]
 struct ModelJson {
     robot: String,

@@ -1,10 +1,10 @@
 //! The tangential law of a recording with sideways motion in contact (`softcontact identify`).
 //!
-//! Each contact is an episode, its zero found as seed 000 finds it: at the third reading in a row above
+//! Each contact is an episode, its zero found as the snake paper finds it: at the third reading in a row above
 //! 0.03 N along the normal, where the tool then is. Along an episode, δ_n is the tool's travel along the
 //! normal from that zero, δ_t its travel across it along the episode's own tangential axis (the direction
 //! of its largest sideways excursion), T the force on the hand against that axis. The normal force the
-//! tangential law sees is Hertz's k_n (δ_n + z_0)^{3/2}, k_n and the zero's depth z_0 fitted to all episodes (seed 000 eq. 4, its zero lies below the surface): a measured
+//! tangential law sees is Hertz's k_n (δ_n + z_0)^{3/2}, k_n and the zero's depth z_0 fitted to all episodes (the snake paper's eq. 4, its zero lies below the surface): a measured
 //! force's noise would make the incremental law's slip test flicker. Both tangential laws are then fitted
 //! and chosen by cross-validation over episodes (`softcontact_contact::identify_tangential`).
 
@@ -22,7 +22,7 @@ use softcontact_nodes::geometry::{self, ContactGeometry};
 use crate::identify_cmd::{POSE, TF_STATIC, WRENCH};
 use crate::loading_paths_cmd::MAX_ZERO_DEPTH;
 
-/// Seed 000's zero: the third reading in a row above this normal force [N].
+/// The snake paper's zero: the third reading in a row above this normal force [N].
 pub const ZERO_THRESHOLD: f64 = 0.03;
 /// An episode whose tool moved less than this across the normal carries no tangential law [m].
 const MIN_SIDEWAYS: f64 = 20e-6;

@@ -1,4 +1,4 @@
-//! `softcontact demo` in-process, in full (seed 001's 10 identification runs and 30 commands per
+//! `softcontact demo` in-process, in full (the force-control paper's 10 identification runs and 30 commands per
 //! surface): the paper's model choices, the goals of the control experiment (cycle 1 within 10 % of
 //! the command, cycles 2–5 within 2 %), the online update doing real work on surfaces whose effects no
 //! model kind has; the discrepancy workflow naming those effects from the identification runs and the
@@ -38,13 +38,13 @@ fn the_demo_reproduces_seed_001_and_beats_its_numbers() {
     assert_eq!(surfaces.len(), 2);
     for (s, (name, kind)) in surfaces.iter().zip([("sponge", "azad_featherstone"), ("dice", "kelvin_voigt")]) {
         assert_eq!(s["name"], name);
-        // Seed 001's choices, made from the fitness table itself.
+        // The force-control paper's choices, made from the fitness table itself.
         let fitness = s["fitness"].as_object().unwrap();
         assert_eq!(fitness.len(), 3, "{name}: three kinds fitted");
         let best =
             fitness.iter().max_by(|a, b| a.1["mean"].as_f64().unwrap().total_cmp(&b.1["mean"].as_f64().unwrap()));
         assert_eq!(best.unwrap().0, kind, "{name}: best fitness");
-        assert_eq!(s["selected"], kind, "{name}: chosen as seed 001 chose");
+        assert_eq!(s["selected"], kind, "{name}: chosen as the force-control paper chose");
         for f in fitness.values() {
             let (m, sd) = (f["mean"].as_f64().unwrap(), f["std"].as_f64().unwrap());
             assert!(m > 0.5 && m <= 1.0 && (0.0..0.1).contains(&sd), "{name}: fitness {m} ± {sd}");

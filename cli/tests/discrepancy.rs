@@ -282,7 +282,7 @@ fn every_wrench_channel_is_predicted_to_its_noise_with_the_tangential_law() {
     assert_eq!(without.len(), 6, "{without:?}");
     let worst = without.iter().map(|(_, rms, sigma)| rms / sigma).fold(0.0, f64::max);
     assert!(worst > 100.0, "a model without a tangential law misses the tangential load: {without:?}");
-    // The corpus's dice law (seed 001's dice) and its tangential law, as the simulator's surface has them.
+    // The corpus's dice law (the force-control paper's dice) and its tangential law, as the simulator's surface has them.
     let mut law = ContactModel::new(Kind::KelvinVoigt, 130.0 / 0.07, 60.0).unwrap();
     law.tangential = Some(softcontact_contact::Tangential::walton(1.0e4, 0.8));
     let model = dir.path().join("law.yaml");
@@ -292,7 +292,7 @@ fn every_wrench_channel_is_predicted_to_its_noise_with_the_tangential_law() {
     }
 }
 
-/// Seed 000's loading paths (`softcontact loading-paths --out`) with the paper's two named errors and the
+/// The snake paper's loading paths (`softcontact loading-paths --out`) with the paper's two named errors and the
 /// specimen's tangential law hidden case by case; `softcontact discrepancy` reads only the two-segment
 /// recording. Each case: the arguments that hide the effects, and the ids that must be named.
 #[test]

@@ -90,7 +90,7 @@ fn each_kind_is_chosen_and_found_with_frames_from_tf_static_or_the_urdf() {
 }
 
 /// The headline `models` are fitted at the estimated surface: there the true kind's k is found within
-/// 1 %, where the fit at the 1 N onset (seed 001's method, `models_at_onset`) measures the deformation
+/// 1 %, where the fit at the 1 N onset (the force-control paper's method, `models_at_onset`) measures the deformation
 /// from a point the tool reaches only after pressing in.
 #[test]
 fn the_true_kind_is_found_within_one_percent_at_the_estimated_surface() {
@@ -101,7 +101,9 @@ fn the_true_kind_is_found_within_one_percent_at_the_estimated_surface() {
     let out = identify(&path, &json);
     let shown = text(&out);
     assert!(
-        out.status.success() && shown.contains("at the estimated surface") && shown.contains("(seed 001"),
+        out.status.success()
+            && shown.contains("at the estimated surface")
+            && shown.contains("(the force-control paper"),
         "{shown}"
     );
     assert!(!shown.contains("no contact model kind fits"), "{shown}");

@@ -1,6 +1,6 @@
 //! The contact estimator as a node struct: from the tool's position and velocity and the measured
 //! normal force it detects contact, keeps (z, ż, f) samples every `sample_period` in the sliding window
-//! (seed 001: 1200 samples at 10 ms), and on `refit` chooses the best kind by cross-validated fitness
+//! (the force-control paper: 1200 samples at 10 ms), and on `refit` chooses the best kind by cross-validated fitness
 //! and estimates where the surface really is (the onset threshold fires late on a soft surface).
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -332,12 +332,17 @@ impl Params {
 impl crate::params::NodeParams for Params {
     fn declare(&self, d: &mut crate::params::Declarations) {
         d.direction("normal", self.normal, "contact direction n in the world");
-        d.above("sample_period", self.sample_period, (0.0, 1.0), "time between window samples (seed 001: 10 ms) [s]");
+        d.above(
+            "sample_period",
+            self.sample_period,
+            (0.0, 1.0),
+            "time between window samples (the force-control paper: 10 ms) [s]",
+        );
         d.integer(
             "window",
             self.window as i64,
             (10 * self.folds.max(1) as i64, 1_000_000),
-            "samples in the window (seed 001: 1200; at least 10 per fold)",
+            "samples in the window (the force-control paper: 1200; at least 10 per fold)",
         );
         d.onset(self.onset_threshold, self.onset_confirm);
         d.integer("folds", self.folds as i64, (1, 100), "cross-validation folds of the model selection");
@@ -476,7 +481,7 @@ pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), Co
     Ok((model, position))
 }
 
-/// One force reading made into what the estimator takes (design.md section 4): the sensor's force
+/// One force reading made into what the estimator takes (docs/conventions.md): the sensor's force
 /// rotated into the world through the newest tool pose, its normal component f = −F·n ≥ 0, and the
 /// tool's position and velocity. The node and `softcontact identify` pair readings the same way.
 #[derive(Debug, Clone)]

@@ -1,4 +1,4 @@
-//! The deformation controller (seed 001) as a node struct: one `tick` per joint-state measurement.
+//! The deformation controller (the force-control paper) as a node struct: one `tick` per joint-state measurement.
 //!
 //! Before contact the hand descends along the contact direction n at a slow, constant speed; the onset
 //! detector fixes the contact position d. In contact a force command becomes a deformation command
@@ -15,7 +15,7 @@
 //! and drift come out of the reading (at most [`MAX_SENSOR_CORRECTION`] of `max_force`), and the force
 //! guard watches the larger of the reading and the corrected force.
 //!
-//! What it refuses (the safety contract, README "Safety"): a command whose force, deformation, lift or
+//! What it refuses (the safety contract, docs/safety.md): a command whose force, deformation, lift or
 //! move duration lies outside the configured limits; a move across the surface or a tilt beyond
 //! [`MAX_LATERAL`], [`MAX_TILT`] or their speed limits; a contact model that is not plausible (exponents
 //! outside [`EXPONENT_RANGE`], a sensor bias beyond [`MAX_SENSOR_CORRECTION`] or a surface drift beyond
@@ -79,7 +79,7 @@ pub struct ControllerConfig {
 pub const EXPONENT_RANGE: std::ops::RangeInclusive<f64> = 0.0..=4.0;
 
 impl ControllerConfig {
-    /// Seed 001's set-up on the LWR IV: surface below, 1 kHz.
+    /// The force-control paper's set-up on the LWR IV: surface below, 1 kHz.
     pub fn lwr4(max_force: f64, max_deformation: f64) -> Self {
         let model = lwr4::model();
         Self {
@@ -633,7 +633,7 @@ impl DeformationController {
         Ok(Segment::Move(quintic))
     }
 
-    /// A deformation command (position control along n, seed 001's identification ramps): a quintic of
+    /// A deformation command (position control along n, the force-control paper's identification ramps): a quintic of
     /// `duration` seconds to rest at deformation z; negative z lifts the hand off the surface. Cancels
     /// any force command.
     pub fn command_deformation(&mut self, z: f64, duration: f64) -> Result<(), ControlError> {
@@ -647,7 +647,7 @@ impl DeformationController {
         Ok(())
     }
 
-    /// Seed 001's identification pushes: a quintic of one period into the lowest point, then `periods`
+    /// The force-control paper's identification pushes: a quintic of one period into the lowest point, then `periods`
     /// sinusoidal periods between deformations `low` and `high` at `frequency`; it ends at `low`.
     pub fn command_pushes(&mut self, low: f64, high: f64, frequency: f64, periods: u32) -> Result<(), ControlError> {
         if self.contact_level.is_none() {
@@ -937,7 +937,7 @@ impl DeformationController {
             self.tau0[i] =
                 self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i];
         }
-        // The measured contact force is fed forward (seed 001, eq. 15) — but backing off from the force
+        // The measured contact force is fed forward (the force-control paper, eq. 15) — but backing off from the force
         // limit, only up to the model's force at the back-off's reference (at most max_force). A sensor
         // that reads a few per cent high feeds forward more than the surface pushes back, which the soft
         // deformation gains cannot hold: the force runs away to the limit, and with the reading fed
@@ -983,7 +983,7 @@ impl DeformationController {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelUpdate {
-    /// The newest model is adopted when the next force command arrives (seed 001: once per cycle).
+    /// The newest model is adopted when the next force command arrives (the force-control paper: once per cycle).
     OnCommand,
     /// Every model is adopted when it arrives, and the standing command re-planned through it.
     Continuous,
@@ -1206,7 +1206,7 @@ impl crate::params::NodeParams for Params {
             &self.service_mapping,
             "service mapping of the peers' middleware for the force action and the re-tare service",
         );
-        d.any("model_update", "on_command (seed 001: the newest model is adopted at each force command) or continuous (each model on arrival, the standing command re-planned through it)");
+        d.any("model_update", "on_command (the force-control paper: the newest model is adopted at each force command) or continuous (each model on arrival, the standing command re-planned through it)");
         let e = self.initial_model.exponents;
         let model = if [e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
             self.initial_model.plausible().map_err(|e| e.to_string())
@@ -1543,7 +1543,7 @@ mod tests {
         let (end, low, high) = press_and_hold(&mut cell, 100.0, 8.0);
         eprintln!("augmented: {end:.3} N at the end of the move, {low:.3}–{high:.3} N over the hold");
         assert!((end - 100.0).abs() < 0.5 && (low - 100.0).abs() < 0.5 && (high - 100.0).abs() < 0.5);
-        // The same law without its effects (as identified by seed 001's kinds): the force fades with
+        // The same law without its effects (as identified by the force-control paper's kinds): the force fades with
         // the branches during the hold.
         let mut plain = softcontact_sim::lab_sponge();
         plain.effects.clear();

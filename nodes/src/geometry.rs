@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use softcontact_msgs::geometry_msgs::{Pose, Vector3 as Vector3Msg};
 use softcontact_msgs::tf2_msgs::TFMessage;
 
-/// Seed 001's contact geometry (eqs. 8–10 and 12): the contact direction n in the world (the way the
+/// The force-control paper's contact geometry (eqs. 8–10 and 12): the contact direction n in the world (the way the
 /// hand moves to compress the surface) and the sensor's mounting. The sensor reads the force F the
 /// surface exerts on the hand in its own frame; in the world that is R_world←tool · R_tool←sensor · F,
 /// and the normal force is f = −F·n (≥ 0 in contact: the surface pushes back against n). Deformation and

@@ -41,7 +41,7 @@ pub struct Identification {
     /// Seconds from the first force reading to the onset.
     pub contact_time: f64,
     /// Every candidate kind fitted at the estimated surface (`contact_position()`), cross-validated, in
-    /// the order of `model.estimate.fits` (those are fitted at the force onset, seed 001's method). The
+    /// the order of `model.estimate.fits` (those are fitted at the force onset, the force-control paper's method). The
     /// selected kind's entry is `model.model`.
     pub at_surface: Vec<Fit>,
 }
@@ -164,7 +164,7 @@ pub struct SyntheticReading {
     pub wrench: WrenchStamped,
 }
 
-/// Seed 001-style identification data made from a contact model alone, with an exactly known truth
+/// The force-control paper-style identification data made from a contact model alone, with an exactly known truth
 /// (for the offline tools' tests and benchmarks): the tool faces down 5 mm above a horizontal surface
 /// at height `surface_z`, approaches at 1 cm/s, then pushes at 1 Hz between 2 mm and `depth` of
 /// deformation; `rate` readings a second, the force on the sensor in its own frame (through the URDF's

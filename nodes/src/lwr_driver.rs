@@ -32,7 +32,7 @@
 //! vanished — and only what the offset cannot carry fades, over `hold_release_cycles`. Overspeed drops
 //! the torque and the offset at once: then the command itself is suspect.
 //!
-//! Who and when (the safety contract, README "Safety"):
+//! Who and when (the safety contract, docs/safety.md):
 //! - One KRC: the first sender (or the configured `krc_address`) is pinned by IP address; datagrams
 //!   from any other address, or from port 0, are refused and counted as strangers, unanswered. A new
 //!   source port of the pinned address, or measurements resuming after `new_session_after` of silence,

@@ -1,5 +1,5 @@
 //! ROS 2 wiring shared by the node binaries: one DDS participant per process on `ROS_DOMAIN_ID`, QoS
-//! per design.md (sensor streams best-effort keep-last, commands and models reliable, static frames
+//! per docs/architecture.md (sensor streams best-effort keep-last, commands and models reliable, static frames
 //! latched), topics by their ROS 2 names and types.
 
 use std::sync::Arc;

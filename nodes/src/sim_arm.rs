@@ -201,7 +201,7 @@ impl SimArmServer {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum SurfaceKind {
-    /// Seed 001's surfaces as pure laws (Azad-Featherstone, Kelvin-Voigt).
+    /// The force-control paper's surfaces as pure laws (Azad-Featherstone, Kelvin-Voigt).
     Sponge,
     Dice,
     /// The same with the effects no model kind has, and a drifting sensor (`softcontact demo`).

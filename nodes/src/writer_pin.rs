@@ -11,8 +11,7 @@
 //! its process's life.
 //!
 //! This keeps out a stray tool, a forgotten node or a careless peer. It is no authentication: DDS without
-//! DDS-Security lets anyone on the network forge RTPS packets with the pinned writer's GUID (README
-//! "Safety": the separate layout trusts its DDS domain; the composed default takes no torque and no joint
+//! DDS-Security lets anyone on the network forge RTPS packets with the pinned writer's GUID (docs/safety.md: the separate layout trusts its DDS domain; the composed default takes no torque and no joint
 //! state from the network).
 
 /// A writer's identity: its DDS GUID (prefix and entity id), as `MessageInfo::publisher_gid` gives it.

@@ -38,7 +38,7 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
         cycles += 1;
         assert!(cycles < 10_000, "no contact after 10 s");
     }
-    // Identification as seed 001 does it, with pushes at 1 Hz (the damping term needs motion to be
+    // Identification as the force-control paper does it, with pushes at 1 Hz (the damping term needs motion to be
     // seen), using the guessed model; the estimator node watches. 12 s fill the 1200-sample window.
     for _ in 0..12 {
         for force in [100.0, 30.0] {
@@ -68,7 +68,7 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
     );
     assert!((learned.contact_position.z - surface_top).abs() < 1e-3, "surface placed within 1 mm");
     l.0.controller.law.set_contact_model(learned.model.clone(), learned.offset).unwrap();
-    // Seed 001's control experiment, shortened: 2 s quintic moves, force read at the end of each move.
+    // The force-control paper's control experiment, shortened: 2 s quintic moves, force read at the end of each move.
     let mut errors = Vec::new();
     for ratio in [0.5, 0.3, 0.7, 0.4, 0.6] {
         let command = ratio * 280.0;

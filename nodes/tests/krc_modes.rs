@@ -1,5 +1,5 @@
 //! The KRC's modes in the lockstep cell: torque reaches the arm only in joint impedance with the KRL
-//! program's handshake done (README "Safety"). A KRC in position control, drives off or a strategy
+//! program's handshake done (docs/safety.md). A KRC in position control, drives off or a strategy
 //! switched mid-press gets no torque, the arm stays put, the controller integrates nothing, and it
 //! approaches again once torque mode is back.
 

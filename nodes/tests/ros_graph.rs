@@ -1,6 +1,5 @@
 //! The driver nodes as ROS 2 processes over real DDS, against `sim_arm` over real UDP. DDS stays on this
-//! machine: the test re-runs itself inside a network namespace that has only loopback (design.md
-//! section 3), where it starts the three node processes and talks to them as a controller would.
+//! machine: the test re-runs itself inside a network namespace that has only loopback (docs/developing.md), where it starts the three node processes and talks to them as a controller would.
 
 #[allow(dead_code)]
 mod common;

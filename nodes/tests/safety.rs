@@ -1,4 +1,4 @@
-//! The safety contract in the lockstep cell (README "Safety"): from a hand pressing the sponge, every
+//! The safety contract in the lockstep cell (docs/safety.md): from a hand pressing the sponge, every
 //! bad input a user, a file or a stranger can send the controller is refused, and the arm stays put —
 //! the hand moves less than 5 mm, every joint stays within its position, velocity and torque limits,
 //! and the true contact force (the simulator's) never passes `force_limit`. Then a fuzz of the same

@@ -1,7 +1,7 @@
 //! The arm's own effects in the demo: the simulated LWR carries joint friction and a flange payload its
 //! URDF does not know (hidden in the simulator's physics). The discrepancy workflow names them from a
 //! free-space excitation (joint states and the torques commanded for them), writes the controller's
-//! compensation overlay, and one cycle of seed 001's force commands on the sponge is run without and with
+//! compensation overlay, and one cycle of the force-control paper's force commands on the sponge is run without and with
 //! the compensation: how closely the hand follows the deformation reference, how still it holds across
 //! the surface, and the force at the end of each move.
 
@@ -90,7 +90,7 @@ pub fn run(spec: &SurfaceSpec, seed: u64, out: &Path) -> anyhow::Result<ArmRepor
     })
 }
 
-/// One cycle of seed 001's first six commands (ratios of 80 % of the surface's force limit) through the
+/// One cycle of the force-control paper's first six commands (ratios of 80 % of the surface's force limit) through the
 /// surface's true model, so that what is left is the arm's own tracking.
 fn press(spec: &SurfaceSpec, sim: SimConfig, arm: ArmEffects) -> anyhow::Result<Tracking> {
     let surface = sim.surface.as_ref().context("a surface")?.point;

@@ -3,7 +3,7 @@
 //! with an effect hidden in the simulator's surface or sensor, or none, and the workflow run on the file
 //! as `softcontact discrepancy FILE` runs it. The workflow only reads the recording; the truth stays here.
 //!
-//! Every case runs seed 001's two excitations, shortened: identification (ramps and 1 Hz pushes) and
+//! Every case runs the force-control paper's two excitations, shortened: identification (ramps and 1 Hz pushes) and
 //! control (quintic moves to force commands, each followed by a hold); the sensor is tared at start-up and
 //! before control, and the recording marks both tares.
 
@@ -95,7 +95,7 @@ fn noisy(scale: f64) -> FtSensorConfig {
     s
 }
 
-/// The corpus: every effect of the cell's surface and sensor alone on both seed-001 laws, two-effect cases,
+/// The corpus: every effect of the cell's surface and sensor alone on both the force-control paper's laws, two-effect cases,
 /// the demo's lab surfaces, an effect outside the library, and 40 nulls (two laws each: four noise levels,
 /// three seeds; with sway and tilt, two seeds; coloured noise, a slowly wandering offset and a sensor
 /// drifting slower than the tares follow, `slow_noise_seeds` seeds each, two in the committed table).
@@ -185,11 +185,11 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["stiffness_exponent"],
             "pushes to several depths",
         );
-        // Seed 000's named error: the sensor axis misaligned 1° with the pushing axis (about y), which
+        // The snake paper's named error: the sensor axis misaligned 1° with the pushing axis (about y), which
         // reads the tangential load along x into the normal channel (coupling n × ω).
         let misaligned = 1f64.to_radians();
         case(
-            format!("{law}: sensor axis misaligned 1° (seed 000)"),
+            format!("{law}: sensor axis misaligned 1° (the snake paper)"),
             with(gripping(base.clone()), &[Effect::SensorCrosstalk { coupling: [misaligned, 0.0, 0.0] }]),
             g(),
             geometry,

@@ -1,4 +1,4 @@
-//! Seed 001's two experiments on one simulated surface, in lockstep with the simulator: the same node
+//! The force-control paper's two experiments on one simulated surface, in lockstep with the simulator: the same node
 //! structs as the graph, no DDS. Identification: 10 runs of a ramp into contact, 1 Hz sinusoidal
 //! pushes and a retreat; every kind fitted to all of it with 5-fold cross-validation. Control: 30 force
 //! commands reached by 2 s quintics, cycle 1 through the identified model, then the estimator's model
@@ -12,7 +12,7 @@ use softcontact_nodes::contact_estimator::{self, ContactEstimatorNode, ModelOut}
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_sim::{FtSensorConfig, SimConfig};
 
-/// The ratios of the maximum identified force that seed 001 commands: 4 cycles of the first six,
+/// The ratios of the maximum identified force that the force-control paper commands: 4 cycles of the first six,
 /// then one of the second six.
 pub const RATIOS: [[f64; 6]; 2] = [[0.8, 0.4, 0.7, 0.3, 0.5, 0.6], [0.75, 0.35, 0.65, 0.25, 0.45, 0.55]];
 pub const CYCLES: usize = 5;
@@ -23,7 +23,7 @@ pub struct SurfaceSpec {
     pub name: &'static str,
     /// What the simulator's surface is made of (the truth, effects included).
     pub truth: ContactModel,
-    /// Identification pushes between these deformations [m] (seed 001: up to 5 cm sponge, 7 cm dice).
+    /// Identification pushes between these deformations [m] (the force-control paper: up to 5 cm sponge, 7 cm dice).
     pub push: (f64, f64),
     /// Identification pushes of the `--graph` run, by force commands: high and low [N].
     pub push_forces: (f64, f64),
@@ -34,7 +34,7 @@ pub struct SurfaceSpec {
     pub sensor: FtSensorConfig,
 }
 
-/// How much of the experiments to run (the full set is seed 001's).
+/// How much of the experiments to run (the full set is the force-control paper's).
 #[derive(Debug, Clone, Copy)]
 pub struct Plan {
     pub identification_runs: usize,
@@ -68,7 +68,7 @@ impl Plan {
     };
 }
 
-/// Which model a command went through (design.md section 6: a command's `model`).
+/// Which model a command went through (docs/contracts.md: a command's `model`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ModelUse {
@@ -103,14 +103,14 @@ fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> 
 }
 
 impl CommandResult {
-    /// Command `i` (from 0) of seed 001's sequence: its cycle (from 1), ratio and force [N].
+    /// Command `i` (from 0) of the force-control paper's sequence: its cycle (from 1), ratio and force [N].
     pub fn planned(i: usize, max_force: f64) -> (usize, f64, f64) {
         let cycle = i / 6 + 1;
         let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
         (cycle, ratio, ratio * max_force)
     }
 
-    /// Command `i`'s result, with the error as seed 001 measures it: |actual − command|, on the true
+    /// Command `i`'s result, with the error as the force-control paper measures it: |actual − command|, on the true
     /// force `reached` and on the sensor's `reached_measured`.
     pub fn new(i: usize, max_force: f64, reached: f64, reached_measured: f64, model_stiffness: f64) -> Self {
         let (cycle, ratio, command) = Self::planned(i, max_force);
@@ -305,7 +305,7 @@ pub fn run_surface(
         surface.point -= (0.04 + depth) * surface.normal;
     }
     let params = contact_estimator::Params::default();
-    // Identification keeps every sample of every run (seed 001 fits all of them at once).
+    // Identification keeps every sample of every run (the force-control paper fits all of them at once).
     let identification = contact_estimator::EstimatorConfig { window: 100_000, ..params.estimator_config() };
     // The controller knows nothing of the surface yet: it only moves the hand during identification.
     let guess = ContactModel::new(Kind::KelvinVoigt, 5000.0, 0.0)?;
@@ -451,7 +451,7 @@ fn run_control<O: Observer>(
         if cycle > 1
             && let Some(m) = r.newest.take()
         {
-            // Seed 001: from cycle 2 on, the newest model of the last 12 s at each command.
+            // The force-control paper: from cycle 2 on, the newest model of the last 12 s at each command.
             r.cell.controller.law.adopt_estimate(m.model, &m.contact_position, None)?;
         }
         let stiffness = r.cell.controller.law.contact_model().stiffness;
@@ -479,7 +479,7 @@ fn run_control<O: Observer>(
                 end_true.push(r.cell.sim.contact().normal_force);
             }
         }
-        // The force at the end of the move (the last 10 ms, one sample of seed 001's 100 Hz).
+        // The force at the end of the move (the last 10 ms, one sample of the force-control paper's 100 Hz).
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
         let result = CommandResult::new(i, max_force, mean(&end_true), mean(&end), stiffness);
         commands.push(CommandResult { model: use_, ..result });

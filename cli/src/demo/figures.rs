@@ -1,4 +1,4 @@
-//! Figures like seed 001's: Fig. 2 (identification reference and actual deformation), Figs. 3 and 4
+//! Figures like the force-control paper's: Fig. 2 (identification reference and actual deformation), Figs. 3 and 4
 //! (actual, predicted and commanded normal force over the control experiment), as SVG.
 
 use std::path::{Path, PathBuf};
@@ -63,7 +63,7 @@ pub fn identification(runs: &[&SurfaceRun], out: &Path) -> Result<PathBuf> {
 }
 
 /// Figs. 3 and 4: actual, predicted and commanded normal force over the control experiment through
-/// the model `use_` (the identified one: seed 001's figure; the augmented one: `_augmented`), the five
+/// the model `use_` (the identified one: the force-control paper's figure; the augmented one: `_augmented`), the five
 /// cycles separated by dashed red lines.
 pub fn control(run: &SurfaceRun, use_: ModelUse, figure: u32, out: &Path) -> Result<PathBuf> {
     let (control, suffix, which) = match (use_, &run.augmented) {

@@ -262,7 +262,7 @@ impl Client {
         Ok(())
     }
 
-    /// Seed 001's force commands, ratios of `max_force`, each graded at the end of its move on the true
+    /// The force-control paper's force commands, ratios of `max_force`, each graded at the end of its move on the true
     /// force, with the sensor's reading beside it.
     fn control(
         &mut self,

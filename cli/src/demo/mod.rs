@@ -1,4 +1,4 @@
-//! `softcontact demo`: seed 001's identification and control experiments on a simulated LWR IV, for a
+//! `softcontact demo`: the force-control paper's identification and control experiments on a simulated LWR IV, for a
 //! sponge and a dice, printed in the paper's table layouts beside the paper's numbers.
 
 mod arm;
@@ -30,10 +30,10 @@ pub struct DemoArgs {
     /// instead of in-process lockstep.
     #[arg(long)]
     pub graph: bool,
-    /// Identification runs per surface (seed 001: 10).
+    /// Identification runs per surface (the force-control paper: 10).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=50))]
     pub runs: u32,
-    /// Force commands per surface (seed 001: 30, five cycles of six).
+    /// Force commands per surface (the force-control paper: 30, five cycles of six).
     #[arg(long, default_value_t = 30, value_parser = clap::value_parser!(u32).range(1..=30))]
     pub commands: u32,
     /// (internal) the --graph client for one surface, run inside the graph's namespace.
@@ -45,7 +45,7 @@ pub struct DemoArgs {
     pub graph_augmented: Option<f64>,
 }
 
-/// Seed 001's two surfaces as the simulator makes them (with effects no model kind has).
+/// The force-control paper's two surfaces as the simulator makes them (with effects no model kind has).
 fn surfaces() -> [SurfaceSpec; 2] {
     [
         SurfaceSpec {
@@ -80,7 +80,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     }
     let specs = surfaces();
     let mode = if args.graph { "the node processes over DDS, real time" } else { "in-process, lockstep at 1 kHz" };
-    println!("softcontact demo: seed 001's experiments on a simulated KUKA LWR IV ({mode}).");
+    println!("softcontact demo: the force-control paper's experiments on a simulated KUKA LWR IV ({mode}).");
     for spec in &specs {
         println!("  simulated {}: {}", spec.name, report::describe(&spec.truth));
     }
@@ -140,7 +140,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     for (_, path, stats) in &results {
         println!("  {} ({} messages, {:.1} MB)", path.display(), stats.messages, stats.bytes as f64 / 1e6);
     }
-    println!("figures (seed 001's Figs. 2–4):");
+    println!("figures (the force-control paper's Figs. 2–4):");
     for f in &written {
         println!("  {}", f.display());
     }

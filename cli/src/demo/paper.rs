@@ -1,4 +1,4 @@
-//! Seed 001's published numbers (the KUKA LWR IV on a real sponge and dice), printed beside ours.
+//! The force-control paper's published numbers (the KUKA LWR IV on a real sponge and dice), printed beside ours.
 
 pub struct PaperSurface {
     /// Table I: fitness mean and standard deviation of Kelvin-Voigt, Hunt-Crossley, Azad-Featherstone.

@@ -1,4 +1,4 @@
-//! The demo's tables: seed 001's Table I (fitness) and Tables II/III (errors per command and cycle),
+//! The demo's tables: the force-control paper's Table I (fitness) and Tables II/III (errors per command and cycle),
 //! ours beside the paper's, and the same as JSON.
 
 use std::collections::BTreeMap;
@@ -37,7 +37,7 @@ pub struct Identified {
     pub samples: usize,
 }
 
-/// One surface: the JSON of design.md's demo contract, and what the tables print.
+/// One surface: the JSON of the demo's contract in docs/contracts.md, and what the tables print.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SurfaceReport {
     pub name: String,

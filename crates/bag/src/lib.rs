@@ -1,4 +1,4 @@
-//! ROS 2 recordings in MCAP (design.md section 5): profile `ros2`, messages in CDR with the 4-byte
+//! ROS 2 recordings in MCAP (docs/recordings.md): profile `ros2`, messages in CDR with the 4-byte
 //! encapsulation header, schemas `ros2msg` named `pkg/msg/Type` with the full definition text.
 //!
 //! - [`BagWriter`] writes one `.mcap` file, or a rosbag2 folder (`metadata.yaml` + `<name>_0.mcap`) as

@@ -52,7 +52,7 @@ pub struct ClimbConfig {
     /// The grips' angle from the horizontal when both their feet just touch [rad]: the gap is
     /// l cos(angle) + 2R.
     pub opening_angle: f64,
-    /// The rubber feet: seed 000's 1-inch gum-rubber half-ball (R, kₙ, kₜ) on sandpaper (μ).
+    /// The rubber feet: the snake paper's 1-inch gum-rubber half-ball (R, kₙ, kₜ) on sandpaper (μ).
     pub foot_radius: f64,
     pub normal_stiffness: f64,
     pub tangential_stiffness: f64,
@@ -82,7 +82,7 @@ pub struct ClimbConfig {
 
 impl Default for ClimbConfig {
     fn default() -> Self {
-        // Seed 000's rubber: kₙ 8.506 N/mm^{3/2} and kₜ 4.05 N/mm^{3/2} (Table I and the linear paths), in
+        // The snake paper's rubber: kₙ 8.506 N/mm^{3/2} and kₜ 4.05 N/mm^{3/2} (Table I and the linear paths), in
         // N/m^{3/2}.
         let per_mm = 1e3f64.powf(1.5);
         ClimbConfig {

@@ -1,4 +1,4 @@
-//! Seed 000's climbing snake ("Modeling and Experimental Validation of a Compliant Contact Model …",
+//! The snake paper's climbing snake ("Modeling and Experimental Validation of a Compliant Contact Model …",
 //! section V): a planar chain squeezed between two walls on compliant rubber feet, driven by
 //! decentralised PD control to a sequence of set points; the equilibrium each set point reaches, its
 //! stability with the contact law plugged into the dynamics, and a gait that climbs.

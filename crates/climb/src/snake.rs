@@ -1,10 +1,10 @@
 //! The snake between two walls: a planar chain ([`PlanarChain`]) with a rubber half-ball foot at every
 //! node, squeezed between the walls x = 0 (normal +x) and x = `gap` (normal −x), gravity along the
-//! walls (−y), its joints driven by decentralised PD control to set points (seed 000, section V, eqs. 5–6):
+//! walls (−y), its joints driven by decentralised PD control to set points (the snake paper, section V, eqs. 5–6):
 //!
 //!   M(q) q̈ + h(q, q̇) = τ_PD + Σ_feet Jₙᵀ fₙ + Jₛᵀ fₜ,   τ_PD,j = k_p (q̄ⱼ − qⱼ) − k_d q̇ⱼ (joints only).
 //!
-//! Each foot is a ball of radius R centred on its node, turning freely on the node's axle (as seed 000's
+//! Each foot is a ball of radius R centred on its node, turning freely on the node's axle (as the snake paper's
 //! point contacts: a foot's contact moves with its node, and a link turning about a pressed foot does not
 //! roll it). In contact with a wall it is pressed z = R − (distance of the node from the wall) deep and
 //! the one contact law of `softcontact_contact` gives its forces:

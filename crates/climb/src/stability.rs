@@ -1,4 +1,4 @@
-//! Equilibria and their stability (seed 000, section V, eq. 6: the contact model plugged into the
+//! Equilibria and their stability (the snake paper, section V, eq. 6: the contact model plugged into the
 //! dynamics, linearised at the set point's equilibrium).
 //!
 //! - [`settle`]: the equilibrium as the physical squeeze reaches it — the snake simulated under its set

@@ -1,4 +1,4 @@
-//! Least-squares identification of f = k zᵃ + λ zᵇ żᶜ with known exponents (seed 001 eq. 16): the model
+//! Least-squares identification of f = k zᵃ + λ zᵇ żᶜ with known exponents (the force-control paper's eq. 16): the model
 //! is linear in (k, λ), so each fit is a 2-parameter least-squares problem. Its sufficient statistics
 //! ([`Moments`]) add and subtract sample by sample, which makes the sliding window O(1) per sample and
 //! k-fold cross-validation a matter of combining per-fold moments.
@@ -109,7 +109,7 @@ impl Moments {
             .max(0.0)
     }
 
-    /// Total sum of squares about the mean (the denominator of seed 001's fitness, eq. 18).
+    /// Total sum of squares about the mean (the denominator of the force-control paper's fitness, eq. 18).
     pub fn sst(&self) -> f64 {
         if self.n > 0.0 { (self.sff - self.sf * self.sf / self.n).max(0.0) } else { 0.0 }
     }
@@ -139,7 +139,7 @@ impl Moments {
     }
 }
 
-/// Seed 001's fitness (eq. 18): 1 − Σ(σ − σ̂)² / Σ(σ − σ̄)².
+/// The force-control paper's fitness (eq. 18): 1 − Σ(σ − σ̂)² / Σ(σ − σ̄)².
 pub fn fitness(sse: f64, sst: f64) -> f64 {
     if sst > 0.0 { 1.0 - sse / sst } else { f64::NAN }
 }
@@ -147,7 +147,7 @@ pub fn fitness(sse: f64, sst: f64) -> f64 {
 /// How an estimator fits and judges.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitConfig {
-    /// Folds of the cross-validation (seed 001: 5). Folds are contiguous blocks in time, so a fold's
+    /// Folds of the cross-validation (the force-control paper: 5). Folds are contiguous blocks in time, so a fold's
     /// test samples are never the neighbours of its training samples.
     pub folds: usize,
     /// A parameter whose relative standard error exceeds this is not identified by the data: it is

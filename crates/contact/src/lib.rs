@@ -4,20 +4,20 @@
 //! # Models
 //!
 //! [`ContactModel`] is the one description of a contact, read from and written to YAML:
-//! - normal force f = k zᵃ + λ zᵇ żᶜ for z > 0, 0 otherwise (seed 001 eq. 2), never negative, with
+//! - normal force f = k zᵃ + λ zᵇ żᶜ for z > 0, 0 otherwise (the force-control paper's eq. 2), never negative, with
 //!   named [`Kind`]s Kelvin-Voigt (a = c = 1, b = 0), Hunt-Crossley (a = b = 3/2, c = 1),
 //!   Azad-Featherstone (a = 3/2, b = 1/2, c = 1), Hertz-Walton's normal part, or general exponents;
 //!   żᶜ keeps the sign of ż (sgn(ż)|ż|ᶜ);
-//! - optionally a tangential law ([`Tangential`]): seed 000's Walton law f_t = k_t √z δ_t, or the
+//! - optionally a tangential law ([`Tangential`]): the snake paper's Walton law f_t = k_t √z δ_t, or the
 //!   incremental Mindlin–Deresiewicz law that agrees with it on straight paths and carries the path's
 //!   history off them, both inside the friction cone;
 //! - optionally named [`Effect`]s (viscoelastic relaxation, hysteresis, contact-offset drift, sensor
 //!   bias and drift) with their own state, advanced by [`ContactModel::step`].
 //!
 //! Each model gives the force, ∂f/∂z and ∂f/∂ż, and the inverse the controller uses: the deformation
-//! that holds a force at rest, z = (f/k)^{1/a} (seed 001 eq. 19).
+//! that holds a force at rest, z = (f/k)^{1/a} (the force-control paper's eq. 19).
 //!
-//! # Sign conventions (design.md section 4)
+//! # Sign conventions (docs/conventions.md)
 //!
 //! n is the unit vector along which the hand moves to compress the surface (default [0, 0, −1] in
 //! `world`); d is where the tool was when contact began. Deformation z = (r − d)·n, rate ż = ṙ·n, normal
@@ -29,8 +29,8 @@
 //! - Online, every sample: [`WindowEstimator`] keeps the last N samples (default 1200, 12 s at 10 ms)
 //!   with running least-squares moments of every candidate kind, O(1) per sample;
 //!   [`WindowEstimator::current`] reads the current (k, λ) of a kind at once.
-//! - Online, when a model is adopted (e.g. once per command cycle, as in seed 001):
-//!   [`WindowEstimator::refit`] refits every kind with 5-fold cross-validated fitness (seed 001 eq. 18),
+//! - Online, when a model is adopted (e.g. once per command cycle, as in the force-control paper):
+//!   [`WindowEstimator::refit`] refits every kind with 5-fold cross-validated fitness (the force-control paper's eq. 18),
 //!   chooses the best, and applies the excitation guard: a parameter the window does not determine
 //!   (λ during a long hold, where ż ≈ 0) stays at its prior and is flagged, instead of following noise.
 //! - Offline, a whole recording: [`estimate`] on all samples; [`estimate_contact_offset`] when the
@@ -41,7 +41,7 @@
 //!   the surface separates and the force is 0 rather than the law's negative value, so such samples
 //!   (f below the onset threshold) say nothing about the law and bias it.
 //! - Contact onset: [`OnsetDetector`] (threshold 1 N, confirmed by 3 consecutive readings).
-//! - Reporting as seed 000 does: [`fit_statistics`] and [`dispersion`]; its 205 loading paths and what a
+//! - Reporting as the snake paper does: [`fit_statistics`] and [`dispersion`]; its 205 loading paths and what a
 //!   model predicts at their ends: [`seed_000_experiments`], [`predicted_dispersion`].
 
 mod effect_fit;

@@ -1,4 +1,4 @@
-//! Seed 000's loading-path experiments ("Modeling and Experimental Validation of a Compliant Contact
+//! The snake paper's loading-path experiments ("Modeling and Experimental Validation of a Compliant Contact
 //! Model…", section IV): paths in the (δ_n, δ_t) plane along which a plate is pushed onto a compliant
 //! half-ball, and what a contact model predicts at their ends.
 //!
@@ -6,7 +6,7 @@
 //! - 45 linear paths, 2° … 30° by 2°, three repeats each, to the same normal depth δ_max;
 //! - 150 two-segment paths in three sets converging on 5 points equally spaced along the 20° ray (up to
 //!   δ_n = `last_point`): approach angles 10–30° by 5°, 16–24° by 2° and 18–22° by 1°, each path twice.
-//!   Seed 000 does not define its two segments; these are "corner" paths: from the origin along the
+//!   The snake paper does not define its two segments; these are "corner" paths: from the origin along the
 //!   approach angle α until the path meets the axis-parallel line through the convergence point, then
 //!   along that line to it — for α < 20° the last segment is purely tangential, for α > 20° purely normal
 //!   (α = 20° is the straight ray).
@@ -14,14 +14,14 @@
 //! δ_max is where the normal law reaches 25 N ([`ContactModel::deformation_for_force`]). A model whose
 //! tangential force depends on the present displacement only (Walton's) predicts one force per
 //! convergence point; the incremental Mindlin–Deresiewicz law predicts a spread
-//! ([`predicted_dispersion`]), the spread seed 000 measured (its Table III) and could not model.
+//! ([`predicted_dispersion`]), the spread the snake paper measured (its Table III) and could not model.
 
 use crate::{ContactError, ContactModel, Dispersion, MindlinDeresiewicz, TangentialLaw, dispersion};
 
-/// Seed 000 gives its stiffnesses in N/mm^{3/2}; the models take N/m^{3/2}: multiply by this (1000^{3/2}).
+/// The snake paper gives its stiffnesses in N/mm^{3/2}; the models take N/m^{3/2}: multiply by this (1000^{3/2}).
 pub const N_PER_MM_1_5: f64 = 31_622.776_601_683_792;
 
-/// Which of seed 000's experiment families a path belongs to.
+/// Which of the snake paper's experiment families a path belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Family {
     Normal,
@@ -89,7 +89,7 @@ pub fn corner_path(angle: f64, point: [f64; 2]) -> Vec<[f64; 2]> {
     }
 }
 
-/// Seed 000's 205 experiments for a specimen whose normal law is `model`'s, with the convergence points
+/// The snake paper's 205 experiments for a specimen whose normal law is `model`'s, with the convergence points
 /// up to `last_point` deep [m].
 pub fn seed_000_experiments(model: &ContactModel, last_point: f64) -> Result<Vec<LoadingPath>, ContactError> {
     let depth = model.deformation_for_force(FINAL_NORMAL_FORCE)?;
@@ -158,7 +158,7 @@ pub fn forces_at_end(model: &ContactModel, path: &LoadingPath, steps: usize) -> 
     }
 }
 
-/// Seed 000's Table III statistics as `model` predicts them for two-segment set `set` (1–3): the forces
+/// The snake paper's Table III statistics as `model` predicts them for two-segment set `set` (1–3): the forces
 /// at the end of every path of the set, grouped by convergence point. Zero for Walton's law.
 pub fn predicted_dispersion(
     model: &ContactModel,
@@ -174,13 +174,13 @@ pub fn predicted_dispersion(
     dispersion(&groups)
 }
 
-/// Seed 000's eq. 4 normal part fitted by least squares: k_n of f_n = k_n δ_n^{3/2}, from (δ_n, f_n)
+/// The snake paper's eq. 4 normal part fitted by least squares: k_n of f_n = k_n δ_n^{3/2}, from (δ_n, f_n)
 /// samples (those with δ_n > 0). A model linear in its one parameter: k = Σ f x / Σ x², x = δ_n^{3/2}.
 pub fn fit_normal_stiffness(samples: &[(f64, f64)]) -> Result<f64, ContactError> {
     fit_through_origin(samples.iter().filter(|s| s.0 > 0.0).map(|&(dn, f)| (dn.powf(1.5), f)), "k_n")
 }
 
-/// Seed 000's zero (the third reading above a threshold) lies below the true surface: Hertz's law
+/// The snake paper's zero (the third reading above a threshold) lies below the true surface: Hertz's law
 /// fitted with the depth of the zero as a second parameter, f_n = k_n (δ_n + z_0)^{3/2} over z_0 in
 /// [0, `max_zero`] (k_n by least squares at each); (k_n, z_0). Without z_0 a fitted k_t absorbs the
 /// missing √z_0 and a fitted μ the curvature it leaves.
@@ -194,7 +194,7 @@ pub fn fit_normal_stiffness_and_zero(samples: &[(f64, f64)], max_zero: f64) -> R
     Ok((fit_through_origin(shifted(z0).map(|(z, f)| (z.powf(1.5), f)), "k_n")?, z0))
 }
 
-/// Seed 000's eq. 4 tangential part fitted by least squares: k_t of f_t = k_t √δ_n δ_t, from
+/// The snake paper's eq. 4 tangential part fitted by least squares: k_t of f_t = k_t √δ_n δ_t, from
 /// (δ_n, δ_t, f_t) samples (those with δ_n > 0).
 pub fn fit_tangential_stiffness(samples: &[(f64, f64, f64)]) -> Result<f64, ContactError> {
     fit_through_origin(samples.iter().filter(|s| s.0 > 0.0).map(|&(dn, dt, f)| (dn.sqrt() * dt, f)), "k_t")
@@ -224,7 +224,7 @@ mod tests {
     }
     use crate::{Kind, Tangential};
 
-    /// Seed 000's fitted linear-path constants in SI: k_n 8.280 N/mm^1.5, k_t 3.7482 N/mm^1.5.
+    /// The snake paper's fitted linear-path constants in SI: k_n 8.280 N/mm^1.5, k_t 3.7482 N/mm^1.5.
     fn specimen(law: Tangential) -> ContactModel {
         let per_mm = N_PER_MM_1_5;
         let mut m = ContactModel::new(Kind::HertzWalton, 8.280 * per_mm, 0.0).unwrap();

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::{ContactError, Tangential};
 
-/// The named normal-force laws f = k zᵃ + λ zᵇ żᶜ (seed 001 eq. 2).
+/// The named normal-force laws f = k zᵃ + λ zᵇ żᶜ (the force-control paper's eq. 2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Kind {
@@ -15,7 +15,7 @@ pub enum Kind {
     HuntCrossley,
     /// Hertzian spring, damping scaled by √z: a = 3/2, b = 1/2, c = 1.
     AzadFeatherstone,
-    /// Seed 000's sphere on a plane: f_n = k_n z^{3/2} (a = b = 3/2, c = 1; λ normally 0), with the Walton
+    /// The snake paper's sphere on a plane: f_n = k_n z^{3/2} (a = b = 3/2, c = 1; λ normally 0), with the Walton
     /// tangential law in [`Tangential`].
     HertzWalton,
     /// Any exponents, e.g. an estimated a.
@@ -23,7 +23,7 @@ pub enum Kind {
 }
 
 impl Kind {
-    /// The kinds an estimator compares (seed 001).
+    /// The kinds an estimator compares (the force-control paper).
     pub const CANDIDATES: [Kind; 3] = [Kind::KelvinVoigt, Kind::HuntCrossley, Kind::AzadFeatherstone];
 
     /// Fixed exponents of a named kind; `None` for [`Kind::General`].
@@ -68,7 +68,7 @@ pub struct Exponents {
     pub c: f64,
 }
 
-/// A named augmentation of the base law (design.md section 7 ids). Surface effects change the force the
+/// A named augmentation of the base law (docs/discrepancy.md ids). Surface effects change the force the
 /// surface exerts; sensor effects change what the F/T sensor reports of it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "id", rename_all = "snake_case", deny_unknown_fields)]
@@ -78,7 +78,7 @@ pub enum Effect {
     ViscoelasticRelaxation { stiffness: f64, time_constant: f64 },
     /// Loading and unloading paths differ: the elastic force is scaled by 1 + h·tanh(ż / v₀).
     Hysteresis { fraction: f64, velocity_scale: f64 },
-    /// The surface zero moves at a constant rate [m/s] along the contact normal (seed 000's creep).
+    /// The surface zero moves at a constant rate [m/s] along the contact normal (the snake paper's creep).
     ContactOffsetDrift { rate: f64 },
     /// Constant offset [N] of the measured normal force.
     SensorBias { offset: f64 },
@@ -88,7 +88,7 @@ pub enum Effect {
     /// The reading reaches the recording `delay` [s] after the force acts (a slow sensor chain or a skewed
     /// stamp): measured(t) = reading(t − delay), 0 ≤ delay ≤ [`MAX_DELAY`].
     TimeDelay { delay: f64 },
-    /// Force channels mix (seed 000: a sensor axis misaligned with the pushing axis): the normal reading
+    /// Force channels mix (the snake paper: a sensor axis misaligned with the pushing axis): the normal reading
     /// gains coupling · F_t, F_t the tangential force the surface exerts on the hand, both in the frame of
     /// the normal. A misalignment by a small rotation ω of the sensing frame gives coupling ≈ n × ω.
     SensorCrosstalk { coupling: [f64; 3] },
@@ -515,7 +515,7 @@ impl ContactModel {
         Ok((df_dz, df_dzdot))
     }
 
-    /// The deformation that holds force f at rest (ż = 0): z = (f/k)^{1/a} (seed 001 eq. 19).
+    /// The deformation that holds force f at rest (ż = 0): z = (f/k)^{1/a} (the force-control paper's eq. 19).
     pub fn deformation_for_force(&self, f: f64) -> Result<f64, ContactError> {
         let f = finite("force", f)?;
         if f < 0.0 {

@@ -1,8 +1,8 @@
 //! Contact onset: where the surface is.
 //!
 //! A force threshold alone fires on a single noise spike, so contact is declared at the `confirm`-th
-//! consecutive reading above the threshold (seed 000: "the 3rd of three readings"), and the contact
-//! position d is where the tool was at the first of those readings (seed 001: "the instant the normal
+//! consecutive reading above the threshold (the snake paper: "the 3rd of three readings"), and the contact
+//! position d is where the tool was at the first of those readings (the force-control paper: "the instant the normal
 //! force goes above 1 N"). Contact ends after `confirm` consecutive readings below half the threshold.
 
 use crate::ContactError;
@@ -10,9 +10,9 @@ use crate::ContactError;
 /// Onset detector settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OnsetConfig {
-    /// Normal force above which a reading counts [N] (seed 001: 1 N).
+    /// Normal force above which a reading counts [N] (the force-control paper: 1 N).
     pub threshold: f64,
-    /// Consecutive readings that confirm contact, or its loss (seed 000: 3).
+    /// Consecutive readings that confirm contact, or its loss (the snake paper: 3).
     pub confirm: usize,
 }
 

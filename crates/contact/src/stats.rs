@@ -1,8 +1,8 @@
-//! Fit statistics exactly as seed 000's Appendix defines them (its Tables I–III).
+//! Fit statistics exactly as the snake paper's Appendix defines them (its Tables I–III).
 
 use crate::ContactError;
 
-/// Seed 000 Appendix C: how well a model's predictions f_m fit measured forces f_d.
+/// The snake paper's Appendix C: how well a model's predictions f_m fit measured forces f_d.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FitStatistics {
     /// R² "as reported by Mathematica" for a nonlinear model fit: 1 − Σ(f_d − f_m)² / Σ f_d², with the
@@ -51,7 +51,7 @@ pub fn fit_statistics(measured: &[f64], predicted: &[f64]) -> Result<FitStatisti
     })
 }
 
-/// Seed 000 Appendix D: spread of (normal, tangential) forces measured at loading-path convergence
+/// The snake paper's Appendix D: spread of (normal, tangential) forces measured at loading-path convergence
 /// points, where a path-independent model must predict one force.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Dispersion {

@@ -4,12 +4,12 @@
 //! Sphere of radius R pressed δ_n deep (contact radius a = √(R δ_n)) and displaced δ_t sideways, normal
 //! force P, tangential force T, friction coefficient μ. Two laws, chosen per model file (`law`):
 //!
-//! - **Walton** (seed 000, "Modeling and Experimental Validation of a Compliant Contact…", eqs. 3–4):
+//! - **Walton** (the snake paper, "Modeling and Experimental Validation of a Compliant Contact…", eqs. 3–4):
 //!   T = k_t √δ_n δ_t, a function of the present displacement only, limited to |T| ≤ μP.
 //! - **Mindlin–Deresiewicz** (R. D. Mindlin and H. Deresiewicz, "Elastic spheres in contact under varying
 //!   oblique forces", 1953): T is state, advanced by increments. Without slip dT = 8G*a dδ_t; since
 //!   Walton's k_t = (16/3) G* √R, that is dT = (3/2) k_t √δ_n dδ_t with the same k_t, so both laws agree
-//!   exactly on every straight path from the origin and differ off them — the path dependence seed 000
+//!   exactly on every straight path from the origin and differ off them — the path dependence the snake paper
 //!   measured and could not model. An increment slips nowhere while the normal force grows at least as
 //!   fast as the tangential one (dP > 0 and |dT| ≤ μ dP); otherwise an annulus slips (microslip) and the
 //!   tangent stiffness falls, by the factor θ of the loading case (Thornton's form of the
@@ -24,7 +24,7 @@
 //!   P this is Cattaneo–Mindlin, T = μP[1 − (1 − k_t √δ_n δ_t/(μP))^{3/2}], and unloading follows the
 //!   loading curve doubled about the turning point (Masing). |T| ≤ μP always; at the cap the contact slides.
 //!   The memory is one loop deep: a reversal while reloading starts a new unloading. The law acts along one
-//!   axis, the direction of the first tangential motion (seed 000's paths lie in one plane); motion across
+//!   axis, the direction of the first tangential motion (the snake paper's paths lie in one plane); motion across
 //!   it is carried by the Walton law and the whole force is capped at μP.
 //!
 //! The no-slip increment uses the mean contact radius over the step (exact on any straight step in the
@@ -326,7 +326,7 @@ impl ContactModel {
 
 /// The incremental law's axis is the direction of the first tangential motion at least this large [m]: a
 /// stage's sub-micrometre jitter while it presses would otherwise fix the axis in a random direction and
-/// leave the real motion across it, to the path-independent law (the arm as seed 000's stage did that).
+/// leave the real motion across it, to the path-independent law (the arm as the snake paper's stage did that).
 pub const AXIS_MIN_MOTION: f64 = 1e-6;
 
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -337,7 +337,7 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 mod tests {
     use super::*;
 
-    // Seed 000's magnitudes, in its units (N, mm): k_n 8.280 N/mm^1.5, k_t 3.7482 N/mm^1.5.
+    // The snake paper's magnitudes, in its units (N, mm): k_n 8.280 N/mm^1.5, k_t 3.7482 N/mm^1.5.
     const KN: f64 = 8.280;
     const KT: f64 = 3.7482;
 
@@ -364,7 +364,7 @@ mod tests {
 
     #[test]
     fn on_every_straight_path_it_is_walton() {
-        // Rays at 2°…30° (seed 000's linear paths) to 25 N: T = k_t √δ_n δ_t, however coarse the steps.
+        // Rays at 2°…30° (the snake paper's linear paths) to 25 N: T = k_t √δ_n δ_t, however coarse the steps.
         let law = Tangential::mindlin_deresiewicz(KT, 0.9);
         for degrees in (2..=30).step_by(2) {
             let slope = (degrees as f64).to_radians().tan();
@@ -519,7 +519,7 @@ mod tests {
 
     #[test]
     fn sub_micrometre_jitter_does_not_fix_the_incremental_laws_axis() {
-        // SI units: seed 000's half-ball. Pressed 1 mm with 0.2 µm of sideways jitter across the coming
+        // SI units: the snake paper's half-ball. Pressed 1 mm with 0.2 µm of sideways jitter across the coming
         // motion (a stage's tracking noise), then dragged 0.5 mm along x at that depth: the force along x
         // is the one-axis law's along the same (δ_n, δ_t) path, not Walton's.
         let (kn, kt) = (8.280 * crate::N_PER_MM_1_5, 3.7482 * crate::N_PER_MM_1_5);

@@ -5,8 +5,8 @@
 //! dependent) — and scored by K-fold cross-validation over whole paths: a path is never split between
 //! fitting and scoring, since the incremental law's state runs along it. The path-independent law is
 //! kept unless the incremental one predicts the held-out paths better by more than `MARGIN`: on straight
-//! paths from the zero the two are the same law (seed 000's linear paths cannot tell them apart), and only
-//! paths that turn (seed 000's two-segment paths) or slide can.
+//! paths from the zero the two are the same law (the snake paper's linear paths cannot tell them apart), and only
+//! paths that turn (the snake paper's two-segment paths) or slide can.
 //!
 //! Fitting, per law: for each μ of a grid (and no slip), k_t by least squares (exact for Walton without
 //! its cap and for the incremental law without slip, where T is linear in k_t; a few rescaling steps
@@ -310,7 +310,7 @@ mod tests {
         let id = identify_tangential(&data(Tangential::walton(K_T, 0.9), false), 5).unwrap();
         assert_eq!(id.chosen, TangentialLaw::Walton, "{id:?}");
         assert!((id.walton.law.stiffness / K_T - 1.0).abs() < 0.01);
-        // Seed 000's linear paths only: the incremental truth, yet the laws agree on every straight path.
+        // The snake paper's linear paths only: the incremental truth, yet the laws agree on every straight path.
         let id = identify_tangential(&data(Tangential::mindlin_deresiewicz(K_T, 0.9), true), 5).unwrap();
         assert_eq!(id.chosen, TangentialLaw::Walton, "{id:?}");
         assert!((id.walton.cv_rms / id.mindlin_deresiewicz.cv_rms - 1.0).abs() < 0.01, "{id:?}");

@@ -1,4 +1,4 @@
-//! The sliding-window estimator: the last N samples (seed 001: 1200 at 10 ms), O(1) work per sample,
+//! The sliding-window estimator: the last N samples (the force-control paper: 1200 at 10 ms), O(1) work per sample,
 //! and a full cross-validated refit of every candidate kind on demand.
 
 use std::collections::VecDeque;

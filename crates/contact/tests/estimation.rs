@@ -48,7 +48,7 @@ fn noisy_identification_recovers_parameters_within_two_percent() {
     for kind in Kind::CANDIDATES {
         for (depth, force) in [SPONGE, DICE] {
             let (k, l) = common::parameters(kind, depth, force, 0.15);
-            // One identification run of seed 001: ramp, 10 s of 1 Hz pushes, retreat; 0.2 N noise.
+            // One identification run of the force-control paper: ramp, 10 s of 1 Hz pushes, retreat; 0.2 N noise.
             let data = common::samples(kind, k, l, &common::identification(depth, 10), 0.2, &mut rng);
             let est = estimate(&data, &[None; 3], &FitConfig::default()).unwrap();
             let fit = est.fit(kind).unwrap();

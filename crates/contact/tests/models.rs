@@ -180,7 +180,7 @@ fn walton_tangential_law_sticks_inside_the_cone_and_slides_outside() {
         tangential: Some(Tangential::walton(3.7482, 0.5)),
         ..ContactModel::new(Kind::HertzWalton, 8.28, 0.0).unwrap()
     };
-    let z: f64 = 2.0; // seed 000 works in millimetre-scale units; the law is unit-agnostic
+    let z: f64 = 2.0; // the snake paper works in millimetre-scale units; the law is unit-agnostic
     let fn_ = model.force(z, 0.0).unwrap();
     assert!((fn_ - 8.28 * z.powf(1.5)).abs() < 1e-12);
     let (ft, slides) = model.tangential_force(z, 0.5, fn_).unwrap().unwrap();

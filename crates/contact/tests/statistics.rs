@@ -1,4 +1,4 @@
-//! Seed 000's statistics against values published elsewhere and worked by hand.
+//! The snake paper's statistics against values published elsewhere and worked by hand.
 
 use faer::Mat;
 use faer::linalg::solvers::SolveLstsq;

@@ -1,7 +1,7 @@
 //! The augmented contact model inverted: the deformation that gives force f at the end of a move, and
 //! keeps it during the hold, on a surface whose force has memory.
 //!
-//! Seed 001 inverts the static law, z = (f/k)^{1/a} (eq. 19). A surface that relaxes (Maxwell branches
+//! The force-control paper inverts the static law, z = (f/k)^{1/a} (eq. 19). A surface that relaxes (Maxwell branches
 //! ṡᵢ = kᵢ ż − sᵢ/τᵢ beside the elastic law, the discrepancy workflow's `viscoelastic_relaxation`) does
 //! not hold that force: at the end of a move its branches still push, and during the hold they fade.
 //! So the inverse carries the branches' states, driven by the measured deformation every tick, and

@@ -1,4 +1,4 @@
-//! The deformation control law of seed 001 (eq. 11–12): a force command becomes a deformation command
+//! The deformation control law of the force-control paper (eq. 11–12): a force command becomes a deformation command
 //! through the inverted contact model, and the deformation follows its reference with a PD law on the
 //! acceleration.
 
@@ -27,7 +27,7 @@ pub fn deformation_acceleration(gains: &DeformationGains, reference: &Reference,
     reference.acceleration + gains.stiffness * (reference.position - z) + gains.damping * (reference.velocity - zdot)
 }
 
-/// The deformation that holds force f at rest under the current model (seed 001 eq. 19).
+/// The deformation that holds force f at rest under the current model (the force-control paper's eq. 19).
 pub fn force_to_deformation(model: &ContactModel, force: f64) -> Result<f64, ContactError> {
     model.deformation_for_force(force)
 }

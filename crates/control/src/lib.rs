@@ -1,4 +1,4 @@
-//! Control of the normal force on a soft surface (seed 001): quintic references ([`quintic`]), the
+//! Control of the normal force on a soft surface (the force-control paper): quintic references ([`quintic`]), the
 //! deformation law that turns force commands into deformation accelerations ([`law`]), and task-space
 //! torques with null-space joint impedance ([`task`]). Pure: the controller node wires it to ROS.
 

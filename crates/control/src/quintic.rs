@@ -1,4 +1,4 @@
-//! Fifth-order polynomial references (seed 001: 2 s between set-points): position, velocity and
+//! Fifth-order polynomial references (the force-control paper: 2 s between set-points): position, velocity and
 //! acceleration exact at both ends, so consecutive moves join without jumps in any of them.
 
 /// One move from (p₀, v₀, a₀) to (p₁, v₁, a₁) in `duration` seconds.
@@ -104,7 +104,7 @@ impl SetpointSequence {
     }
 }
 
-/// A sinusoid about `mean` that starts at its lowest point, mean − amplitude, at rest: seed 001's
+/// A sinusoid about `mean` that starts at its lowest point, mean − amplitude, at rest: the force-control paper's
 /// identification pushes. The start has acceleration amplitude·ω², so a quintic that ends in
 /// [`Oscillation::start`] joins it without a jump in any derivative.
 #[derive(Debug, Clone, Copy, PartialEq)]

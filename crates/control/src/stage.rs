@@ -1,4 +1,4 @@
-//! The arm as a stiff displacement stage (seed 000's loading paths): the tool follows a position
+//! The arm as a stiff displacement stage (the snake paper's loading paths): the tool follows a position
 //! reference at a fixed orientation, by computed torque with integral action.
 //!
 //! A Cartesian impedance of a few N/mm would give way more than the whole indentation of a specimen whose

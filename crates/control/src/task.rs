@@ -1,4 +1,4 @@
-//! Task-space torques with null-space joint impedance (seed 001 eq. 15):
+//! Task-space torques with null-space joint impedance (the force-control paper's eq. 15):
 //!
 //! τ = (J M⁻¹)^# (p̈_des − J̇q̇ + J M⁻¹ h − J M⁻¹ Jᵀ f) + N τ₀,  N = I − (J M⁻¹)^# (J M⁻¹),
 //!

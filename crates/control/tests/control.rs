@@ -63,7 +63,7 @@ fn a_setpoint_sequence_moves_two_seconds_each_and_joins_smoothly() {
 
 #[test]
 fn pushes_joined_by_quintics_are_smooth_in_position_velocity_and_acceleration() {
-    // Seed 001's identification: a ramp into the sine's lowest point, 3 periods at 1 Hz, a retreat.
+    // The force-control paper's identification: a ramp into the sine's lowest point, 3 periods at 1 Hz, a retreat.
     let push = Oscillation { mean: 0.03, amplitude: 0.02, frequency: 1.0, periods: 3 };
     let ramp = Quintic::new(Reference::default(), push.start(), 1.0).unwrap();
     let retreat = Quintic::new(push.start(), Reference { position: -0.02, ..Default::default() }, 1.0).unwrap();

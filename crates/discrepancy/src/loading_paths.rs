@@ -1,8 +1,8 @@
-//! The discrepancy workflow on loading-path recordings (seed 000, "Modeling and Experimental Validation
+//! The discrepancy workflow on loading-path recordings (the snake paper, "Modeling and Experimental Validation
 //! of a Compliant Contact Model…", section IV): contact episodes, each zeroed where the paper zeroes it,
 //! with both force channels — the normal force P and the tangential force T along the episode's axis.
 //!
-//! Seed 000 names its two worst errors and cannot model a third thing it measured:
+//! The snake paper names its two worst errors and cannot model a third thing it measured:
 //! - `contact_offset_drift`: the specimen's zero creeps during an experiment (by a different amount each
 //!   time), so P falls short of Hertz's law by 1.5 k_n √z · c_i · s, growing with the progress s along the
 //!   path — one creep c_i per episode;

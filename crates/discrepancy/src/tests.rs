@@ -559,7 +559,7 @@ fn record_with_wrench(truth: &ContactModel, sigma: f64, seed: u64) -> Series {
 #[test]
 fn crosstalk_and_tool_weight_are_named_from_the_whole_wrench() {
     let o = Options::default();
-    // A sensor axis misaligned by 1° towards the sway (seed 000's error): coupling 0.0175 along it.
+    // A sensor axis misaligned by 1° towards the sway (the snake paper's error): coupling 0.0175 along it.
     let coupling = [0.0175 * 0.8, -0.0175 * 0.6, 0.0];
     let truth = with(&kv(), &[Effect::SensorCrosstalk { coupling }]);
     let r = analyse(&record_with_wrench(&truth, 0.05, 41), &kv(), &o).unwrap();
@@ -599,7 +599,7 @@ fn a_time_delay_is_named_with_its_delay() {
 
 #[test]
 fn the_lab_sponge_is_named_and_reproduced_to_the_floor_at_100_hz_and_1_khz() {
-    // The demo's sponge (seed 001's Azad-Featherstone law with a fast and a slow relaxation branch and a
+    // The demo's sponge (the force-control paper's Azad-Featherstone law with a fast and a slow relaxation branch and a
     // rate-dependent hysteresis), stepped at 10 kHz and sampled at 100 Hz and 1 kHz: both branches and the
     // hysteresis named with their parameters, and the augmented model at the noise floor. (A branch
     // stepped with the rate held over a 10 ms sample, and a clamp mask that stays where the surface was,

@@ -1,4 +1,4 @@
-//! A planar chain of rigid links with a floating base: the snake of seed 000's section V ("Modeling and
+//! A planar chain of rigid links with a floating base: the snake of the snake paper's section V ("Modeling and
 //! Experimental Validation of a Compliant Contact Model …", the climbing robot between two walls).
 //!
 //! Coordinates q = [x, y, θ, q₁ … q_{N−1}]: node 0 (the first link's proximal end) at (x, y), the first

@@ -1,6 +1,6 @@
 //! The KRC side of FRI: the OFF/MON/CMD state machine driven through the KRL exchange variables, the
 //! timing grade (quality) of the remote's answers, and the joint-impedance law the KRC runs, with its
-//! own gravity compensation, as the real controller does (specs/fri-lwr4.md sections 9–11).
+//! own gravity compensation, as the real controller does (docs/protocols/fri-lwr4.md sections 9–11).
 //!
 //! The KRL side runs one of two programs ([`KrlProgram`]): the one this repository ships
 //! (`krl/softcontact.src`) or the common `ros_control.src` of the LWR's ROS 1 stack. Both read

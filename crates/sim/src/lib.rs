@@ -65,7 +65,7 @@ pub struct SimConfig {
 
 impl SimConfig {
     /// The hand at [`DEFAULT_Q`], facing down 4 cm above a horizontal soft surface made of `model`
-    /// (seed 001's start).
+    /// (the force-control paper's start).
     pub fn above_surface(model: ContactModel, seed: u64) -> Self {
         let normal = Vector3::new(0.0, 0.0, -1.0);
         let arm = lwr4::model();
@@ -105,18 +105,18 @@ fn sensed_load(surface: Option<&SurfaceConfig>) -> softcontact_dynamics::BodyIne
     load
 }
 
-/// Seed 001's sponge: Azad-Featherstone-like, ≈ 280 N at 5 cm.
+/// The force-control paper's sponge: Azad-Featherstone-like, ≈ 280 N at 5 cm.
 pub fn sponge() -> ContactModel {
     ContactModel::new(softcontact_contact::Kind::AzadFeatherstone, 280.0 / 0.05f64.powf(1.5), 1100.0)
         .expect("valid preset")
 }
 
-/// Seed 001's dice: Kelvin-Voigt-like, ≈ 130 N at 7 cm.
+/// The force-control paper's dice: Kelvin-Voigt-like, ≈ 130 N at 7 cm.
 pub fn dice() -> ContactModel {
     ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 130.0 / 0.07, 60.0).expect("valid preset")
 }
 
-/// Seed 001's sponge as a real one behaves: the law of [`sponge`] plus what none of the model kinds
+/// The force-control paper's sponge as a real one behaves: the law of [`sponge`] plus what none of the model kinds
 /// has — viscoelastic relaxation on two time scales (a fast Maxwell branch that stiffens the foam under
 /// 1 Hz pushes but has relaxed by the end of a slow move, and a slow one: creep under held deformation)
 /// and a little rate-dependent hysteresis. A model identified under pushes is thus biased for slow
@@ -125,7 +125,7 @@ pub fn lab_sponge() -> ContactModel {
     with_lab_effects(sponge(), [2500.0, 100.0])
 }
 
-/// Seed 001's dice as a real one behaves: the law of [`dice`] plus the effects of [`lab_sponge`].
+/// The force-control paper's dice as a real one behaves: the law of [`dice`] plus the effects of [`lab_sponge`].
 pub fn lab_dice() -> ContactModel {
     with_lab_effects(dice(), [600.0, 30.0])
 }

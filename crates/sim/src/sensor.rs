@@ -23,7 +23,7 @@ pub struct FtSensorConfig {
     /// Its correlation time [s]: tens of ms is a filtered electronics' noise, tens of seconds a slow
     /// wander of the offset that no tare schedule follows.
     pub coloured_time_constant: f64,
-    /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (seed 000's
+    /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (the snake paper's
     /// misalignment of the sensor's axes with the pushing axes: a mounting error no tool knows of).
     pub mounting: UnitQuaternion<f64>,
 }
@@ -53,9 +53,9 @@ impl FtSensorConfig {
         Self { noise: [0.0; 6], bias: [0.0; 6], ..Self::gamma() }
     }
 
-    /// A Nano17 (SI-25-0.25) as seed 000 read its half-ball: 1/1280 N resolution (counts per newton),
+    /// A Nano17 (SI-25-0.25) as the snake paper read its half-ball: 1/1280 N resolution (counts per newton),
     /// noise a few resolution steps, no bias. Its ranges are widened (forces 70 N, torques 5 N·m): on the
-    /// product's flange the hand weighs on it and the contact lies 10 cm from its origin, where seed 000's
+    /// product's flange the hand weighs on it and the contact lies 10 cm from its origin, where the snake paper's
     /// plate sat on the sensor itself.
     pub fn nano17() -> Self {
         Self {

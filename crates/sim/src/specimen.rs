@@ -1,10 +1,10 @@
-//! Seed 000's specimen on its own bench: a gum-rubber half-ball (R = 12.7 mm) under a flat plate with
+//! The snake paper's specimen on its own bench: a gum-rubber half-ball (R = 12.7 mm) under a flat plate with
 //! friction, read by a Nano17-like F/T sensor, pushed along paths of the (δ_n, δ_t) plane by an ideal
 //! displacement stage — the paper's setup ("Modeling and Experimental Validation of a Compliant Contact
 //! Model…", section IV), and the reference an arm-driven run is graded against.
 //!
 //! The contact is the model's: Hertz normal law and its tangential law (Walton or Mindlin–Deresiewicz,
-//! crates/contact). The two errors seed 000 names are explicit, seeded parameters:
+//! crates/contact). The two errors the snake paper names are explicit, seeded parameters:
 //! - **creep of the zero**: the ball's surface is still moving when an experiment starts, by `creep` [m]
 //!   over the experiment (one draw per experiment, normal with standard deviation `creep_sd`), so the
 //!   true normal approach is the stage's minus `creep · s`, s ∈ [0, 1] the progress along the path;
@@ -42,11 +42,11 @@ pub struct SpecimenConfig {
     pub seed: u64,
 }
 
-/// The reading that marks contact (seed 000: the third reading above it is the zero).
+/// The reading that marks contact (the snake paper: the third reading above it is the zero).
 pub const ZERO_THRESHOLD: f64 = 0.03;
 
 impl SpecimenConfig {
-    /// Seed 000's magnitudes: ≈ 25 N at ≈ 2 mm, a Nano17, a stage step of 5 µm; no creep, no
+    /// The snake paper's magnitudes: ≈ 25 N at ≈ 2 mm, a Nano17, a stage step of 5 µm; no creep, no
     /// misalignment, no noise (add them explicitly).
     pub fn seed_000(model: ContactModel, seed: u64) -> Self {
         SpecimenConfig {
@@ -217,7 +217,7 @@ mod tests {
 
     #[test]
     fn a_misaligned_sensor_reads_the_rotated_forces() {
-        // Seed 000's sizes: at 2 mm on the 20° ray, 1° of misalignment adds ≈ 0.41 N to T.
+        // The snake paper's sizes: at 2 mm on the 20° ray, 1° of misalignment adds ≈ 0.41 N to T.
         let m = model(Tangential::walton(0.0, 0.9));
         let eps = 1f64.to_radians();
         let mut aligned =
@@ -245,7 +245,7 @@ mod tests {
 
     #[test]
     fn creep_lowers_the_normal_force_by_the_hertz_slope() {
-        // ΔP ≈ 1.5 k_n √δ_n e: 10 µm of creep at 2 mm costs ≈ 0.18 N (seed 000's Table I error is 0.168 N).
+        // ΔP ≈ 1.5 k_n √δ_n e: 10 µm of creep at 2 mm costs ≈ 0.18 N (the snake paper's Table I error is 0.168 N).
         let m = model(Tangential::walton(0.0, 0.9));
         let mut bench = SpecimenBench::new(SpecimenConfig {
             creep_sd: 10e-6,

@@ -59,7 +59,7 @@ impl Surface {
         &self.config
     }
 
-    /// Moves the undeformed top by `distance` along the normal [m] (seed 000's creep of the specimen's
+    /// Moves the undeformed top by `distance` along the normal [m] (the snake paper's creep of the specimen's
     /// zero between and during experiments: a hidden effect, set by the scenario, never read by the tools).
     pub fn creep(&mut self, distance: f64) {
         if distance.is_finite() {

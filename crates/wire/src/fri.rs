@@ -1,6 +1,6 @@
 //! FRI 1.x of the KUKA LWR IV / KRC2lr (datagram ids 0x2006 / 0x1005): the KRC sends a 916-byte
 //! measurement every cycle, the remote answers each with a 376-byte command. Little-endian, offsets
-//! per `friComm.h`; see specs/fri-lwr4.md for every field.
+//! per `friComm.h`; see docs/protocols/fri-lwr4.md for every field.
 
 use crate::WireError;
 use crate::bytes::{Reader, Writer};

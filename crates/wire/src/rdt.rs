@@ -1,5 +1,5 @@
 //! ATI Net F/T Raw Data Transfer over UDP: 8-byte requests to the sensor, 36-byte records back (one per
-//! datagram in real-time mode, several in buffered mode). Big-endian; see specs/netft-rdt.md.
+//! datagram in real-time mode, several in buffered mode). Big-endian; see docs/protocols/netft-rdt.md.
 
 use crate::WireError;
 use crate::bytes::{Reader, Writer};

@@ -1,4 +1,4 @@
-//! FRI codec against bytes laid out by hand from specs/fri-lwr4.md (offsets written out here, not
+//! FRI codec against bytes laid out by hand from docs/protocols/fri-lwr4.md (offsets written out here, not
 //! taken from the codec), round trips, and refusal of anything malformed.
 
 use proptest::prelude::*;

@@ -1,4 +1,4 @@
-//! RDT codec against bytes laid out by hand from specs/netft-rdt.md, units, status words, round trips.
+//! RDT codec against bytes laid out by hand from docs/protocols/netft-rdt.md, units, status words, round trips.
 
 use proptest::prelude::*;
 use softcontact_wire::WireError;

@@ -1,4 +1,4 @@
-//! `deformation_controller`: seed 001's deformation control as a ROS 2 node. Ticks once per
+//! `deformation_controller`: the force-control paper's deformation control as a ROS 2 node. Ticks once per
 //! /lwr/joint_states (1 kHz), with the newest /ft_sensor/wrench turned into the world by the arm's own
 //! kinematics; takes force commands on /deformation_controller/force_command and as the action
 //! /deformation_controller/press, and models from /contact_estimator/model (adopted per `model_update`); publishes /lwr/joint_torque_command, stamped

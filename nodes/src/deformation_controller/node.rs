@@ -14,7 +14,7 @@
 //!   `restart_after` by their stamps restart the controller: the contact is forgotten and the hand
 //!   approaches again.
 //! - A tick that fails asks the driver to hold at once, never for an older torque.
-//! - Models: adopted at the next force command (seed 001), or on arrival with the standing command
+//! - Models: adopted at the next force command (the force-control paper), or on arrival with the standing command
 //!   re-planned (`model_update: continuous`). An implausible one is refused and the present one kept.
 //! - The F/T sensor is checked against the arm's joint torque sensors ([`ForceCheck`]): when they
 //!   disagree on the contact force, every tick holds until the KRC starts a new session.
@@ -328,7 +328,7 @@ impl ControllerNode {
     }
 
     /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted with it,
-    /// once in contact (seed 001: once per command cycle); if the model is refused the command goes on
+    /// once in contact (the force-control paper: once per command cycle); if the model is refused the command goes on
     /// with the present model, and the refusal is returned beside the command's own result. A command
     /// refused changes nothing: the model keeps waiting for the next.
     pub fn on_force_command(&mut self, force: f64, duration: f64) -> (Option<ControlError>, Result<(), ControlError>) {
@@ -499,7 +499,7 @@ impl ControllerNode {
 
 /// A force command followed to the end of its move: what the force action (PressForce) reports. The
 /// move ends `duration` after the command on the controller's own clock; the force reached is the mean
-/// measured normal force of the move's last 10 ticks (seed 001 reads the force at the end of the move).
+/// measured normal force of the move's last 10 ticks (the force-control paper reads the force at the end of the move).
 /// The press is aborted when the controller restarts, loses contact, passes its force limit or fails a
 /// tick: the arm then does what the controller's rules say, and the user is told why.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,5 +1,5 @@
 //! What the tests that run node processes over real DDS or UDP share: they re-run themselves inside a
-//! network namespace that has only loopback (design.md section 3), so that DDS stays on this machine, and
+//! network namespace that has only loopback (docs/architecture.md, "The ROS 2 graph"), so that DDS stays on this machine, and
 //! there start node processes that must not outlive the test.
 
 use std::process::{Child, Command, Stdio};

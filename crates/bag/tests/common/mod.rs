@@ -17,7 +17,7 @@ pub fn header(i: u32, frame: &str) -> Header {
     Header { stamp: Time { sec: 1_700_000_000 + i as i32, nanosec: 1000 * i + 7 }, frame_id: frame.into() }
 }
 
-/// The i-th message of every type, on its design.md topic.
+/// The i-th message of every type, on its topic in docs/architecture.md.
 pub fn samples(i: u32) -> Vec<(&'static str, AnyMessage)> {
     let x = i as f64;
     let v = |a: f64, b: f64, c: f64| Vector3 { x: a, y: b, z: c };

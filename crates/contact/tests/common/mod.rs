@@ -1,4 +1,4 @@
-//! Test data written independently of the crate: closed-form force laws and seed-001-like trajectories.
+//! Test data written independently of the crate: closed-form force laws and the force-control paper's-like trajectories.
 #![allow(dead_code)]
 
 use rand::Rng;
@@ -19,7 +19,7 @@ pub fn closed_form(kind: Kind, k: f64, l: f64, z: f64, zd: f64) -> f64 {
     f.max(0.0)
 }
 
-/// Seed 001's identification trajectory in deformation coordinates, sampled every 10 ms: a ramp from
+/// The force-control paper's identification trajectory in deformation coordinates, sampled every 10 ms: a ramp from
 /// 4 cm above the surface to the middle depth, 1 Hz sine pushes between 0 and `depth`, a ramp back.
 /// Returns (z, ż) pairs.
 pub fn identification(depth: f64, cycles: usize) -> Vec<(f64, f64)> {
