@@ -128,3 +128,122 @@ fn no_document_points_outside_the_repository() {
     }
     assert!(found.is_empty(), "{}", found.join("\n"));
 }
+
+/// Commands the docs show, from their code blocks and inline code: `softcontact …` (however it is run),
+/// the node binaries and the launch scripts, each as its program and arguments.
+fn documented_commands() -> Vec<(String, Vec<String>)> {
+    let mut docs: Vec<PathBuf> = documents().into_iter().filter(|p| p.extension().is_some_and(|e| e == "md")).collect();
+    docs.sort();
+    let mut out = vec![];
+    for doc in docs {
+        let text = std::fs::read_to_string(&doc).unwrap_or_default();
+        let mut snippets: Vec<String> = vec![];
+        let mut in_block = false;
+        for line in text.lines() {
+            if line.trim_start().starts_with("```") {
+                in_block = !in_block;
+            } else if in_block {
+                snippets.push(line.to_string());
+            } else {
+                snippets.extend(line.split('`').skip(1).step_by(2).map(str::to_string));
+            }
+        }
+        for snippet in snippets {
+            // Commands chained with `&&`, `;` or `|`, or started with `&`, each on its own; comments cut.
+            let snippet = snippet.split(" #").next().unwrap_or("");
+            for part in snippet.split(['&', ';', '|', '\'']) {
+                let words: Vec<&str> = part.split_whitespace().collect();
+                let Some(start) = words.iter().position(|w| {
+                    *w == "softcontact" || w.starts_with("target/release/") || w.starts_with("launch-scripts/")
+                }) else {
+                    continue;
+                };
+                let program = words[start].rsplit('/').next().unwrap_or("").to_string();
+                let known = ["softcontact", "lwr_driver", "ft_sensor", "sim_arm", "lwr_control", "contact_estimator",
+                    "deformation_controller", "sim.sh", "robot.sh", "launch.sh"];
+                if !known.contains(&program.as_str()) {
+                    continue;
+                }
+                let args: Vec<String> = words[start + 1..].iter().map(|w| w.to_string()).collect();
+                out.push((format!("{}: {program}", doc.strip_prefix(root()).unwrap_or(&doc).display()), args));
+            }
+        }
+        // `cargo run … --bin NAME -- ARGS`
+        for line in text.lines().filter(|l| l.contains("cargo run")) {
+            let words: Vec<&str> = line.split(" #").next().unwrap_or("").split_whitespace().collect();
+            let (Some(bin), Some(dashes)) =
+                (words.iter().position(|w| *w == "--bin"), words.iter().position(|w| *w == "--"))
+            else {
+                continue;
+            };
+            let program = words.get(bin + 1).unwrap_or(&"").to_string();
+            let args = words[dashes + 1..].iter().map(|w| w.trim_end_matches('`').to_string()).collect();
+            out.push((format!("{}: {program}", doc.strip_prefix(root()).unwrap_or(&doc).display()), args));
+        }
+    }
+    out
+}
+
+fn binary(name: &str) -> PathBuf {
+    // The test runs from target/<profile>/deps; the binaries are one folder up.
+    let exe = std::env::current_exe().unwrap();
+    exe.parent().and_then(Path::parent).unwrap().join(name)
+}
+
+/// Every option a documented command uses is one its program accepts (its `--help` lists it), every
+/// subcommand exists, and every `-p name:=value` names a parameter of the node's YAML in `config/`.
+#[test]
+fn every_documented_command_uses_options_its_program_has() {
+    let mut wrong = vec![];
+    let mut checked = 0;
+    for (where_, args) in documented_commands() {
+        let program = where_.rsplit(": ").next().unwrap().to_string();
+        let mut help_args: Vec<String> = vec![];
+        let mut rest: &[String] = &args;
+        if program == "softcontact" {
+            // The subcommand, and `bench`'s own.
+            for _ in 0..2 {
+                match rest.first() {
+                    Some(w) if !w.starts_with('-') && w.chars().all(|c| c.is_ascii_lowercase() || c == '-') => {
+                        help_args.push(w.clone());
+                        rest = &rest[1..];
+                        if help_args[0] != "bench" {
+                            break;
+                        }
+                    }
+                    _ => break,
+                }
+            }
+        }
+        // A launch script's `--run` starts another command.
+        let rest: Vec<&String> = rest.iter().take_while(|w| *w != "--run").collect();
+        let path = if program.ends_with(".sh") { root().join("launch-scripts").join(&program) } else { binary(&program) };
+        let help = std::process::Command::new(&path).args(&help_args).arg("--help").output();
+        let Ok(help) = help else {
+            wrong.push(format!("{where_} {args:?}: {} does not run", path.display()));
+            continue;
+        };
+        let shown = format!("{}{}", String::from_utf8_lossy(&help.stdout), String::from_utf8_lossy(&help.stderr));
+        if !help.status.success() {
+            wrong.push(format!("{where_} {help_args:?} --help fails: {shown}"));
+            continue;
+        }
+        checked += 1;
+        for (i, word) in rest.iter().enumerate() {
+            if let Some(flag) = word.strip_prefix("--").map(|f| f.split('=').next().unwrap_or("")) {
+                if !flag.is_empty() && !shown.contains(&format!("--{flag}")) {
+                    wrong.push(format!("{where_} {args:?}: --{flag} is not an option of `{program} {}`", help_args.join(" ")));
+                }
+            }
+            if *word == "-p" && !program.ends_with(".sh") && program != "softcontact" {
+                let name = rest.get(i + 1).map_or("", |v| v.split(":=").next().unwrap_or(""));
+                let yaml = std::fs::read_to_string(root().join("config").join(format!("{program}.yaml"))).unwrap_or_default();
+                if !yaml.lines().any(|l| l.trim_start().starts_with(&format!("{name}:"))) {
+                    wrong.push(format!("{where_} {args:?}: `{name}` is not a parameter in config/{program}.yaml"));
+                }
+            }
+        }
+    }
+    assert!(checked >= 20, "only {checked} documented commands found");
+    assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+}
