@@ -148,19 +148,32 @@ fn documented_commands() -> Vec<(String, Vec<String>)> {
                 snippets.extend(line.split('`').skip(1).step_by(2).map(str::to_string));
             }
         }
-        for snippet in snippets {
+        for snippet in snippets.iter().filter(|s| !s.contains("cargo ")) {
             // Commands chained with `&&`, `;` or `|`, or started with `&`, each on its own; comments cut.
             let snippet = snippet.split(" #").next().unwrap_or("");
             for part in snippet.split(['&', ';', '|', '\'']) {
                 let words: Vec<&str> = part.split_whitespace().collect();
-                let Some(start) = words.iter().position(|w| {
-                    *w == "softcontact" || w.starts_with("target/release/") || w.starts_with("launch-scripts/")
+                // `softcontact` as the command itself, a built binary or a script anywhere (after `--run`).
+                let Some(start) = words.iter().enumerate().position(|(i, w)| {
+                    (i == 0 && *w == "softcontact")
+                        || w.starts_with("target/release/")
+                        || w.starts_with("launch-scripts/")
                 }) else {
                     continue;
                 };
                 let program = words[start].rsplit('/').next().unwrap_or("").to_string();
-                let known = ["softcontact", "lwr_driver", "ft_sensor", "sim_arm", "lwr_control", "contact_estimator",
-                    "deformation_controller", "sim.sh", "robot.sh", "launch.sh"];
+                let known = [
+                    "softcontact",
+                    "lwr_driver",
+                    "ft_sensor",
+                    "sim_arm",
+                    "lwr_control",
+                    "contact_estimator",
+                    "deformation_controller",
+                    "sim.sh",
+                    "robot.sh",
+                    "launch.sh",
+                ];
                 if !known.contains(&program.as_str()) {
                     continue;
                 }
@@ -217,7 +230,8 @@ fn every_documented_command_uses_options_its_program_has() {
         }
         // A launch script's `--run` starts another command.
         let rest: Vec<&String> = rest.iter().take_while(|w| *w != "--run").collect();
-        let path = if program.ends_with(".sh") { root().join("launch-scripts").join(&program) } else { binary(&program) };
+        let path =
+            if program.ends_with(".sh") { root().join("launch-scripts").join(&program) } else { binary(&program) };
         let help = std::process::Command::new(&path).args(&help_args).arg("--help").output();
         let Ok(help) = help else {
             wrong.push(format!("{where_} {args:?}: {} does not run", path.display()));
@@ -231,13 +245,17 @@ fn every_documented_command_uses_options_its_program_has() {
         checked += 1;
         for (i, word) in rest.iter().enumerate() {
             if let Some(flag) = word.strip_prefix("--").map(|f| f.split('=').next().unwrap_or("")) {
-                if !flag.is_empty() && !shown.contains(&format!("--{flag}")) {
-                    wrong.push(format!("{where_} {args:?}: --{flag} is not an option of `{program} {}`", help_args.join(" ")));
+                if !flag.is_empty() && flag != "help" && !shown.contains(&format!("--{flag}")) {
+                    wrong.push(format!(
+                        "{where_} {args:?}: --{flag} is not an option of `{program} {}`",
+                        help_args.join(" ")
+                    ));
                 }
             }
             if *word == "-p" && !program.ends_with(".sh") && program != "softcontact" {
                 let name = rest.get(i + 1).map_or("", |v| v.split(":=").next().unwrap_or(""));
-                let yaml = std::fs::read_to_string(root().join("config").join(format!("{program}.yaml"))).unwrap_or_default();
+                let yaml =
+                    std::fs::read_to_string(root().join("config").join(format!("{program}.yaml"))).unwrap_or_default();
                 if !yaml.lines().any(|l| l.trim_start().starts_with(&format!("{name}:"))) {
                     wrong.push(format!("{where_} {args:?}: `{name}` is not a parameter in config/{program}.yaml"));
                 }
