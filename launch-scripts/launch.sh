@@ -36,7 +36,7 @@ while (($#)); do
     --params-file) overlays+=("$(realpath "$2")"); shift ;;
     --nodes) only="$2"; shift ;;
     --run) shift; run=("$@"); break ;;
-    -h | --help) sed -n '2,23p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,/^[^#]/p' "${BASH_SOURCE[0]}" | grep '^#' | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "launch: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
     shift

@@ -266,3 +266,32 @@ fn every_documented_command_uses_options_its_program_has() {
     assert!(checked >= 20, "only {checked} documented commands found");
     assert!(wrong.is_empty(), "{}", wrong.join("\n"));
 }
+
+/// Topic names are declared once, in `msgs/src/topics.rs`: no product source (its tests aside) spells
+/// one of the graph's names as a string.
+#[test]
+fn topic_names_are_declared_once() {
+    let declared = std::fs::read_to_string(root().join("msgs/src/topics.rs")).unwrap();
+    let names: Vec<&str> =
+        declared.lines().filter_map(|l| l.split("Topic::new(\"").nth(1)?.split('"').next()).collect();
+    assert!(names.len() >= 15, "{names:?}");
+    let mut spelled = vec![];
+    for doc in documents() {
+        let relative = doc.strip_prefix(root()).unwrap_or(&doc).to_string_lossy().to_string();
+        let product = ["nodes/src/", "cli/src/", "crates/", "msgs/src/"].iter().any(|p| relative.starts_with(p))
+            && relative.ends_with(".rs")
+            && !relative.contains("/tests/")
+            && relative != "msgs/src/topics.rs";
+        if !product {
+            continue;
+        }
+        let text = std::fs::read_to_string(&doc).unwrap_or_default();
+        let code = text.split("#[cfg(test)]").next().unwrap_or("");
+        for (n, line) in code.lines().enumerate() {
+            if let Some(name) = names.iter().find(|name| line.contains(&format!("\"{name}\""))) {
+                spelled.push(format!("{relative}:{}: {name}", n + 1));
+            }
+        }
+    }
+    assert!(spelled.is_empty(), "topic names spelled outside msgs/src/topics.rs:\n{}", spelled.join("\n"));
+}

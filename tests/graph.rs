@@ -114,10 +114,11 @@ fn stranger_client() {
     use softcontact_msgs::sensor_msgs::JointState;
     let mut node = ros::node("stranger").unwrap();
     let states =
-        ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
-    let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+        ros::subscription_by_name::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())
+            .unwrap();
+    let joints = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
     let commands =
-        ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+        ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
     let start = Instant::now();
     let mut in_contact = 0;
     while in_contact < 500 {
@@ -128,10 +129,12 @@ fn stranger_client() {
         std::thread::sleep(Duration::from_millis(1));
     }
     // Writers of the stranger's own, created only now: the graph's nodes have pinned theirs.
-    let forged_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::reliable_qos()).unwrap();
-    let wrenches = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
-    let torques = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
-    let models = ros::publisher::<softcontact_nodes::contact_estimator::ModelMsg>(
+    let forged_states =
+        ros::publisher_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::reliable_qos()).unwrap();
+    let wrenches = ros::publisher_by_name::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
+    let torques =
+        ros::publisher_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+    let models = ros::publisher_by_name::<softcontact_nodes::contact_estimator::ModelMsg>(
         &mut node,
         "/contact_estimator/model",
         ros::reliable_qos(),
@@ -245,7 +248,8 @@ fn the_lockstep_graph_runs_the_controller_on_the_simulated_clock() {
 fn lockstep_client() {
     let mut node = ros::node("lockstep_test").unwrap();
     let states =
-        ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
+        ros::subscription_by_name::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())
+            .unwrap();
     let start = Instant::now();
     let mut holding = 0;
     while holding < 200 {
@@ -364,7 +368,8 @@ fn replay_client(recording: &Path) {
     eprint!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success(), "the Cyclone DDS peer got the estimator's parameters");
     let mut node = ros::node("replay_test").unwrap();
-    let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos()).unwrap();
+    let models =
+        ros::subscription_by_name::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos()).unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
         .arg("replay")
         .arg(recording)
@@ -412,10 +417,12 @@ fn client() {
         .unwrap();
     let mut node = ros::node("graph_test").unwrap();
     let states =
-        ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
-    let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos()).unwrap();
+        ros::subscription_by_name::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())
+            .unwrap();
+    let models =
+        ros::subscription_by_name::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos()).unwrap();
     let commands =
-        ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())
+        ros::publisher_by_name::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())
             .unwrap();
     let mut latest_model: Option<ContactModel> = None;
     let mut latest_state: Option<ControllerState> = None;
@@ -482,7 +489,7 @@ fn client() {
 
     // A stranger's torque commands, stamped and in the driver's session as the controller's would be:
     // the composed driver takes none from the network, so the hold at contact is not disturbed.
-    let stranger = ros::publisher::<softcontact_msgs::sensor_msgs::JointState>(
+    let stranger = ros::publisher_by_name::<softcontact_msgs::sensor_msgs::JointState>(
         &mut node,
         "/lwr/joint_torque_command",
         ros::reliable_qos(),

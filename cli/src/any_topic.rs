@@ -4,25 +4,14 @@
 use ros2_client::{Node, Publisher, Subscription};
 use softcontact_bag::{AnyMessage, Qos};
 use softcontact_msgs::RosType;
+use softcontact_msgs::topics;
 use softcontact_nodes::ros;
 
-/// The topics of docs/architecture.md, "The ROS 2 graph", their types and the QoS their publishers offer.
-pub const GRAPH_TOPICS: [(&str, &str, Qos); 14] = [
-    ("/lwr/joint_states", "sensor_msgs/msg/JointState", Qos::SENSOR),
-    ("/lwr/joint_torque_command", "sensor_msgs/msg/JointState", Qos::RELIABLE),
-    ("/lwr/ee_pose", "geometry_msgs/msg/PoseStamped", Qos::SENSOR),
-    ("/lwr/ee_twist", "geometry_msgs/msg/TwistStamped", Qos::SENSOR),
-    ("/tf", "tf2_msgs/msg/TFMessage", Qos::SENSOR),
-    ("/tf_static", "tf2_msgs/msg/TFMessage", Qos::LATCHED),
-    ("/ft_sensor/wrench_raw", "geometry_msgs/msg/WrenchStamped", Qos::SENSOR),
-    ("/ft_sensor/wrench", "geometry_msgs/msg/WrenchStamped", Qos::SENSOR),
-    ("/ft_sensor/tare", "geometry_msgs/msg/WrenchStamped", Qos::RELIABLE),
-    ("/contact_estimator/model", "softcontact_msgs/msg/ContactModel", Qos::RELIABLE),
-    ("/contact_estimator/state", "softcontact_msgs/msg/ContactState", Qos::SENSOR),
-    ("/deformation_controller/force_command", "softcontact_msgs/msg/ForceCommand", Qos::RELIABLE),
-    ("/deformation_controller/state", "softcontact_msgs/msg/ControllerState", Qos::SENSOR),
-    ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", Qos::RELIABLE),
-];
+/// The graph's recorded topics (`softcontact_msgs::topics::recorded`): name, type and the QoS their
+/// publishers offer.
+pub fn graph_topics() -> Vec<(&'static str, String, Qos)> {
+    topics::recorded().into_iter().map(|t| (t.name, t.type_path, Qos::of(t.delivery))).collect()
+}
 
 fn profile(qos: Qos) -> ros2_client::QosProfile {
     ros::qos(qos.reliable, qos.transient_local, if qos.transient_local { qos.depth as usize } else { 1000 })
@@ -38,7 +27,7 @@ macro_rules! any_topic {
             pub fn new(node: &mut Node, topic: &str, type_name: &str, qos: Qos) -> anyhow::Result<Self> {
                 let path = softcontact_bag::type_path(type_name);
                 $(if path == <$ty>::type_path() {
-                    return Ok(Self::$variant(ros::subscription::<$ty>(node, topic, profile(qos))?));
+                    return Ok(Self::$variant(ros::subscription_by_name::<$ty>(node, topic, profile(qos))?));
                 })+
                 anyhow::bail!("{topic}: type {type_name} is not one the project knows")
             }
@@ -66,7 +55,7 @@ macro_rules! any_topic {
             pub fn new(node: &mut Node, topic: &str, type_name: &str, qos: Qos) -> anyhow::Result<Self> {
                 let path = softcontact_bag::type_path(type_name);
                 $(if path == <$ty>::type_path() {
-                    return Ok(Self::$variant(ros::publisher::<$ty>(node, topic, profile(qos))?));
+                    return Ok(Self::$variant(ros::publisher_by_name::<$ty>(node, topic, profile(qos))?));
                 })+
                 anyhow::bail!("{topic}: type {type_name} is not one the project knows")
             }

@@ -5,6 +5,7 @@
 //! arm's. The first [`MAX_SAMPLES`] free-space samples are analysed (20 s at 1 kHz, far more than the
 //! 18 parameters need), so that memory stays bounded whatever the file.
 
+use softcontact_msgs::topics;
 use std::collections::BTreeMap;
 
 use anyhow::Context;
@@ -16,8 +17,8 @@ use softcontact_msgs::sensor_msgs::JointState;
 
 use crate::identify_cmd::WRENCH;
 
-pub const JOINT_STATES: &str = "/lwr/joint_states";
-pub const TORQUE_COMMAND: &str = "/lwr/joint_torque_command";
+pub const JOINT_STATES: &str = topics::JOINT_STATES.name;
+pub const TORQUE_COMMAND: &str = topics::JOINT_TORQUE_COMMAND.name;
 /// A force reading above this means contact [N].
 pub const CONTACT: f64 = 1.0;
 /// The most samples analysed.

@@ -2,6 +2,7 @@
 //! (pre-drawn random states, many calls cycling through them, best of several repetitions), so that the
 //! two can be compared in one run. Pin the process to one core for stable numbers: `taskset -c 1 …`.
 
+use softcontact_msgs::topics;
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::process::Command;
@@ -261,17 +262,17 @@ fn write_recording(
     path: &std::path::Path,
     readings: &[softcontact_nodes::identify::SyntheticReading],
 ) -> anyhow::Result<u64> {
-    use softcontact_bag::{BagWriter, Qos};
-    use softcontact_msgs::geometry_msgs::{PoseStamped, TransformStamped, TwistStamped, WrenchStamped};
-    use softcontact_msgs::sensor_msgs::JointState;
+    use softcontact_bag::BagWriter;
+    use softcontact_msgs::geometry_msgs::TransformStamped;
+
     use softcontact_msgs::tf2_msgs::TFMessage;
     let mut w = BagWriter::create(path)?;
-    let js = w.add_topic::<JointState>("/lwr/joint_states", Qos::SENSOR)?;
-    let pose = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR)?;
-    let twist = w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR)?;
-    let tf = w.add_topic::<TFMessage>("/tf", Qos::SENSOR)?;
-    let raw = w.add_topic::<WrenchStamped>("/ft_sensor/wrench_raw", Qos::SENSOR)?;
-    let wrench = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR)?;
+    let js = w.add(&topics::JOINT_STATES)?;
+    let pose = w.add(&topics::EE_POSE)?;
+    let twist = w.add(&topics::EE_TWIST)?;
+    let tf = w.add(&topics::TF)?;
+    let raw = w.add(&topics::WRENCH_RAW)?;
+    let wrench = w.add(&topics::WRENCH)?;
     let mut next_flush = 1.0;
     let mut transform = TFMessage { transforms: vec![TransformStamped::default()] };
     for r in readings {

@@ -12,6 +12,7 @@
 //! estimator's newest model at each later command), on both surfaces alike: only the simulated surface
 //! differs between the two runs.
 
+use softcontact_msgs::topics;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -30,8 +31,8 @@ use softcontact_sim::{FtSensorConfig, SimConfig, SurfaceConfig};
 use crate::discrepancy_cmd::{Analysis, DiscrepancyArgs};
 use crate::identify_cmd;
 
-const FORCE_COMMAND: &str = "/deformation_controller/force_command";
-const JOINT_STATES: &str = "/lwr/joint_states";
+const FORCE_COMMAND: &str = topics::FORCE_COMMAND.name;
+const JOINT_STATES: &str = topics::JOINT_STATES.name;
 /// The compared samples' spacing [s].
 const SAMPLE: f64 = 0.01;
 /// How long the replayed cell holds in contact before the first command [s].

@@ -3,6 +3,7 @@
 //! (docs/discrepancy.md; the method is `crates/discrepancy`). This command only reads the recording
 //! into a [`Series`] along the contact normal, runs [`analyse`] and shows the result.
 
+use softcontact_msgs::topics;
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -48,7 +49,7 @@ pub struct DiscrepancyArgs {
 }
 
 /// The F/T node's tares (their stamps zero the sensor's drifted offset).
-const TARE: &str = "/ft_sensor/tare";
+const TARE: &str = topics::TARE.name;
 
 /// Gravity in the frame of the poses (the arm's base, z up) [m/s²].
 const GRAVITY: [f64; 3] = [0.0, 0.0, -9.81];
@@ -134,10 +135,15 @@ fn print_report(report: &Report, name: &str) {
     let n = |v: f64| si(v, "N");
     println!("{name}: baseline {} — in-contact residual RMS {}", report.baseline.kind.id(), n(report.baseline.rms));
     println!(
-        "noise floor {} ({:?}; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
+        "noise floor {} (from {}; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
          {:.4e}, {:.4e}, {} ± {} → RMS {}",
         n(report.noise_floor),
-        report.noise_source,
+        match report.noise_source {
+            softcontact_discrepancy::NoiseSource::FreeSpace => "free space",
+            softcontact_discrepancy::NoiseSource::FreeSpaceDifferences => "free space's consecutive differences",
+            softcontact_discrepancy::NoiseSource::HoldingDifferences => "holds' consecutive differences",
+            softcontact_discrepancy::NoiseSource::AllDifferences => "all consecutive differences",
+        },
         n(report.level_noise),
         report.refit.stiffness,
         report.refit.damping,
@@ -361,7 +367,8 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         noise_floor: report.noise_floor,
     };
     for path in discrepancy_figures::write(&args.out, &figures)? {
-        println!("figure: {}", path.display());
+        let what = if path.extension().is_some_and(|e| e == "csv") { "samples" } else { "figure" };
+        println!("{what}: {}", path.display());
     }
     if let Some(path) = &id_args.json {
         let mut value = serde_json::to_value(&report)?;

@@ -2,11 +2,12 @@
 //! action /deformation_controller/press, and report the result: the force reached at the end of the
 //! move (the force-control paper reads the force there) and its error.
 
+use softcontact_msgs::topics;
 use std::time::{Duration, Instant};
 
 use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalId, GoalStatusEnum};
 use ros2_client::{ActionTypeName, Name};
-use softcontact_msgs::softcontact_msgs::{ControllerState, PressForceFeedback, PressForceGoal, PressForceResult};
+use softcontact_msgs::softcontact_msgs::{PressForceFeedback, PressForceGoal, PressForceResult};
 use softcontact_nodes::deformation_controller::PRESS_ACTION;
 use softcontact_nodes::ros;
 
@@ -36,7 +37,7 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.force.is_finite() && args.force >= 0.0, "the force must be a number ≥ 0");
     anyhow::ensure!(args.duration.is_finite() && args.duration > 0.0, "the duration must be positive");
     let mut node = ros::node("softcontact_force")?;
-    let states = ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
+    let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
     let press = press_client(&mut node, &args.service_mapping)?;
     // The controller publishes its state while it commands the arm; without it (no contact yet, the KRC
     // not in torque mode, a fault) the goal is sent all the same, and the controller says why it refuses.

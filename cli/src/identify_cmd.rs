@@ -3,6 +3,7 @@
 //! the estimated surface: the force-control paper's fits at the force onset carry the onset's error in the deformation
 //! (k off by several % on recordings made by others), and are shown beside them.
 
+use softcontact_msgs::topics;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -18,10 +19,10 @@ use softcontact_nodes::identify::{FramesFrom, Identification, Identifier};
 use crate::table::{self, Depth, Table};
 use crate::tangential_paths;
 
-pub const WRENCH: &str = "/ft_sensor/wrench";
-pub const POSE: &str = "/lwr/ee_pose";
-pub const TWIST: &str = "/lwr/ee_twist";
-pub const TF_STATIC: &str = "/tf_static";
+pub const WRENCH: &str = topics::WRENCH.name;
+pub const POSE: &str = topics::EE_POSE.name;
+pub const TWIST: &str = topics::EE_TWIST.name;
+pub const TF_STATIC: &str = topics::TF_STATIC.name;
 /// The most samples fitted (28 hours at 10 ms).
 const MAX_WINDOW: usize = 10_000_000;
 
@@ -329,7 +330,7 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
         id.readings,
         id.unpaired,
         match id.frames {
-            FramesFrom::TfStatic => "/tf_static",
+            FramesFrom::TfStatic => TF_STATIC,
             FramesFrom::Urdf => "the URDF (no /tf_static in the recording)",
         }
     );

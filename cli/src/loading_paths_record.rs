@@ -9,9 +9,10 @@
 //! surface, and the surface itself creeps during the experiment: neither is written anywhere but in the
 //! forces.
 
+use softcontact_msgs::topics;
 use std::path::{Path, PathBuf};
 
-use softcontact_bag::{BagWriter, Qos};
+use softcontact_bag::BagWriter;
 use softcontact_contact::{Family, LoadingPath};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
@@ -53,9 +54,9 @@ fn stamp(ns: u64) -> Time {
 
 fn write_family<'a>(file: &Path, runs: impl Iterator<Item = &'a BenchRun>) -> anyhow::Result<()> {
     let mut w = BagWriter::create(file)?;
-    let tf_static = w.add_topic::<TFMessage>("/tf_static", Qos::LATCHED)?;
-    let pose_channel = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR)?;
-    let wrench_channel = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR)?;
+    let tf_static = w.add(&topics::TF_STATIC)?;
+    let pose_channel = w.add(&topics::EE_POSE)?;
+    let wrench_channel = w.add(&topics::WRENCH)?;
     let aligned = nalgebra::Isometry3::identity();
     let tf =
         TFMessage { transforms: vec![transform(lwr4::TOOL_FRAME, lwr4::FT_SENSOR_FRAME, &aligned, stamp(START_NS))] };

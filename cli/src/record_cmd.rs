@@ -1,5 +1,6 @@
 //! `softcontact record` and `softcontact replay`: like `ros2 bag record` and `ros2 bag play`, in MCAP.
 
+use softcontact_msgs::topics;
 use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -7,7 +8,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use softcontact_bag::{AnyMessage, BagWriter, Qos, Recording};
 use softcontact_nodes::ros;
 
-use crate::any_topic::{AnyPublisher, AnySubscription, GRAPH_TOPICS};
+use crate::any_topic::{AnyPublisher, AnySubscription, graph_topics};
 
 #[derive(Debug, clap::Args)]
 pub struct RecordArgs {
@@ -48,9 +49,9 @@ pub struct ReplayArgs {
 /// Recorded topics whose messages command the arm when published into a live graph: torques the driver
 /// applies, force commands the controller executes, contact models the controller places its pushes with.
 pub const ACTUATOR_TOPICS: [(&str, &str); 3] = [
-    ("/lwr/joint_torque_command", "the driver applies them to the arm"),
-    ("/deformation_controller/force_command", "the controller moves the arm to them"),
-    ("/contact_estimator/model", "the controller places its pushes with it"),
+    (topics::JOINT_TORQUE_COMMAND.name, "the driver applies them to the arm"),
+    (topics::FORCE_COMMAND.name, "the controller moves the arm to them"),
+    (topics::CONTACT_MODEL.name, "the controller places its pushes with it"),
 ];
 
 /// Types that command the arm on whatever topic they were recorded.
@@ -119,14 +120,15 @@ fn cpu_seconds() -> Option<f64> {
 /// The topics asked for, with types and QoS.
 fn resolve(topics: &[String]) -> anyhow::Result<Vec<(String, String, Qos)>> {
     if topics.is_empty() {
-        return Ok(GRAPH_TOPICS.iter().map(|(n, t, q)| (n.to_string(), t.to_string(), *q)).collect());
+        return Ok(graph_topics().into_iter().map(|(n, t, q)| (n.to_string(), t, q)).collect());
     }
+    let graph = graph_topics();
     topics
         .iter()
         .map(|spec| {
             let (name, ty) = spec.split_once(':').map_or((spec.as_str(), None), |(n, t)| (n, Some(t)));
             anyhow::ensure!(name.starts_with('/'), "topic `{name}`: names start with /");
-            let known = GRAPH_TOPICS.iter().find(|(n, _, _)| *n == name);
+            let known = graph.iter().find(|(n, _, _)| *n == name);
             match (ty, known) {
                 (Some(ty), _) => {
                     anyhow::ensure!(AnyMessage::is_known(ty), "{name}: type {ty} is not one the project knows");
@@ -135,7 +137,7 @@ fn resolve(topics: &[String]) -> anyhow::Result<Vec<(String, String, Qos)>> {
                 (None, Some((_, ty, qos))) => Ok((name.to_string(), ty.to_string(), *qos)),
                 (None, None) => anyhow::bail!(
                     "{name} is not a topic of the graph; give its type as {name}:pkg/msg/Type (graph topics: {})",
-                    GRAPH_TOPICS.iter().map(|t| t.0).collect::<Vec<_>>().join(" ")
+                    graph.iter().map(|t| t.0).collect::<Vec<_>>().join(" ")
                 ),
             }
         })
@@ -247,7 +249,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     let mut node = ros::node("softcontact_replay")?;
     let mut publishers = Vec::new();
     for topic in plan {
-        let qos = topic.qos.or_else(|| GRAPH_TOPICS.iter().find(|t| t.0 == topic.name).map(|t| t.2));
+        let qos = topic.qos.or_else(|| graph_topics().into_iter().find(|t| t.0 == topic.name).map(|t| t.2));
         let publisher = AnyPublisher::new(&mut node, &topic.name, &topic.type_name, qos.unwrap_or(Qos::SENSOR))?;
         let what = if actuator(&topic.name, &topic.type_name).is_some() { ", commands to the arm" } else { "" };
         println!("replaying {} ({}, {} messages{what})", topic.name, topic.type_name, topic.message_count);

@@ -177,7 +177,7 @@ pub fn print(r: &TangentialReport) {
         r.k_n / per_mm,
         r.zero_depth * 1e6
     );
-    println!("  {:<22}{:>16}{:>14}{:>12}{:>16}", "law", "k_t [N/mm^1.5]", "μ", "RMS [N]", "held-out RMS [N]");
+    println!("  {:<22}{:>16}{:>14}{:>12}{:>18}", "law", "k_t [N/mm^1.5]", "μ", "RMS [N]", "held-out RMS [N]");
     for (f, chosen) in [
         (&id.walton, id.chosen == id.walton.law.law),
         (&id.mindlin_deresiewicz, id.chosen == id.mindlin_deresiewicz.law.law),
@@ -188,7 +188,7 @@ pub fn print(r: &TangentialReport) {
             format!("≥ {:.2}", f.friction_at_least)
         };
         println!(
-            "  {:<22}{:>16.4}{:>14}{:>12.4}{:>16.4}{}",
+            "  {:<22}{:>16.4}{:>14}{:>12.4}{:>18.4}{}",
             f.law.law.id(),
             f.law.stiffness / per_mm,
             mu,

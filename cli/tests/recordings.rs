@@ -177,11 +177,12 @@ fn commands_inside() {
     let file = path.to_str().unwrap();
     let mut node = ros::node("replay_safety_test").unwrap();
     let qos = ros::reliable_qos();
-    let torques = ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", qos.clone()).unwrap();
+    let torques = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", qos.clone()).unwrap();
     let forces =
-        ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", qos.clone()).unwrap();
-    let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", qos.clone()).unwrap();
-    let wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", qos).unwrap();
+        ros::subscription_by_name::<ForceCommand>(&mut node, "/deformation_controller/force_command", qos.clone())
+            .unwrap();
+    let models = ros::subscription_by_name::<ContactModel>(&mut node, "/contact_estimator/model", qos.clone()).unwrap();
+    let wrenches = ros::subscription_by_name::<WrenchStamped>(&mut node, "/ft_sensor/wrench", qos).unwrap();
     let replay = |extra: &[&str]| {
         let mut child = softcontact(&[&["replay", file, "--wait", "2"][..], extra].concat())
             .stdout(Stdio::piped())

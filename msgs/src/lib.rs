@@ -23,6 +23,8 @@ pub trait RosType {
     }
 }
 
+pub mod topics;
+
 include!(concat!(env!("OUT_DIR"), "/definitions.rs"));
 
 /// The full ROS 2 definition of a type named `pkg/msg/Name` (or `pkg/Name`), if the project knows it.

@@ -2,6 +2,7 @@
 //! per docs/architecture.md (sensor streams best-effort keep-last, commands and models reliable, static frames
 //! latched), topics by their ROS 2 names and types.
 
+use softcontact_msgs::topics::{self, Topic};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -153,7 +154,26 @@ fn topic<T: RosType>(
     Ok(node.create_topic(&Name::new(ns, base)?, T::type_name(), qos)?)
 }
 
+/// A publisher of one of the graph's topics (`softcontact_msgs::topics`).
 pub fn publisher<T: RosType + Serialize>(
+    node: &mut Node,
+    topic: &Topic<T>,
+    qos: QosProfile,
+) -> anyhow::Result<ros2_client::Publisher<T>> {
+    publisher_by_name(node, topic.name, qos)
+}
+
+/// A subscription to one of the graph's topics (`softcontact_msgs::topics`).
+pub fn subscription<T: RosType + DeserializeOwned + 'static>(
+    node: &mut Node,
+    topic: &Topic<T>,
+    qos: QosProfile,
+) -> anyhow::Result<ros2_client::Subscription<T>> {
+    subscription_by_name(node, topic.name, qos)
+}
+
+/// A publisher of a topic named at run time (replaying a recording's topics).
+pub fn publisher_by_name<T: RosType + Serialize>(
     node: &mut Node,
     path: &str,
     qos: QosProfile,
@@ -162,7 +182,8 @@ pub fn publisher<T: RosType + Serialize>(
     Ok(node.create_publisher(&t, Some(qos))?)
 }
 
-pub fn subscription<T: RosType + DeserializeOwned + 'static>(
+/// A subscription to a topic named at run time (recording any topic).
+pub fn subscription_by_name<T: RosType + DeserializeOwned + 'static>(
     node: &mut Node,
     path: &str,
     qos: QosProfile,
@@ -194,7 +215,10 @@ pub struct Clock {
 impl Clock {
     pub fn new(node: &mut Node, use_sim_time: bool) -> anyhow::Result<Self> {
         let sim = if use_sim_time {
-            Some((subscription(node, "/clock", reliable_qos())?, softcontact_msgs::builtin_interfaces::Time::default()))
+            Some((
+                subscription_by_name(node, topics::CLOCK.name, reliable_qos())?,
+                softcontact_msgs::builtin_interfaces::Time::default(),
+            ))
         } else {
             None
         };

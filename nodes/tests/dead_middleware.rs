@@ -105,12 +105,15 @@ fn nodes_notice_a_dead_middleware() {
     let logs = std::env::temp_dir().join(format!("softcontact-dead-middleware-{}", std::process::id()));
     std::fs::create_dir_all(&logs).unwrap();
     let mut node = ros::node("dead_middleware_test").unwrap();
-    let joint_states = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let joint_states =
+        ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
     let estimator_states =
-        ros::subscription::<ContactState>(&mut node, "/contact_estimator/state", ros::sensor_qos()).unwrap();
+        ros::subscription_by_name::<ContactState>(&mut node, "/contact_estimator/state", ros::sensor_qos()).unwrap();
     let controller_states =
-        ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos()).unwrap();
-    let diagnostics = ros::subscription::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos()).unwrap();
+        ros::subscription_by_name::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())
+            .unwrap();
+    let diagnostics =
+        ros::subscription_by_name::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos()).unwrap();
 
     let dead_after = format!("dead_after:={DEAD_AFTER}");
     let mut procs = Processes { logs: logs.clone(), children: Vec::new() };

@@ -22,11 +22,14 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
         return;
     }
     let mut node = ros::node("graph_test").unwrap();
-    let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
-    let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos()).unwrap();
-    let wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
-    let diagnostics = ros::subscription::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos()).unwrap();
-    let torque = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
+    let joints = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let poses = ros::subscription_by_name::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos()).unwrap();
+    let wrenches =
+        ros::subscription_by_name::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
+    let diagnostics =
+        ros::subscription_by_name::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos()).unwrap();
+    let torque =
+        ros::publisher_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
     let bias = node
         .create_client::<TriggerRequest, TriggerResponse>(
             ros::service_mapping("cyclone").unwrap(),
@@ -74,7 +77,7 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
             if n_joints == 1500 {
                 let mut node = ros::node("stranger").unwrap();
                 let qos = ros::reliable_qos();
-                let p = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", qos).unwrap();
+                let p = ros::publisher_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", qos).unwrap();
                 stranger = Some((node, p));
             }
             if n_joints > 2000 && first_q.is_none() {
@@ -141,8 +144,8 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
     }
     use softcontact_msgs::rosgraph_msgs::Clock;
     let mut node = ros::node("lockstep_test").unwrap();
-    let clock = ros::subscription::<Clock>(&mut node, "/clock", ros::reliable_qos()).unwrap();
-    let joints = ros::subscription::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let clock = ros::subscription_by_name::<Clock>(&mut node, "/clock", ros::reliable_qos()).unwrap();
+    let joints = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
     let mut driver =
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "use_sim_time:=true", "-p", "exit_after_silence:=1"]);
     std::thread::sleep(Duration::from_millis(500)); // discovery

@@ -26,8 +26,8 @@ struct Flow {
 impl Flow {
     fn new(node: &mut ros2_client::Node) -> Self {
         Flow {
-            joint_states: ros::subscription(node, "/lwr/joint_states", ros::sensor_qos()).unwrap(),
-            states: ros::subscription(node, "/contact_estimator/state", ros::sensor_qos()).unwrap(),
+            joint_states: ros::subscription_by_name(node, "/lwr/joint_states", ros::sensor_qos()).unwrap(),
+            states: ros::subscription_by_name(node, "/contact_estimator/state", ros::sensor_qos()).unwrap(),
         }
     }
 

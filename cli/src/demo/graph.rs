@@ -10,6 +10,7 @@
 //! Then, as a user would: `softcontact discrepancy` on that recording, and a second graph started with
 //! the parameter overlay it writes, for the force commands again through the augmented model.
 
+use softcontact_msgs::topics;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -201,12 +202,10 @@ struct Client {
 impl Client {
     fn new() -> anyhow::Result<Self> {
         let mut node = ros::node("softcontact_demo")?;
-        let states =
-            ros::subscription::<ControllerState>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
-        let models = ros::subscription::<ContactModel>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
-        let truth = ros::subscription::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
-        let commands =
-            ros::publisher::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
+        let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
+        let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
+        let truth = ros::subscription(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
+        let commands = ros::publisher(&mut node, &topics::FORCE_COMMAND, ros::reliable_qos())?;
         let geometry = ContactGeometry::lwr4(Vector3::from(deformation_controller::Params::default().normal))
             .context("the controller's normal")?;
         let heard =

@@ -1,14 +1,12 @@
 //! The demo's recording: what the graph's nodes would publish, written to ROS 2 MCAP as the run goes
 //! (stamps: the simulated time after the wall-clock time the demo started).
 
+use softcontact_msgs::topics;
 use std::path::Path;
 
-use softcontact_bag::{BagWriter, Qos};
+use softcontact_bag::BagWriter;
 use softcontact_msgs::builtin_interfaces::Time;
-use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
-use softcontact_msgs::sensor_msgs::JointState;
-use softcontact_msgs::softcontact_msgs::{ContactModel, ContactState, ControllerState, ForceCommand};
-use softcontact_msgs::tf2_msgs::TFMessage;
+use softcontact_msgs::softcontact_msgs::ForceCommand;
 use softcontact_nodes::cell::Tick;
 use softcontact_nodes::contact_estimator::ModelOut;
 use softcontact_nodes::messages;
@@ -40,17 +38,17 @@ impl Recorder {
     pub fn create(path: &Path, epoch: u64) -> anyhow::Result<Self> {
         let _ = std::fs::remove_file(path);
         let mut w = BagWriter::create(path)?;
-        let tf_static = w.add_topic::<TFMessage>("/tf_static", Qos::LATCHED)?;
+        let tf_static = w.add(&topics::TF_STATIC)?;
         let channels = Channels {
-            joint_states: w.add_topic::<JointState>("/lwr/joint_states", Qos::SENSOR)?,
-            ee_pose: w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR)?,
-            ee_twist: w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR)?,
-            wrench: w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR)?,
-            tare: w.add_topic::<WrenchStamped>("/ft_sensor/tare", Qos::RELIABLE)?,
-            controller_state: w.add_topic::<ControllerState>("/deformation_controller/state", Qos::SENSOR)?,
-            estimator_state: w.add_topic::<ContactState>("/contact_estimator/state", Qos::SENSOR)?,
-            model: w.add_topic::<ContactModel>("/contact_estimator/model", Qos::RELIABLE)?,
-            force_command: w.add_topic::<ForceCommand>("/deformation_controller/force_command", Qos::RELIABLE)?,
+            joint_states: w.add(&topics::JOINT_STATES)?,
+            ee_pose: w.add(&topics::EE_POSE)?,
+            ee_twist: w.add(&topics::EE_TWIST)?,
+            wrench: w.add(&topics::WRENCH)?,
+            tare: w.add(&topics::TARE)?,
+            controller_state: w.add(&topics::CONTROLLER_STATE)?,
+            estimator_state: w.add(&topics::CONTACT_STATE)?,
+            model: w.add(&topics::CONTACT_MODEL)?,
+            force_command: w.add(&topics::FORCE_COMMAND)?,
         };
         w.write(tf_static, epoch, &messages::tool_to_sensor_static(stamp(epoch)))?;
         let model = softcontact_dynamics::lwr4::model();

@@ -21,6 +21,16 @@ impl Qos {
     pub const RELIABLE: Qos = Qos { reliable: true, transient_local: false, depth: 10 };
     pub const LATCHED: Qos = Qos { reliable: true, transient_local: true, depth: 1 };
 
+    /// The profile a publisher of this delivery offers.
+    pub fn of(delivery: softcontact_msgs::topics::Delivery) -> Qos {
+        use softcontact_msgs::topics::Delivery;
+        match delivery {
+            Delivery::Sensor => Qos::SENSOR,
+            Delivery::Reliable => Qos::RELIABLE,
+            Delivery::Latched => Qos::LATCHED,
+        }
+    }
+
     /// rosbag2's (Jazzy) YAML list of profiles, as a string.
     pub fn to_yaml(&self) -> String {
         let infinite = "\n    sec: 2147483647\n    nsec: 4294967295";

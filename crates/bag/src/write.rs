@@ -71,6 +71,11 @@ impl BagWriter {
     }
 
     /// Adds a topic of a type the project knows; returns its channel for [`Self::write`].
+    /// Adds one of the graph's topics (`softcontact_msgs::topics`), with the QoS its publisher offers.
+    pub fn add<T: RosType>(&mut self, topic: &softcontact_msgs::topics::Topic<T>) -> Result<u16> {
+        self.add_topic::<T>(topic.name, Qos::of(topic.delivery))
+    }
+
     pub fn add_topic<T: RosType>(&mut self, topic: &str, qos: Qos) -> Result<u16> {
         self.add_topic_with_definition(topic, &T::type_path(), T::definition(), qos)
     }

@@ -6,15 +6,14 @@
 //! (a dead publisher or middleware): it exits with an error naming the stream, and the launch script
 //! stops the graph.
 
+use softcontact_msgs::topics;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
 use mio::{Events, Interest, Poll, Token};
 use nalgebra::Vector3;
-use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
-use softcontact_msgs::softcontact_msgs::ContactState;
 use softcontact_msgs::std_msgs::Header;
-use softcontact_nodes::contact_estimator::{ForcePairing, ModelMsg, Params};
+use softcontact_nodes::contact_estimator::{ForcePairing, Params};
 use softcontact_nodes::geometry;
 use softcontact_nodes::liveness::{StreamWatch, first_dead};
 use softcontact_nodes::params::{self, ParamArgs};
@@ -38,11 +37,11 @@ fn main() -> anyhow::Result<()> {
     let mut estimator = p.estimator(f64::NEG_INFINITY)?;
     let normal = Vector3::from(p.normal).normalize();
     let mut node = ros::node_with_parameters("contact_estimator", declared)?;
-    let mut wrenches = ros::subscription::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
-    let poses = ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
-    let twists = ros::subscription::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
-    let state_pub = ros::publisher::<ContactState>(&mut node, "/contact_estimator/state", ros::sensor_qos())?;
-    let model_pub = ros::publisher::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+    let mut wrenches = ros::subscription(&mut node, &topics::WRENCH, ros::sensor_qos())?;
+    let poses = ros::subscription(&mut node, &topics::EE_POSE, ros::sensor_qos())?;
+    let twists = ros::subscription(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
+    let state_pub = ros::publisher(&mut node, &topics::CONTACT_STATE, ros::sensor_qos())?;
+    let model_pub = ros::publisher(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
     let mut poll = Poll::new()?;
     poll.registry().register(&mut wrenches, Token(0), Interest::READABLE)?;
@@ -60,8 +59,8 @@ fn main() -> anyhow::Result<()> {
     let mut next_state = f64::NEG_INFINITY;
     let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
     let mut was_in_contact = false;
-    let mut wrench_watch = StreamWatch::new("/ft_sensor/wrench", 1000.0, p.dead_after);
-    let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
+    let mut wrench_watch = StreamWatch::new(topics::WRENCH.name, 1000.0, p.dead_after);
+    let mut pose_watch = StreamWatch::new(topics::EE_POSE.name, 1000.0, p.dead_after);
     let mut dead = None;
     // Poses, twists and wrenches each from one writer, the first heard while it is the only one
     // (softcontact_nodes::writer_pin): a stranger's zero wrenches once kept the estimator from publishing

@@ -11,11 +11,11 @@
 //! it is the only one on its topic (`softcontact_nodes::writer_pin`): a stranger's joint states stamped
 //! ahead once silenced this controller, and a stranger's wrenches would steer its force.
 
+use softcontact_msgs::topics;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
 use mio::{Events, Interest, Poll, Token};
-use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_nodes::deformation_controller::{ControllerInterface, ControllerNode, JointSample, Params};
 use softcontact_nodes::geometry;
@@ -41,10 +41,10 @@ fn main() -> anyhow::Result<()> {
     let stop = ros::shutdown_flag()?;
     let mut control = ControllerNode::from_params(&p)?;
     let mut topics = ControllerInterface::new(&p, declared)?;
-    let mut joint_states = ros::subscription::<JointState>(&mut topics.node, "/lwr/joint_states", ros::sensor_qos())?;
-    let wrenches = ros::subscription::<WrenchStamped>(&mut topics.node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    let mut joint_states = ros::subscription(&mut topics.node, &topics::JOINT_STATES, ros::sensor_qos())?;
+    let wrenches = ros::subscription(&mut topics.node, &topics::WRENCH, ros::sensor_qos())?;
     // The KRC's external torque estimate, to check the force with (published before each joint state).
-    let external = ros::subscription::<JointState>(&mut topics.node, "/lwr/external_torque", ros::sensor_qos())?;
+    let external = ros::subscription(&mut topics.node, &topics::EXTERNAL_TORQUE, ros::sensor_qos())?;
     let mut poll = Poll::new()?;
     poll.registry().register(&mut joint_states, Token(0), Interest::READABLE)?;
     let mut events = Events::with_capacity(8);
@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
 
     let start = Instant::now();
     let now = || start.elapsed().as_secs_f64();
-    let mut joint_states_watch = StreamWatch::new("/lwr/joint_states", 1000.0, p.dead_after);
+    let mut joint_states_watch = StreamWatch::new(topics::JOINT_STATES.name, 1000.0, p.dead_after);
     let mut dead = None;
     let (mut pin_joint_states, mut pin_wrenches, mut pin_external) = Default::default();
     let mut strangers_logged = 0;

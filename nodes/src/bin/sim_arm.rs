@@ -3,12 +3,12 @@
 //! Point the driver nodes at it as at the hardware. It publishes what only a simulator knows: the true
 //! contact wrench on the hand (/sim_arm/contact_wrench, world, 1 kHz), and /clock in lockstep.
 
+use softcontact_msgs::topics;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use clap::Parser;
 use softcontact_msgs::builtin_interfaces::Time;
-use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::rosgraph_msgs::Clock;
 use softcontact_nodes::messages;
 use softcontact_nodes::params::{self, ParamArgs};
@@ -63,9 +63,8 @@ fn main() -> anyhow::Result<()> {
     // The hardware it stands in for has no ROS side: a DDS participant only for what a simulator alone
     // knows — its time (/clock, in lockstep) and the true contact wrench, to grade runs on.
     let mut node = ros::node_with_parameters("sim_arm", declared)?;
-    let clock =
-        if p.lockstep { Some(ros::publisher::<Clock>(&mut node, "/clock", ros::reliable_qos())?) } else { None };
-    let contact_wrench = ros::publisher::<WrenchStamped>(&mut node, "/sim_arm/contact_wrench", ros::sensor_qos())?;
+    let clock = if p.lockstep { Some(ros::publisher(&mut node, &topics::CLOCK, ros::reliable_qos())?) } else { None };
+    let contact_wrench = ros::publisher(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
     eprintln!("sim_arm: ready: FRI from {} to {}, RDT at {}", server.fri_addr()?, p.fri_remote, server.rdt_addr()?);
     let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());
     let stats = server.run(|sim| {

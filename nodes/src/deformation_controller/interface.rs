@@ -14,6 +14,7 @@
 //! from the present reference, as a new command mid-move does), which is aborted. A cancel request is
 //! rejected — stopping a move midway is a new goal, so that the hand never stops with a jolt.
 
+use softcontact_msgs::topics;
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -113,9 +114,8 @@ impl ControllerInterface {
     /// The node "deformation_controller", serving its `declared` parameters, with its topics and action.
     pub fn new(p: &Params, declared: crate::params::Declared) -> anyhow::Result<Self> {
         let mut node = ros::node_with_parameters("deformation_controller", declared)?;
-        let commands =
-            ros::subscription::<ForceCommand>(&mut node, "/deformation_controller/force_command", ros::reliable_qos())?;
-        let models = ros::subscription::<ModelMsg>(&mut node, "/contact_estimator/model", ros::reliable_qos())?;
+        let commands = ros::subscription(&mut node, &topics::FORCE_COMMAND, ros::reliable_qos())?;
+        let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
         let server = press_server(&mut node, &p.service_mapping)?;
         let mapping = ros::service_mapping(&p.service_mapping)?;
         let trigger = ServiceTypeName::new("std_srvs", "Trigger");
@@ -127,8 +127,8 @@ impl ControllerInterface {
         let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
         let bias_client =
             node.create_client::<TriggerRequest, TriggerResponse>(mapping, &bias_name, &trigger, q1, q2)?;
-        let torque_pub = ros::publisher::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?;
-        let state_pub = ros::publisher::<StateMsg>(&mut node, "/deformation_controller/state", ros::sensor_qos())?;
+        let torque_pub = ros::publisher(&mut node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?;
+        let state_pub = ros::publisher(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
         Ok(Self {
             node,
             retare_server,

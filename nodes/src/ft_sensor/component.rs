@@ -1,6 +1,7 @@
 //! The `ft_sensor` node's process loop, hosted by its own binary or by `lwr_control` (see the binary
 //! for what it publishes and serves).
 
+use softcontact_msgs::topics;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -8,8 +9,7 @@ use std::time::{Duration, Instant};
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_dynamics::lwr4;
-use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
-use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
+use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
 use super::{FtConfig, FtSensorNode, Params, StartupTare};
@@ -44,15 +44,15 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut client = RdtClient::connect(p.sensor, ft)?;
     client.new_stream_after = Duration::from_secs_f64(p.stale_after);
     let mut node = ros::node_with_parameters("ft_sensor", declared)?;
-    let raw_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench_raw", ros::sensor_qos())?;
-    let wrench_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos())?;
+    let raw_pub = ros::publisher(&mut node, &topics::WRENCH_RAW, ros::sensor_qos())?;
+    let wrench_pub = ros::publisher(&mut node, &topics::WRENCH, ros::sensor_qos())?;
     // Every tare taken (its bias, stamped when taken): a recording then shows where the sensor's drifted
     // offset was zeroed, which the discrepancy workflow needs to tell a drift from a moving surface.
-    let tare_pub = ros::publisher::<WrenchStamped>(&mut node, "/ft_sensor/tare", ros::reliable_qos())?;
-    let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
+    let tare_pub = ros::publisher(&mut node, &topics::TARE, ros::reliable_qos())?;
+    let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
     // Composed, the driver hands the pose over in memory.
     let poses = match links.poses {
-        None => Some(ros::subscription::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?),
+        None => Some(ros::subscription(&mut node, &topics::EE_POSE, ros::sensor_qos())?),
         Some(_) => None,
     };
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
@@ -77,7 +77,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut logged_network_errors = 0;
     let mut startup_tare = StartupTare::new(p.tare_after);
     let start = Instant::now();
-    let mut pose_watch = StreamWatch::new("/lwr/ee_pose", 1000.0, p.dead_after);
+    let mut pose_watch = StreamWatch::new(topics::EE_POSE.name, 1000.0, p.dead_after);
     let mut poses_dead: Option<DeadStream> = None;
     let mut newest_shared_pose = None;
     while !ros::stopping(&stop) {

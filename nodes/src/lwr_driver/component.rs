@@ -1,6 +1,7 @@
 //! The `lwr_driver` node's process loop, hosted by its own binary or as the FRI thread of `lwr_control`
 //! with the controller answering in process (see the binary for what it publishes and takes).
 
+use softcontact_msgs::topics;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
@@ -8,9 +9,6 @@ use std::time::{Duration, Instant};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
-use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
-use softcontact_msgs::sensor_msgs::JointState;
-use softcontact_msgs::tf2_msgs::TFMessage;
 
 use super::{DriverCounters, DriverError, DriverOutput, LwrDriver, Params, Refusals, Waiting};
 use crate::deformation_controller::InProcessController;
@@ -113,21 +111,21 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let Links { mut controller, poses } = links;
     let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;
-    let joint_states = ros::publisher::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos())?;
+    let joint_states = ros::publisher(&mut node, &topics::JOINT_STATES, ros::sensor_qos())?;
     // For a controller of its own; composed, the controller has the estimate in memory, and the FRI
     // thread's share of two cores is spared a fifth message a cycle.
     let external_torque = match controller {
-        None => Some(ros::publisher::<JointState>(&mut node, "/lwr/external_torque", ros::sensor_qos())?),
+        None => Some(ros::publisher(&mut node, &topics::EXTERNAL_TORQUE, ros::sensor_qos())?),
         Some(_) => None,
     };
-    let ee_pose = ros::publisher::<PoseStamped>(&mut node, "/lwr/ee_pose", ros::sensor_qos())?;
-    let ee_twist = ros::publisher::<TwistStamped>(&mut node, "/lwr/ee_twist", ros::sensor_qos())?;
-    let tf = ros::publisher::<TFMessage>(&mut node, "/tf", ros::sensor_qos())?;
-    let tf_static = ros::publisher::<TFMessage>(&mut node, "/tf_static", ros::latched_qos())?;
-    let diag = ros::publisher::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos())?;
+    let ee_pose = ros::publisher(&mut node, &topics::EE_POSE, ros::sensor_qos())?;
+    let ee_twist = ros::publisher(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
+    let tf = ros::publisher(&mut node, &topics::TF, ros::sensor_qos())?;
+    let tf_static = ros::publisher(&mut node, &topics::TF_STATIC, ros::latched_qos())?;
+    let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
     // Composed, the controller answers in process: nobody else may command the arm.
     let commands = match controller {
-        None => Some(ros::subscription::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos())?),
+        None => Some(ros::subscription(&mut node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?),
         Some(_) => None,
     };
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
@@ -152,7 +150,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
     let start = Instant::now();
-    let mut command_watch = StreamWatch::new("/lwr/joint_torque_command", 1000.0, p.dead_after);
+    let mut command_watch = StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, p.dead_after);
     let mut commands_dead: Option<DeadStream> = None;
     // The counters at the last diagnostics, for what was refused since.
     let mut counted = DriverCounters::default();
