@@ -190,6 +190,7 @@ fn the_hidden_effect_corpus_meets_its_goals() {
         "time_delay",
         "sensor_crosstalk",
         "tool_gravity",
+        "adhesion",
     ] {
         assert!(hidden.contains(id), "{id} is never hidden: {shown}");
     }

@@ -78,6 +78,11 @@ fn dice_law() -> ContactModel {
     softcontact_sim::dice()
 }
 
+/// The peak force of a surface's pushes [N].
+fn max_force_of(((_, _), max_force): ((f64, f64), f64)) -> f64 {
+    max_force
+}
+
 fn with(mut m: ContactModel, effects: &[Effect]) -> ContactModel {
     m.effects.extend_from_slice(effects);
     m
@@ -314,6 +319,17 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
                 case(format!("null: {law}, {what}"), base.clone(), sensor.clone(), geometry, vec![], visible_in);
             }
         }
+    }
+    // Effects added to the library later, last: the cases before them keep their seeds.
+    for (law, base, geometry) in [("sponge", sponge_law(), sponge), ("dice", dice_law(), dice)] {
+        case(
+            format!("{law}: adhesion pulling 10 % of the peak force, letting go 2 mm beyond the surface"),
+            with(base.clone(), &[Effect::Adhesion { force: 0.1 * max_force_of(geometry), range: 0.002 }]),
+            FtSensorConfig::gamma(),
+            geometry,
+            vec!["adhesion"],
+            "unloading and lift-off (pushes)",
+        );
     }
     for c in out.iter_mut() {
         if c.visible_in == ONE_HOLD {

@@ -4,12 +4,13 @@
 //!
 //! For a fixed structure the force is linear in its amplitudes:
 //!
-//! f = k z^a + λ z^b sgn(ż)|ż|^c + (k h) z^a tanh(ż/v₀) + Σᵢ kᵢ rᵢ(t) + Σᵢ sᵢ₀ e^{−(t−t₀)/τᵢ} + b
+//! f = k z^a + λ z^b sgn(ż)|ż|^c + (k h) z^a tanh(ż/v₀) + Σᵢ kᵢ rᵢ(t) + Σᵢ sᵢ₀ e^{−(t−t₀)/τᵢ} − F_a u(t) + b
 //!
 //! where rᵢ is the Maxwell branch ṙ = ż − r/τᵢ driven by the samples' own deformation (the force of a
 //! branch of unit stiffness; [`maxwell_step`], the model's own step), restarted at zero where the window
 //! has a gap (the contact was left: its samples are in contact only), sᵢ₀ the branch force the window
-//! starts with, and b the sensor's offset now (its bias and the drift since the tare, as one constant
+//! starts with, u the share of an adhesion's pull-off force F_a (its range fixed; the window's deepest
+//! deformation its peak), and b the sensor's offset now (its bias and the drift since the tare, as one constant
 //! over the window). Least squares by QR; an amplitude fitted unphysical (λ, kᵢ < 0, h outside [0, 1)) is
 //! fixed at zero and the rest fitted again. The surface is placed by a golden-section search of the
 //! residual over the offset range, as [`crate::estimate_contact_offset`] does for the base law.
@@ -39,6 +40,7 @@ enum Column {
     Hysteresis { velocity_scale: f64 },
     Branch { index: usize, time_constant: f64 },
     BranchStart { time_constant: f64 },
+    Adhesion { range: f64 },
     Bias,
 }
 
@@ -54,6 +56,7 @@ fn columns(structure: &ContactModel) -> Vec<Column> {
                 cols.push(Column::BranchStart { time_constant });
             }
             Effect::SensorBias { .. } | Effect::SensorDrift { .. } => bias = true,
+            Effect::Adhesion { range, .. } => cols.push(Column::Adhesion { range }),
             _ => {}
         }
     }
@@ -79,6 +82,18 @@ fn design(samples: &[TimedSample], cols: &[Column], structure: &ContactModel, of
                     let change = z - (samples[i - 1].sample.z - offset).max(0.0);
                     r = maxwell_step(r, change, samples[i].t - samples[i - 1].t, time_constant);
                     a[(i, j)] = r;
+                }
+            }
+            Column::Adhesion { range } => {
+                // Minus the share of the pull-off force (the model's own pull), the contact's deepest
+                // deformation counted from the window's start.
+                let mut peak = f64::NEG_INFINITY;
+                for i in 0..n {
+                    let z = samples[i].sample.z - offset;
+                    peak = peak.max(z);
+                    if z >= -range && peak > 0.0 {
+                        a[(i, j)] = -((peak - z) / (peak + range)).clamp(0.0, 1.0);
+                    }
                 }
             }
             Column::BranchStart { time_constant } => {
@@ -147,7 +162,7 @@ fn fit_at(
         let k = x[0];
         let badness = |j: usize| -> f64 {
             match cols[j] {
-                Column::Rate | Column::Branch { .. } => -x[j],
+                Column::Rate | Column::Branch { .. } | Column::Adhesion { .. } => -x[j],
                 Column::Hysteresis { .. } if k > 0.0 => (-x[j]).max(x[j] / k - 0.999),
                 _ => f64::NEG_INFINITY,
             }
@@ -221,6 +236,10 @@ pub fn fit_with_effects_at(
                 fraction: amplitude(&|c| matches!(c, Column::Hysteresis { .. })).unwrap_or(0.0) / k,
                 velocity_scale,
             },
+            Effect::Adhesion { range, .. } => Effect::Adhesion {
+                force: amplitude(&|c| *c == Column::Adhesion { range }).unwrap_or(0.0).max(0.0),
+                range,
+            },
             Effect::SensorBias { .. } | Effect::SensorDrift { .. } if !bias_placed => {
                 bias_placed = true;
                 Effect::SensorBias { offset: bias.unwrap_or(0.0) }
@@ -265,6 +284,11 @@ mod tests {
     }
 
     fn record(model: &ContactModel, surface: f64, seconds: f64) -> Vec<TimedSample> {
+        record_from(model, surface, seconds, 1.0)
+    }
+
+    /// [`record`] keeping the samples after `from` [s].
+    fn record_from(model: &ContactModel, surface: f64, seconds: f64, from: f64) -> Vec<TimedSample> {
         let mut state = model.effect_state();
         let mut out = Vec::new();
         let dt = 1e-3;
@@ -278,7 +302,7 @@ mod tests {
             let rate = if hold { 0.0 } else { 0.015 * w * (w * phase).cos() };
             let (_, read) = model.step(&mut state, depth, rate, dt).unwrap();
             // In contact only, as the estimator keeps them (a quick unloading lifts off before z = 0).
-            if i % 10 == 0 && t > 1.0 && read > 1.0 {
+            if i % 10 == 0 && t > from && read > 1.0 {
                 out.push(TimedSample { t, sample: Sample { z: depth + surface, zdot: rate, f: read } });
             }
         }
@@ -324,6 +348,25 @@ mod tests {
                 other => panic!("effects out of order: {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn an_adhesions_pull_off_force_comes_back_with_its_range_given() {
+        let mut truth = ContactModel::new(Kind::AzadFeatherstone, 25_000.0, 1100.0).unwrap();
+        truth.effects = vec![Effect::Adhesion { force: 3.0, range: 0.003 }];
+        // From before the first peak: the window's deepest deformation is the contact's.
+        let samples = record_from(&truth, 0.0, 13.0, 0.3);
+        let mut structure = truth.clone();
+        structure.effects = vec![Effect::Adhesion { force: 0.0, range: 0.003 }];
+        let (offset, fitted) = fit_with_effects(&samples, &structure, (-0.01, 0.01)).unwrap();
+        let Effect::Adhesion { force, range } = fitted.effects[0] else { panic!() };
+        assert!((force - 3.0).abs() < 0.03 && range == 0.003, "pull-off {force} N for 3 N");
+        assert!(offset.abs() < 1e-6, "offset {offset}");
+        // A surface that does not hold on: no pull, not a push.
+        let samples = record_from(&ContactModel { effects: vec![], ..truth }, 0.0, 13.0, 0.3);
+        let (_, fitted) = fit_with_effects(&samples, &structure, (-0.01, 0.01)).unwrap();
+        let Effect::Adhesion { force, .. } = fitted.effects[0] else { panic!() };
+        assert!((0.0..0.03).contains(&force), "no adhesion fitted as {force} N");
     }
 
     #[test]

@@ -67,9 +67,10 @@ pub use loading_paths::{
     predicted_dispersion, seed_000_experiments,
 };
 pub use model::{
-    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_CONTACT_STIFFNESS, MAX_DELAY, MAX_EFFECTS,
-    MAX_HYSTERESIS, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT, MAX_SURFACE_DRIFT, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH,
-    SensorInputs, TIME_CONSTANT_RANGE, finite, gravity_change, maxwell_step, maxwell_step_with_decay,
+    ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_ADHESION, MAX_ADHESION_RANGE,
+    MAX_CONTACT_STIFFNESS, MAX_DELAY, MAX_EFFECTS, MAX_HYSTERESIS, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT,
+    MAX_SURFACE_DRIFT, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH, SensorInputs, TIME_CONSTANT_RANGE, finite,
+    gravity_change, maxwell_step, maxwell_step_with_decay,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

@@ -96,6 +96,11 @@ pub enum Effect {
     /// reading gains mass · Δg_n, with Δg_n how gravity along the normal, as the sensor sees it, has changed
     /// since its last tare ([`SensorInputs::gravity_change`]); nothing while the hand keeps its orientation.
     ToolGravity { mass: f64 },
+    /// The surface holds on to the hand on the way out (JKR/DMT-like adhesion): once pressed, it pulls
+    /// with `force` · min(1, (z_peak − z)/(z_peak + range)) [N] as the deformation falls from the deepest
+    /// z_peak of the present contact, the full pull-off `force` at `range` [m] beyond the surface, where it
+    /// lets go; nothing while pressing deeper, nothing after letting go until the next contact.
+    Adhesion { force: f64, range: f64 },
 }
 
 /// The longest [`Effect::TimeDelay`] a model may carry [s].
@@ -132,13 +137,14 @@ impl Effect {
             Effect::TimeDelay { .. } => "time_delay",
             Effect::SensorCrosstalk { .. } => "sensor_crosstalk",
             Effect::ToolGravity { .. } => "tool_gravity",
+            Effect::Adhesion { .. } => "adhesion",
         }
     }
 
     /// The parameters in the order of the file's fields (the form of a /contact_estimator/model message).
     pub fn parameter_list(&self) -> Vec<f64> {
         let n = match self {
-            Effect::ViscoelasticRelaxation { .. } | Effect::Hysteresis { .. } => 2,
+            Effect::ViscoelasticRelaxation { .. } | Effect::Hysteresis { .. } | Effect::Adhesion { .. } => 2,
             Effect::SensorCrosstalk { .. } => 3,
             _ => 1,
         };
@@ -166,6 +172,7 @@ impl Effect {
             "time_delay" => arity(1).map(|_| Effect::TimeDelay { delay: p[0] }),
             "sensor_crosstalk" => arity(3).map(|_| Effect::SensorCrosstalk { coupling: [p[0], p[1], p[2]] }),
             "tool_gravity" => arity(1).map(|_| Effect::ToolGravity { mass: p[0] }),
+            "adhesion" => arity(2).map(|_| Effect::Adhesion { force: p[0], range: p[1] }),
             _ => {
                 Err(ContactError::InvalidModel(format!("unknown effect `{}`", id.chars().take(40).collect::<String>())))
             }
@@ -183,6 +190,7 @@ impl Effect {
             Effect::TimeDelay { delay } => [delay, 0.0, 0.0],
             Effect::SensorCrosstalk { coupling } => coupling,
             Effect::ToolGravity { mass } => [mass, 0.0, 0.0],
+            Effect::Adhesion { force, range } => [force, range, 0.0],
         }
     }
 
@@ -208,6 +216,7 @@ impl Effect {
                 bad("|coupling| must be below 0.5")
             }
             Effect::ToolGravity { mass } if mass.abs() > 100.0 => bad("|mass| must be at most 100 kg"),
+            Effect::Adhesion { force, range } if force < 0.0 || range <= 0.0 => bad("force must be ≥ 0 and range > 0"),
             _ => Ok(()),
         }
     }
@@ -325,6 +334,10 @@ pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
 pub const MAX_SENSOR_DRIFT: f64 = 0.1;
 /// The largest sensor bias of a plausible model [N].
 pub const MAX_SENSOR_BIAS: f64 = 20.0;
+/// The strongest pull-off of a plausible model's adhesion [N] (a suction cup on glass: tens of N).
+pub const MAX_ADHESION: f64 = 50.0;
+/// The farthest beyond the surface a plausible model's adhesion holds on [m].
+pub const MAX_ADHESION_RANGE: f64 = 0.02;
 
 /// State of the effects that have memory (see [`ContactModel::step`]).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -341,6 +354,9 @@ pub struct EffectState {
     pub last_deformation: Option<f64>,
     /// (time, reading) of the last [`Effect::TimeDelay`] span, oldest first: at most [`DELAY_LINE`].
     pub delay_line: std::collections::VecDeque<(f64, f64)>,
+    /// The deepest effective deformation of the present contact while an [`Effect::Adhesion`] holds on
+    /// (None before the first contact and after it let go).
+    pub adhesion_peak: Option<f64>,
 }
 
 /// One step of a Maxwell branch, ṡ = k_m ż − s/τ, over dt: the branch force s after a step in which the
@@ -430,6 +446,7 @@ impl ContactModel {
         let a = self.exponents.a;
         let mut stiffness = self.stiffness * a * pow(PLAUSIBLE_DEPTH, a - 1.0);
         let (mut hysteresis, mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
+        let mut adhesion = 0.0_f64;
         for e in &self.effects {
             match *e {
                 Effect::ViscoelasticRelaxation { time_constant, .. }
@@ -449,8 +466,17 @@ impl ContactModel {
                 Effect::ContactOffsetDrift { rate } => surface_drift += rate,
                 Effect::SensorDrift { rate } => sensor_drift += rate,
                 Effect::SensorBias { offset } => bias += offset,
+                Effect::Adhesion { range, .. } if range > MAX_ADHESION_RANGE => {
+                    return bad(format!(
+                        "adhesion holding on {range} m beyond the surface, farther than {MAX_ADHESION_RANGE} m"
+                    ));
+                }
+                Effect::Adhesion { force, .. } => adhesion += force,
                 _ => {}
             }
+        }
+        if adhesion > MAX_ADHESION {
+            return bad(format!("an adhesion pulling {adhesion} N in all, more than {MAX_ADHESION} N"));
         }
         if stiffness.is_nan() || stiffness > MAX_CONTACT_STIFFNESS {
             return bad(format!(
@@ -537,7 +563,8 @@ impl ContactModel {
         Ok((surface, self.sense(state, surface, &SensorInputs::default())?))
     }
 
-    /// Advances time and the surface effects by dt and returns the force the surface exerts (≥ 0). Call
+    /// Advances time and the surface effects by dt and returns the force the surface exerts (≥ 0 but for
+    /// an adhesion's pull). Call
     /// [`ContactModel::sense`] after it, once per step, for what the sensor reads.
     pub fn step_surface(&self, state: &mut EffectState, z: f64, zdot: f64, dt: f64) -> Result<f64, ContactError> {
         let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
@@ -563,7 +590,47 @@ impl ContactModel {
                 surface += *s;
             }
         }
-        Ok(surface.max(0.0))
+        state.adhesion_peak = self.adhesion_peak(state.adhesion_peak, z_eff);
+        let (pull, _) = self.adhesion_pull(state.adhesion_peak, z_eff);
+        Ok(surface.max(0.0) - pull)
+    }
+
+    /// The deepest deformation of the present contact after a step to z_eff: deeper in contact, kept
+    /// beyond the surface while an adhesion holds on, forgotten once every one has let go.
+    #[inline]
+    fn adhesion_peak(&self, peak: Option<f64>, z_eff: f64) -> Option<f64> {
+        let reach = self
+            .effects
+            .iter()
+            .filter_map(|e| if let Effect::Adhesion { range, .. } = *e { Some(range) } else { None })
+            .fold(None, |r: Option<f64>, x| Some(r.map_or(x, |r| r.max(x))))?;
+        if z_eff > 0.0 {
+            Some(peak.map_or(z_eff, |p| p.max(z_eff)))
+        } else if z_eff < -reach {
+            None
+        } else {
+            peak
+        }
+    }
+
+    /// The adhesions' pull [N] at z_eff with the contact's deepest deformation `peak`, and its derivative
+    /// along z (≤ 0: the pull eases as the hand presses back in).
+    #[inline]
+    fn adhesion_pull(&self, peak: Option<f64>, z_eff: f64) -> (f64, f64) {
+        let Some(peak) = peak else { return (0.0, 0.0) };
+        let (mut pull, mut slope) = (0.0, 0.0);
+        for e in &self.effects {
+            if let Effect::Adhesion { force, range } = *e
+                && z_eff >= -range
+            {
+                let share = (peak - z_eff) / (peak + range);
+                pull += force * share.clamp(0.0, 1.0);
+                if share > 0.0 && share < 1.0 {
+                    slope -= force / (peak + range);
+                }
+            }
+        }
+        (pull, slope)
     }
 
     /// The deformation the law sees at `time` (the surface moved by its offset drift) and the factor of
@@ -591,8 +658,9 @@ impl ContactModel {
     pub fn force_at_rest(&self, state: &EffectState, z: f64, dt: f64) -> Result<(f64, f64), ContactError> {
         let (z, dt) = (finite("z", z)?, finite("dt", dt)?);
         let (z_eff, _) = self.effective(state.time + dt, z, 0.0);
+        let (pull, pull_slope) = self.adhesion_pull(self.adhesion_peak(state.adhesion_peak, z_eff), z_eff);
         if z_eff <= 0.0 {
-            return Ok((0.0, 0.0));
+            return Ok((-pull, -pull_slope));
         }
         let a = self.exponents.a;
         let (mut force, mut slope) = (self.stiffness * pow(z_eff, a), self.stiffness * a * pow(z_eff, a - 1.0));
@@ -604,7 +672,7 @@ impl ContactModel {
                 slope += maxwell_step(0.0, stiffness, dt, time_constant);
             }
         }
-        Ok((force.max(0.0), slope))
+        Ok((force.max(0.0) - pull, slope - pull_slope))
     }
 
     /// What the named sensor effects add to a reading now [N]: the bias, and the drift since the last

@@ -126,6 +126,7 @@ fn an_effect_travels_as_its_id_and_its_fields_in_file_order() {
         Effect::TimeDelay { delay: 0.02 },
         Effect::SensorCrosstalk { coupling: [0.01, -0.02, 0.0] },
         Effect::ToolGravity { mass: 0.3 },
+        Effect::Adhesion { force: 1.5, range: 0.002 },
     ];
     for effect in every {
         let list = effect.parameter_list();
@@ -149,6 +150,9 @@ fn an_effect_travels_as_its_id_and_its_fields_in_file_order() {
         ("viscoelastic_relaxation", vec![1.0, f64::NAN], "finite"),
         ("hysteresis", vec![1.5, 0.01], "fraction must be in [0, 1)"),
         ("time_delay", vec![1e300], "delay must be in"),
+        ("adhesion", vec![-1.0, 0.002], "force must be ≥ 0 and range > 0"),
+        ("adhesion", vec![1.0, 0.0], "force must be ≥ 0 and range > 0"),
+        ("adhesion", vec![1.0, f64::INFINITY], "finite"),
     ] {
         let err = Effect::from_parameters(id, &p).unwrap_err().to_string();
         assert!(err.contains(words), "{id} {p:?}: expected `{words}` in `{err}`");
@@ -349,4 +353,84 @@ fn maxwell_step_is_exact_for_a_ramp_and_a_hold() {
     // A hold decays; a step of the deformation alone (dt = 0) is the spring's.
     assert!((softcontact_contact::maxwell_step(s, 0.0, dt, tau) - s * (-dt / tau).exp()).abs() < 1e-15);
     assert_eq!(softcontact_contact::maxwell_step(1.0, 0.5, 0.0, tau), 1.5);
+}
+
+/// The pull a press to `peak` and a retract to z leaves, written out: F·min(1, (peak − z)/(peak + δ)) while
+/// z ≥ −δ, nothing beyond.
+fn adhesion_by_hand(force: f64, range: f64, peak: f64, z: f64) -> f64 {
+    if z < -range { 0.0 } else { force * ((peak - z) / (peak + range)).clamp(0.0, 1.0) }
+}
+
+#[test]
+fn adhesion_pulls_on_the_way_out_lets_go_at_its_range_and_not_while_pressing() {
+    let (force, range, k) = (2.0, 0.004, 1e4);
+    let mut model = ContactModel::new(Kind::KelvinVoigt, k, 0.0).unwrap();
+    model.effects = vec![Effect::Adhesion { force, range }];
+    let mut state = model.effect_state();
+    let dt = 1e-3;
+    // Press to 10 mm at 10 mm/s: the law alone.
+    let mut z = -0.002;
+    while z < 0.01 - 1e-12 {
+        z += 1e-5;
+        let (surface, _) = model.step(&mut state, z, 0.01, dt).unwrap();
+        assert!((surface - k * z.max(0.0)).abs() < 1e-9, "pressing at {z}: {surface}");
+    }
+    // Out to 8 mm beyond the surface: law minus the pull until −range, then nothing.
+    let peak = z;
+    let mut let_go = false;
+    while z > -0.008 {
+        z -= 1e-5;
+        let (surface, _) = model.step(&mut state, z, -0.01, dt).unwrap();
+        let expected = k * z.max(0.0) - if let_go { 0.0 } else { adhesion_by_hand(force, range, peak, z) };
+        assert!((surface - expected).abs() < 1e-9, "retracting at {z}: {surface} vs {expected}");
+        let_go |= z < -range;
+    }
+    assert!(state.adhesion_peak.is_none(), "let go beyond its range");
+    // At −range (just before letting go) the pull was the whole pull-off force.
+    assert!((adhesion_by_hand(force, range, peak, -range) - force).abs() < 1e-12);
+    // Back in: a fresh contact, pressed, pulls nothing.
+    while z < 0.005 {
+        z += 1e-5;
+        let (surface, _) = model.step(&mut state, z, 0.01, dt).unwrap();
+        assert!((surface - k * z.max(0.0)).abs() < 1e-9, "pressing again at {z}: {surface}");
+    }
+}
+
+#[test]
+fn adhesion_at_rest_is_the_step_and_its_slope_the_difference_quotient() {
+    let mut model = ContactModel::new(Kind::HuntCrossley, 2e4, 100.0).unwrap();
+    model.effects = vec![Effect::Adhesion { force: 3.0, range: 0.003 }];
+    let mut state = model.effect_state();
+    for i in 0..=100 {
+        model.step(&mut state, 0.0002 * i as f64, 0.2, 1e-3).unwrap();
+    }
+    for i in 0..=50 {
+        model.step(&mut state, 0.02 - 0.0002 * i as f64, -0.2, 1e-3).unwrap();
+    }
+    for z in [0.012, 0.005, 0.0005, -0.001, -0.0029, 0.019, 0.025] {
+        let (at_rest, slope) = model.force_at_rest(&state, z, 0.0).unwrap();
+        let mut copy = state.clone();
+        let stepped = model.step_surface(&mut copy, z, 0.0, 0.0).unwrap();
+        assert!((at_rest - stepped).abs() < 1e-9, "z {z}: at rest {at_rest}, stepped {stepped}");
+        let h = 1e-7;
+        let quotient = (model.force_at_rest(&state, z + h, 0.0).unwrap().0
+            - model.force_at_rest(&state, z - h, 0.0).unwrap().0)
+            / (2.0 * h);
+        assert!((slope - quotient).abs() <= 1e-4 * quotient.abs().max(1.0), "z {z}: slope {slope} vs {quotient}");
+        assert!(slope > 0.0, "the force grows with z at {z}: {slope}");
+    }
+}
+
+#[test]
+fn adhesion_beyond_what_a_surface_can_pull_is_implausible() {
+    let mut model = ContactModel::new(Kind::KelvinVoigt, 1e4, 0.0).unwrap();
+    model.effects = vec![Effect::Adhesion { force: 5.0, range: 0.002 }];
+    model.plausible().unwrap();
+    for (force, range, words) in [(60.0, 0.002, "more than 50 N"), (5.0, 0.05, "farther than 0.02 m")] {
+        model.effects = vec![Effect::Adhesion { force, range }];
+        let err = model.plausible().unwrap_err().to_string();
+        assert!(err.contains(words), "{force} N, {range} m: {err}");
+    }
+    model.effects = vec![Effect::Adhesion { force: 30.0, range: 0.002 }; 2];
+    assert!(model.plausible().unwrap_err().to_string().contains("in all"));
 }

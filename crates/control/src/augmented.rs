@@ -12,6 +12,8 @@
 //! - **the hold** solves [`ContactModel::force_at_rest`] = f with the states as they are now, each
 //!   tick: the reference creeps deeper as the branches fade.
 //!
+//! An adhesion pulls while the deformation falls below the contact's deepest, in proportion to how far:
+//! the hold asks for the deformation whose force, that pull counted, is f (the force still grows with z).
 //! Hysteresis by the direction of motion scales the elastic force only while the surface moves, so it
 //! acts through the simulated move; a surface offset drift moves the law's zero with time. The sensor's
 //! named bias and drift are what a reading carries besides the surface force ([`AugmentedInverse::surface_reading`]).
@@ -243,6 +245,27 @@ mod tests {
         let expected = branch_at_start.unwrap() * (-(3.0 - 1e-3) / slow).exp();
         let branch = f - k * z;
         assert!((branch / expected - 1.0).abs() < 0.01, "branch {branch} N, by hand {expected} N");
+    }
+
+    #[test]
+    fn easing_off_an_adhesive_surface_goes_deeper_by_the_pull_it_will_feel() {
+        // k z − F (z_peak − z)/(z_peak + δ) = f on the way out: linear, solved by hand.
+        let (k, force, range) = (2000.0, 4.0, 0.005);
+        let mut m = ContactModel::new(Kind::KelvinVoigt, k, 0.0).unwrap();
+        m.effects = vec![Effect::Adhesion { force, range }];
+        let mut inverse = AugmentedInverse::new(m.clone());
+        for i in 1..=200 {
+            inverse.observe(0.03 * i as f64 / 200.0, 0.15, 1e-3).unwrap();
+        }
+        let peak = 0.03;
+        for f in [40.0, 10.0, 0.5, 0.0] {
+            let z = inverse.hold(f, 0.02, 1e-3).unwrap();
+            let by_hand = (f + force * peak / (peak + range)) / (k + force / (peak + range));
+            assert!((z - by_hand).abs() < 1e-9, "{f} N: z {z} m, by hand {by_hand} m");
+            assert!(z > f / k, "the pull asks for more deformation than the law alone");
+        }
+        // Pressing past the peak: the law alone again.
+        assert!((inverse.hold(80.0, 0.03, 1e-3).unwrap() - 0.04).abs() < 1e-9);
     }
 
     #[test]

@@ -31,12 +31,21 @@ pub(crate) enum Term {
     Crosstalk,
     /// The change of gravity along the normal since the last tare [m/s²]; coefficient the unknown mass [kg].
     Gravity,
+    /// Minus the share of an adhesion's pull-off force with range δ [m] ([`softcontact_contact::Effect::Adhesion`]);
+    /// coefficient the pull-off force [N].
+    Adhesion(f64),
 }
 
 impl Term {
     /// A term of the sensor alone: it acts out of contact too.
     fn of_sensor(self) -> bool {
         matches!(self, Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::Gravity)
+    }
+
+    /// A term the law's clamp at zero leaves alone: the sensor's, and an adhesion, which pulls on what the
+    /// clamped law gives and beyond the surface.
+    fn unclamped(self) -> bool {
+        self.of_sensor() || matches!(self, Term::Adhesion(_))
     }
 }
 
@@ -72,7 +81,7 @@ impl Structure {
 /// Samples in contact where the surface force Σ βⱼ·colⱼ over the surface columns (not the sensor's, nor
 /// those `skip` names) is ≤ 0; `raw` unmasked and undelayed.
 fn surface_clamped(terms: &[Term], raw: &[Vec<f64>], beta: &[f64], skip: impl Fn(Term) -> bool) -> Vec<bool> {
-    let surface = |j: usize| j < 2 || !(terms[j - 2].of_sensor() || skip(terms[j - 2]));
+    let surface = |j: usize| j < 2 || !(terms[j - 2].unclamped() || skip(terms[j - 2]));
     (0..raw[0].len())
         .map(|i| {
             raw[0][i] > 0.0 && (0..raw.len()).filter(|&j| surface(j)).map(|j| beta[j] * raw[j][i]).sum::<f64>() <= 0.0
@@ -214,7 +223,7 @@ fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
         // power of z has (the branches have none).
         let key = match id {
             Column::Term(t) if t.of_sensor() => [0.0; 5],
-            Column::Term(Term::Relax(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
+            Column::Term(Term::Relax(_) | Term::Adhesion(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
             Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
             _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
         };
@@ -237,7 +246,7 @@ fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
                 col
             }
         };
-        if !matches!(id, Column::Term(t) if t.of_sensor()) {
+        if !matches!(id, Column::Term(t) if t.unclamped()) {
             for (v, &c) in col.iter_mut().zip(clamped) {
                 if c {
                     *v = 0.0;
@@ -294,6 +303,26 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
                         x = 0.0;
                     }
                     x
+                })
+                .collect()
+        }
+        Term::Adhesion(range) => {
+            // As ContactModel::step_surface pulls: from the contact's deepest deformation, until δ
+            // beyond the surface.
+            let mut peak: Option<f64> = None;
+            zeff.iter()
+                .map(|&z| {
+                    peak = if z > 0.0 {
+                        Some(peak.map_or(z, |p| p.max(z)))
+                    } else if z < -range {
+                        None
+                    } else {
+                        peak
+                    };
+                    match peak {
+                        Some(p) => -((p - z) / (p + range)).clamp(0.0, 1.0),
+                        None => 0.0,
+                    }
                 })
                 .collect()
         }

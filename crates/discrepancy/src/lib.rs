@@ -117,6 +117,8 @@ pub struct Scales {
     pub time_constants: (f64, f64),
     /// The delays screened [s].
     pub delays: (f64, f64),
+    /// The adhesion ranges screened [m]: from a fiftieth of the deepest deformation to twice it.
+    pub adhesion_ranges: (f64, f64),
 }
 
 impl Scales {
@@ -132,6 +134,10 @@ impl Scales {
             saturating_speed: saturating_speed(series, v_th),
             time_constants: (lo, (RELAXATION_MAX_SHARE * duration).max(4.0 * lo)),
             delays: (DELAY_SAMPLES.0 * sample_period, (DELAY_SAMPLES.1 * sample_period).min(MAX_DELAY)),
+            adhesion_ranges: {
+                let deepest = series.z.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+                (0.02 * deepest, 2.0 * deepest)
+            },
         }
     }
 
@@ -141,6 +147,7 @@ impl Scales {
             Family::Relaxation => self.time_constants,
             Family::Hysteresis => (0.01 * self.p95_speed, self.saturating_speed),
             Family::TimeDelay => self.delays,
+            Family::Adhesion => self.adhesion_ranges,
             Family::StiffnessExponent => {
                 let inside = shape > EXPONENT_RANGE.0 + 0.02 && shape < EXPONENT_RANGE.1 - 0.02;
                 return (!inside).then_some(EXPONENT_RANGE);
@@ -864,10 +871,11 @@ enum Family {
     TimeDelay,
     Crosstalk,
     ToolGravity,
+    Adhesion,
 }
 
 impl Family {
-    const ALL: [Family; 9] = [
+    const ALL: [Family; 10] = [
         Family::SensorBias,
         Family::SensorDrift,
         Family::Relaxation,
@@ -877,6 +885,7 @@ impl Family {
         Family::TimeDelay,
         Family::Crosstalk,
         Family::ToolGravity,
+        Family::Adhesion,
     ];
 
     fn id(self) -> &'static str {
@@ -890,6 +899,7 @@ impl Family {
             Family::TimeDelay => "time_delay",
             Family::Crosstalk => "sensor_crosstalk",
             Family::ToolGravity => "tool_gravity",
+            Family::Adhesion => "adhesion",
         }
     }
 
@@ -917,6 +927,11 @@ impl Family {
                 let (lo, hi) = g.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| (l.min(x), h.max(x)));
                 !g.is_empty() && hi - lo >= MIN_GRAVITY_CHANGE
             }
+            // The hand leaves a contact: only beyond the surface does a pull tell itself from a loop.
+            Family::Adhesion => {
+                let first = d.s.z.iter().position(|&z| z > 0.0);
+                first.is_some_and(|i| d.s.z[i..].iter().any(|&z| z <= 0.0))
+            }
             _ => true,
         }
     }
@@ -932,6 +947,7 @@ impl Family {
             Family::SensorDrift => Some(Term::SensorDrift),
             Family::Relaxation => Some(Term::Relax(shape)),
             Family::Hysteresis => Some(Term::Hyst(shape)),
+            Family::Adhesion => Some(Term::Adhesion(shape)),
             Family::OffsetDrift => Some(Term::OffsetLin),
             Family::StiffnessExponent => None,
         }
@@ -981,12 +997,16 @@ impl Family {
                 (0..=17).map(|i| EXPONENT_RANGE.0 + 0.1 * i as f64).filter(|x| (x - a).abs() > 0.049).collect()
             }
             Family::TimeDelay => log(scales.delays.0, scales.delays.1, 8),
+            Family::Adhesion => log(scales.adhesion_ranges.0, scales.adhesion_ranges.1, 9),
             _ => vec![0.0],
         }
     }
 
     fn has_shape(self) -> bool {
-        matches!(self, Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent | Family::TimeDelay)
+        matches!(
+            self,
+            Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent | Family::TimeDelay | Family::Adhesion
+        )
     }
 }
 
@@ -1001,6 +1021,9 @@ fn would_separate(a: Family, b: Family) -> String {
         }
         (Relaxation, Hysteresis) => {
             "a hold of several seconds (relaxation decays under held deformation, hysteresis does not act at rest) and pushes at two speeds"
+        }
+        (Hysteresis, Adhesion) | (Relaxation, Adhesion) => {
+            "a retract well past the surface: an adhesion still pulls there, a loop of the surface's own force ends at it"
         }
         (Relaxation, _) | (_, Relaxation) => "a hold of several seconds after a fast push: only relaxation decays at rest",
         (Hysteresis, StiffnessExponent) => {
@@ -1060,6 +1083,11 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: &Scales) ->
                 // A small mixing of channels, a plausible tool: larger ones are something else.
                 Family::Crosstalk => physical &= b.abs() < 0.3,
                 Family::ToolGravity => physical &= b.abs() <= 100.0,
+                // Its letting go seen: the hand goes past the range after a contact at least once.
+                Family::Adhesion => {
+                    let col = &fit::columns(d, &st)[j];
+                    physical &= b > 0.0 && (1..col.len()).any(|i| col[i - 1] != 0.0 && col[i] == 0.0 && d.s.z[i] < 0.0)
+                }
                 _ => {}
             }
         } else if f == Family::TimeDelay {
@@ -1144,9 +1172,11 @@ use fit::golden;
 /// the tare (both zero at the tare); a drifting surface zero half its force's range (the surface position,
 /// refitted with it, takes its mean), named only where the free stretches' levels agree within `level`: a
 /// sensor whose offset wanders further moves the force in contact as much, and the recording cannot tell
-/// the two apart.
+/// the two apart. An adhesion is its pull-off force: a pull for a moment past the surface is what a slow
+/// noise can look like there.
 fn slow_offsets_material(d: &Data, c: &Cand, level: f64, stretches: &[&[usize]]) -> bool {
-    let slow = |f: Family| matches!(f, Family::SensorBias | Family::SensorDrift | Family::OffsetDrift);
+    let slow =
+        |f: Family| matches!(f, Family::SensorBias | Family::SensorDrift | Family::OffsetDrift | Family::Adhesion);
     if !c.fams.iter().any(|&(f, _)| slow(f)) {
         return true;
     }
@@ -1251,6 +1281,7 @@ fn to_model(
                     Some(Effect::SensorCrosstalk { coupling: u.map(|x| x * b(f)) })
                 }
                 Family::ToolGravity => Some(Effect::ToolGravity { mass: b(f) }),
+                Family::Adhesion => Some(Effect::Adhesion { force: b(f).max(0.0), range: sh }),
                 Family::StiffnessExponent => None,
             }
         })
@@ -1391,6 +1422,19 @@ fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, rate_s
         Family::ToolGravity => {
             u.insert("mass_kg".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
         }
+        Family::Adhesion => {
+            u.insert("force_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+            // Where it lets go is known to within the deformation's step across the letting go, however
+            // sharp the fit's minimum.
+            let j = term_index(st, fam, sh).unwrap_or(2);
+            let col = &fit::columns(d, st)[j];
+            let zeff = |i: usize| d.s.z[i] - st.shift - st.offset_rate * d.time[i];
+            let step = (1..col.len())
+                .filter(|&i| col[i - 1] != 0.0 && col[i] == 0.0 && zeff(i) < 0.0)
+                .map(|i| (zeff(i) - zeff(i - 1)).abs())
+                .fold(0.0, f64::max);
+            u.insert("range_m".into(), (z * shape_se(&Term::Adhesion)).max(step));
+        }
     }
     u
 }
@@ -1433,6 +1477,10 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
             (Effect::ToolGravity { mass }, Family::ToolGravity) => {
                 p.insert("mass_kg".into(), mass);
             }
+            (Effect::Adhesion { force, range }, Family::Adhesion) => {
+                p.insert("force_n".into(), force);
+                p.insert("range_m".into(), range);
+            }
             _ => {}
         }
     }
@@ -1456,15 +1504,13 @@ fn polish(
     regrid: bool,
 ) -> bool {
     let v_sat = scales.saturating_speed;
-    let shaped: Vec<usize> =
-        (0..st.terms.len()).filter(|&j| matches!(st.terms[j], Term::Relax(_) | Term::Hyst(_))).collect();
+    let shaped: Vec<usize> = (0..st.terms.len()).filter(|&j| shape_of(st.terms[j]).is_some()).collect();
     if shaped.is_empty() {
         return false;
     }
-    let scaled = |t: Term, factor: f64| match t {
-        Term::Relax(tau) => Term::Relax(tau * factor),
-        Term::Hyst(v0) => Term::Hyst(v0 * factor),
-        other => other,
+    let scaled = |t: Term, factor: f64| match shape_of(t) {
+        Some((fam, x)) => fam.term(x * factor).unwrap_or(t),
+        None => t,
     };
     let within_bounds = |s: &Structure| {
         let taus: Vec<f64> =
@@ -1472,6 +1518,7 @@ fn polish(
         s.terms.iter().all(|t| match *t {
             Term::Relax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
             Term::Hyst(v0) => v0 > 0.0 && v0 <= v_sat,
+            Term::Adhesion(range) => (scales.adhesion_ranges.0..=scales.adhesion_ranges.1).contains(&range),
             _ => true,
         }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
     };
@@ -1505,7 +1552,7 @@ fn polish(
         }
     }
     for &j in shaped.iter().filter(|_| regrid) {
-        let fam = if matches!(st.terms[j], Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
+        let Some((fam, _)) = shape_of(st.terms[j]) else { continue };
         let mut without = st.clone();
         without.terms.remove(j);
         for x in fam.grid(scales, &without).into_iter().filter(|&x| fam != Family::Hysteresis || x <= v_sat) {
@@ -1550,20 +1597,50 @@ fn polish(
             break;
         }
     }
+    // Where an adhesion lets go is a step of its column: Gauss–Newton sees only its smooth part, so its
+    // range gets a golden-section search of its own, the other shapes held.
+    for &j in &shaped {
+        let Term::Adhesion(range) = st.terms[j] else { continue };
+        let (lo, hi) = (scales.adhesion_ranges.0.max(range / 2.0), scales.adhesion_ranges.1.min(range * 2.0));
+        if lo < hi {
+            // At the surface each range places: where it lets go moves with it.
+            let placed = |x: f64| {
+                let mut trial = st.clone();
+                trial.terms[j] = Term::Adhesion(x);
+                refine_surface(d, &trial).0
+            };
+            let best = golden(|x| fit::fit(d, &placed(x.exp())).sse, lo.ln(), hi.ln(), 12).exp();
+            let trial = placed(best);
+            let ft = fit::fit(d, &trial);
+            if ft.sse < cur.sse {
+                *st = trial;
+                *cur = ft;
+            }
+        }
+    }
     if cur.sse >= start_sse {
         return false;
     }
     *st = refine_surface(d, st).0;
     *cur = fit::fit(d, st);
     for &j in &shaped {
-        let (before, after) = (start[j], st.terms[j]);
-        let fam = if matches!(before, Term::Relax(_)) { Family::Relaxation } else { Family::Hysteresis };
-        let shape = |t: Term| if let Term::Relax(x) | Term::Hyst(x) = t { x } else { 0.0 };
-        if let Some(slot) = order.iter_mut().find(|x| x.0 == fam && x.1 == shape(before)) {
-            slot.1 = shape(after);
+        let (Some((fam, before)), Some((_, after))) = (shape_of(start[j]), shape_of(st.terms[j])) else { continue };
+        if let Some(slot) = order.iter_mut().find(|x| x.0 == fam && x.1 == before) {
+            slot.1 = after;
         }
     }
     true
+}
+
+/// The family and shape of a term [`polish`] refines (a relaxation's τ, a hysteresis' v₀, an adhesion's
+/// range); None for a term without a shape.
+fn shape_of(t: Term) -> Option<(Family, f64)> {
+    match t {
+        Term::Relax(x) => Some((Family::Relaxation, x)),
+        Term::Hyst(x) => Some((Family::Hysteresis, x)),
+        Term::Adhesion(x) => Some((Family::Adhesion, x)),
+        _ => None,
+    }
 }
 
 /// Gauss–Newton iterations of [`polish`] (half of them after each accepted round).

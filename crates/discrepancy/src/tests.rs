@@ -687,3 +687,29 @@ fn a_tare_of_low_passed_noise_is_no_sensor_offset_but_a_real_bias_is() {
     assert_eq!(ids(&r), vec!["sensor_bias"]);
     within("offset", param(&r, "sensor_bias", "offset_n"), 0.5, 0.2);
 }
+
+/// An adhesion written here, not by the library's effect code: the surface pulls F·(z_peak − z)/(z_peak + δ)
+/// from the deepest deformation of the contact until δ beyond the surface, where it lets go.
+#[test]
+fn an_adhesion_written_by_hand_is_named_with_its_pull_off_force_and_range() {
+    let (pull_off, range) = (2.0, 1.5e-3);
+    for (j, m) in [kv(), af()].iter().enumerate() {
+        let peak = std::cell::Cell::new(None::<f64>);
+        let adhesion = |_: f64, z: f64, _: f64| -> f64 {
+            let now = match peak.get() {
+                _ if z > 0.0 => Some(peak.get().map_or(z, |p: f64| p.max(z))),
+                Some(_) if z < -range => None,
+                p => p,
+            };
+            peak.set(now);
+            now.map_or(0.0, |p| -pull_off * ((p - z) / (p + range)).clamp(0.0, 1.0))
+        };
+        let s = record(m, Exc::new(200.0), 0.02, 90 + j as u64, &adhesion);
+        let r = analyse(&s, m, &Options::default()).unwrap();
+        show("adhesion by hand", &r);
+        assert_eq!(ids(&r), ["adhesion"], "{:?}", m.kind);
+        within("pull-off force", param(&r, "adhesion", "force_n"), pull_off, 0.05);
+        within("range", param(&r, "adhesion", "range_m"), range, 0.1);
+        assert!(shrink_ratio(&r) >= 0.8, "shrink {} of the ideal", shrink_ratio(&r));
+    }
+}

@@ -74,7 +74,7 @@ impl Surface {
         let zd = velocity.dot(&n);
         let f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
         let (tangential, sliding) =
-            self.config.model.tangential_step(&mut self.tangential, (*position).into(), n.into(), z, f)?;
+            self.config.model.tangential_step(&mut self.tangential, (*position).into(), n.into(), z, f.max(0.0))?;
         let force = -f * n + Vector3::from(tangential);
         // The sensor effects on the normal reading; the tangential load of this step feeds crosstalk. (A
         // model's unknown tool weight is carried by the sensor's load instead: see `Sim::new`.)
