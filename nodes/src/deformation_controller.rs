@@ -1503,7 +1503,12 @@ mod tests {
     /// The lockstep cell on the relaxing lab sponge, in contact, the controller given `model` placed at
     /// the simulator's true surface.
     fn lab_sponge_cell(model: ContactModel) -> Cell {
-        let config = SimConfig::above_surface(softcontact_sim::lab_sponge(), 43);
+        surface_cell(softcontact_sim::lab_sponge(), model)
+    }
+
+    /// The cell above the surface `truth`, in contact, the controller with `model`.
+    fn surface_cell(truth: ContactModel, model: ContactModel) -> Cell {
+        let config = SimConfig::above_surface(truth, 43);
         let surface = config.surface.as_ref().unwrap().point;
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
         let mut cell = Cell::new(config, controller(), estimator).unwrap();
@@ -1551,6 +1556,27 @@ mod tests {
         let (end, low, _) = press_and_hold(&mut cell, 100.0, 8.0);
         eprintln!("plain: {end:.3} N at the end of the move, down to {low:.3} N over the hold");
         assert!(end > 102.0 && end - low > 2.0, "the plain model overshoots, then relaxes: {end} N, {low} N");
+    }
+
+    #[test]
+    fn easing_off_an_adhesive_surface_through_the_augmented_model_keeps_the_force() {
+        // A surface that holds on: easing from 150 to 40 N, it pulls ≈ F·(z_peak − z)/(z_peak + δ) on
+        // the way out, so the static inverse stops short of 40 N.
+        let mut sticky = softcontact_sim::sponge();
+        sticky.effects = vec![Effect::Adhesion { force: 20.0, range: 0.003 }];
+        let mut plain = sticky.clone();
+        plain.effects.clear();
+        let ease = |model: &ContactModel| {
+            let mut cell = surface_cell(sticky.clone(), model.clone());
+            press_and_hold(&mut cell, 150.0, 1.0);
+            press_and_hold(&mut cell, 40.0, 3.0)
+        };
+        let (end, low, high) = ease(&sticky);
+        eprintln!("augmented: {end:.3} N at the end of the move, {low:.3}–{high:.3} N over the hold");
+        assert!([end, low, high].iter().all(|f| (f - 40.0).abs() < 0.5), "{end} N, {low}–{high} N");
+        let (end, ..) = ease(&plain);
+        eprintln!("plain: {end:.3} N at the end of the move");
+        assert!(end < 40.0 - 5.0, "the plain model does not count the pull: {end} N");
     }
 
     #[test]
@@ -1606,6 +1632,12 @@ mod tests {
                 m
             },
             with(Effect::SensorDrift { rate: f64::NAN }),
+            with(Effect::Adhesion { force: f64::NAN, range: 0.002 }),
+            with(Effect::Adhesion { force: 1e300, range: 0.002 }),
+            with(Effect::Adhesion { force: -5.0, range: 0.002 }),
+            with(Effect::Adhesion { force: 5.0, range: f64::INFINITY }),
+            with(Effect::Adhesion { force: 5.0, range: 1.0 }),
+            with(Effect::Adhesion { force: 60.0, range: 0.002 }),
         ] {
             assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
             assert_eq!(c.contact_model(), &softcontact_sim::sponge());
