@@ -191,6 +191,7 @@ fn the_hidden_effect_corpus_meets_its_goals() {
         "sensor_crosstalk",
         "tool_gravity",
         "adhesion",
+        "quasi_linear_relaxation",
     ] {
         assert!(hidden.contains(id), "{id} is never hidden: {shown}");
     }

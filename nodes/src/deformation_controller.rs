@@ -1638,6 +1638,10 @@ mod tests {
             with(Effect::Adhesion { force: 5.0, range: f64::INFINITY }),
             with(Effect::Adhesion { force: 5.0, range: 1.0 }),
             with(Effect::Adhesion { force: 60.0, range: 0.002 }),
+            with(Effect::QuasiLinearRelaxation { fraction: f64::NAN, time_constant: 0.5 }),
+            with(Effect::QuasiLinearRelaxation { fraction: 1e300, time_constant: 0.5 }),
+            with(Effect::QuasiLinearRelaxation { fraction: 0.2, time_constant: 1e-300 }),
+            with(Effect::QuasiLinearRelaxation { fraction: -0.2, time_constant: 0.5 }),
         ] {
             assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
             assert_eq!(c.contact_model(), &softcontact_sim::sponge());

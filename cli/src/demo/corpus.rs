@@ -330,6 +330,14 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["adhesion"],
             "unloading and lift-off (pushes)",
         );
+        case(
+            format!("{law}: quasi-linear relaxation, 15 % of the elastic force, τ 1 s"),
+            with(base.clone(), &[Effect::QuasiLinearRelaxation { fraction: 0.15, time_constant: 1.0 }]),
+            FtSensorConfig::gamma(),
+            geometry,
+            vec!["quasi_linear_relaxation"],
+            "holds after moves to several depths",
+        );
     }
     for c in out.iter_mut() {
         if c.visible_in == ONE_HOLD {

@@ -154,6 +154,12 @@ pub fn describe(model: &ContactModel) -> String {
             }
             Effect::SensorBias { offset } => format!("sensor bias ({offset:+.3} N)"),
             Effect::SensorDrift { rate } => format!("sensor drift ({:+.2} mN/s)", rate * 1e3),
+            Effect::QuasiLinearRelaxation { fraction, time_constant } => {
+                format!(
+                    "quasi-linear relaxation ({:.0} % of the elastic force, τ {time_constant:.3} s)",
+                    fraction * 100.0
+                )
+            }
             Effect::Adhesion { force, range } => {
                 format!("adhesion (pull-off {force:.2} N, letting go {:.1} mm beyond the surface)", range * 1e3)
             }

@@ -9,7 +9,7 @@
 //! where rᵢ is the Maxwell branch ṙ = ż − r/τᵢ driven by the samples' own deformation (the force of a
 //! branch of unit stiffness; [`maxwell_step`], the model's own step), restarted at zero where the window
 //! has a gap (the contact was left: its samples are in contact only), sᵢ₀ the branch force the window
-//! starts with, u the share of an adhesion's pull-off force F_a (its range fixed; the window's deepest
+//! starts with (a quasi-linear branch's rᵢ is driven by zᵃ instead, its amplitude g·k), u the share of an adhesion's pull-off force F_a (its range fixed; the window's deepest
 //! deformation its peak), and b the sensor's offset now (its bias and the drift since the tare, as one constant
 //! over the window). Least squares by QR; an amplitude fitted unphysical (λ, kᵢ < 0, h outside [0, 1)) is
 //! fixed at zero and the rest fitted again. The surface is placed by a golden-section search of the
@@ -37,10 +37,21 @@ pub const MIN_EFFECT_SAMPLES: usize = 50;
 enum Column {
     Elastic,
     Rate,
-    Hysteresis { velocity_scale: f64 },
-    Branch { index: usize, time_constant: f64 },
-    BranchStart { time_constant: f64 },
-    Adhesion { range: f64 },
+    Hysteresis {
+        velocity_scale: f64,
+    },
+    /// A branch of unit stiffness driven by the deformation (`elastic`: by zᵃ, a quasi-linear branch).
+    Branch {
+        index: usize,
+        time_constant: f64,
+        elastic: bool,
+    },
+    BranchStart {
+        time_constant: f64,
+    },
+    Adhesion {
+        range: f64,
+    },
     Bias,
 }
 
@@ -52,7 +63,11 @@ fn columns(structure: &ContactModel) -> Vec<Column> {
         match *e {
             Effect::Hysteresis { velocity_scale, .. } => cols.push(Column::Hysteresis { velocity_scale }),
             Effect::ViscoelasticRelaxation { time_constant, .. } => {
-                cols.push(Column::Branch { index, time_constant });
+                cols.push(Column::Branch { index, time_constant, elastic: false });
+                cols.push(Column::BranchStart { time_constant });
+            }
+            Effect::QuasiLinearRelaxation { time_constant, .. } => {
+                cols.push(Column::Branch { index, time_constant, elastic: true });
                 cols.push(Column::BranchStart { time_constant });
             }
             Effect::SensorBias { .. } | Effect::SensorDrift { .. } => bias = true,
@@ -73,13 +88,13 @@ fn design(samples: &[TimedSample], cols: &[Column], structure: &ContactModel, of
     let mut a = Mat::<f64>::zeros(n, cols.len());
     for (j, col) in cols.iter().enumerate() {
         match *col {
-            Column::Branch { time_constant, .. } => {
+            Column::Branch { time_constant, elastic, .. } => {
                 // Through a gap too (the force was below the onset threshold, the surface may still be
                 // pressed): the change over it, the decay of its length.
+                let drive = |z: f64| if elastic { pow(z.max(0.0), e.a) } else { z.max(0.0) };
                 let mut r = 0.0;
                 for i in 1..n {
-                    let z = (samples[i].sample.z - offset).max(0.0);
-                    let change = z - (samples[i - 1].sample.z - offset).max(0.0);
+                    let change = drive(samples[i].sample.z - offset) - drive(samples[i - 1].sample.z - offset);
                     r = maxwell_step(r, change, samples[i].t - samples[i - 1].t, time_constant);
                     a[(i, j)] = r;
                 }
@@ -232,6 +247,11 @@ pub fn fit_with_effects_at(
                 stiffness: amplitude(&|c| matches!(c, Column::Branch { index: i, .. } if *i == index)).unwrap_or(0.0),
                 time_constant,
             },
+            Effect::QuasiLinearRelaxation { time_constant, .. } => Effect::QuasiLinearRelaxation {
+                fraction: amplitude(&|c| matches!(c, Column::Branch { index: i, .. } if *i == index)).unwrap_or(0.0)
+                    / k,
+                time_constant,
+            },
             Effect::Hysteresis { velocity_scale, .. } => Effect::Hysteresis {
                 fraction: amplitude(&|c| matches!(c, Column::Hysteresis { .. })).unwrap_or(0.0) / k,
                 velocity_scale,
@@ -367,6 +387,19 @@ mod tests {
         let (_, fitted) = fit_with_effects(&samples, &structure, (-0.01, 0.01)).unwrap();
         let Effect::Adhesion { force, .. } = fitted.effects[0] else { panic!() };
         assert!((0.0..0.03).contains(&force), "no adhesion fitted as {force} N");
+    }
+
+    #[test]
+    fn a_quasi_linear_fraction_comes_back_with_its_time_constant_given() {
+        let mut truth = ContactModel::new(Kind::AzadFeatherstone, 25_000.0, 1100.0).unwrap();
+        truth.effects = vec![Effect::QuasiLinearRelaxation { fraction: 0.12, time_constant: 0.4 }];
+        let samples = record(&truth, 0.0, 13.0);
+        let mut structure = truth.clone();
+        structure.effects = vec![Effect::QuasiLinearRelaxation { fraction: 0.0, time_constant: 0.4 }];
+        let (_, fitted) = fit_with_effects(&samples, &structure, (-0.01, 0.01)).unwrap();
+        let Effect::QuasiLinearRelaxation { fraction, time_constant } = fitted.effects[0] else { panic!() };
+        assert!((fraction / 0.12 - 1.0).abs() < 0.02 && time_constant == 0.4, "fraction {fraction} for 0.12");
+        assert!((fitted.stiffness / 25_000.0 - 1.0).abs() < 1e-2, "{}", fitted.stiffness);
     }
 
     #[test]

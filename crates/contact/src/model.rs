@@ -101,6 +101,10 @@ pub enum Effect {
     /// z_peak of the present contact, the full pull-off `force` at `range` [m] beyond the surface, where it
     /// lets go; nothing while pressing deeper, nothing after letting go until the next contact.
     Adhesion { force: f64, range: f64 },
+    /// Fung's quasi-linear viscoelasticity with one term, G(t) = 1 + g e^{−t/τ}: a branch driven by the
+    /// elastic force k zᵃ instead of the deformation, ṡ = g · d(k zᵃ)/dt − s/τ. The fresh response is
+    /// (1 + g) times the law's, relaxing to it with τ; for a linear law it is a Maxwell branch of g·k.
+    QuasiLinearRelaxation { fraction: f64, time_constant: f64 },
 }
 
 /// The longest [`Effect::TimeDelay`] a model may carry [s].
@@ -138,13 +142,17 @@ impl Effect {
             Effect::SensorCrosstalk { .. } => "sensor_crosstalk",
             Effect::ToolGravity { .. } => "tool_gravity",
             Effect::Adhesion { .. } => "adhesion",
+            Effect::QuasiLinearRelaxation { .. } => "quasi_linear_relaxation",
         }
     }
 
     /// The parameters in the order of the file's fields (the form of a /contact_estimator/model message).
     pub fn parameter_list(&self) -> Vec<f64> {
         let n = match self {
-            Effect::ViscoelasticRelaxation { .. } | Effect::Hysteresis { .. } | Effect::Adhesion { .. } => 2,
+            Effect::ViscoelasticRelaxation { .. }
+            | Effect::Hysteresis { .. }
+            | Effect::Adhesion { .. }
+            | Effect::QuasiLinearRelaxation { .. } => 2,
             Effect::SensorCrosstalk { .. } => 3,
             _ => 1,
         };
@@ -173,6 +181,9 @@ impl Effect {
             "sensor_crosstalk" => arity(3).map(|_| Effect::SensorCrosstalk { coupling: [p[0], p[1], p[2]] }),
             "tool_gravity" => arity(1).map(|_| Effect::ToolGravity { mass: p[0] }),
             "adhesion" => arity(2).map(|_| Effect::Adhesion { force: p[0], range: p[1] }),
+            "quasi_linear_relaxation" => {
+                arity(2).map(|_| Effect::QuasiLinearRelaxation { fraction: p[0], time_constant: p[1] })
+            }
             _ => {
                 Err(ContactError::InvalidModel(format!("unknown effect `{}`", id.chars().take(40).collect::<String>())))
             }
@@ -191,6 +202,7 @@ impl Effect {
             Effect::SensorCrosstalk { coupling } => coupling,
             Effect::ToolGravity { mass } => [mass, 0.0, 0.0],
             Effect::Adhesion { force, range } => [force, range, 0.0],
+            Effect::QuasiLinearRelaxation { fraction, time_constant } => [fraction, time_constant, 0.0],
         }
     }
 
@@ -217,6 +229,9 @@ impl Effect {
             }
             Effect::ToolGravity { mass } if mass.abs() > 100.0 => bad("|mass| must be at most 100 kg"),
             Effect::Adhesion { force, range } if force < 0.0 || range <= 0.0 => bad("force must be ≥ 0 and range > 0"),
+            Effect::QuasiLinearRelaxation { fraction, time_constant } if fraction < 0.0 || time_constant <= 0.0 => {
+                bad("fraction must be ≥ 0 and time_constant > 0")
+            }
             _ => Ok(()),
         }
     }
@@ -457,6 +472,17 @@ impl ContactModel {
                     ));
                 }
                 Effect::ViscoelasticRelaxation { stiffness: k, .. } => stiffness += k,
+                Effect::QuasiLinearRelaxation { time_constant, .. }
+                    if !TIME_CONSTANT_RANGE.contains(&time_constant) =>
+                {
+                    return bad(format!(
+                        "a quasi-linear time constant of {time_constant} s, outside {TIME_CONSTANT_RANGE:?} s"
+                    ));
+                }
+                // The fresh response adds g times the law's slope.
+                Effect::QuasiLinearRelaxation { fraction, .. } => {
+                    stiffness += fraction * self.stiffness * a * pow(PLAUSIBLE_DEPTH, a - 1.0)
+                }
                 Effect::Hysteresis { velocity_scale, .. } if velocity_scale < MIN_HYSTERESIS_SCALE => {
                     return bad(format!(
                         "hysteresis turning over {velocity_scale} m/s, slower than {MIN_HYSTERESIS_SCALE} m/s"
@@ -578,17 +604,21 @@ impl ContactModel {
         }
         // The part of the step's deformation change made in contact (the branches start from rest at the
         // surface); the rate held over the step before the first one.
-        let change = match state.last_deformation {
-            Some(last) => z_eff - last.max(0.0),
-            None => zdot * dt,
-        };
+        let last = state.last_deformation.unwrap_or(z_eff - zdot * dt).max(0.0);
+        let change = z_eff - last;
+        // The same for the law's elastic force (the quasi-linear branches).
+        let a = self.exponents.a;
+        let elastic_change = self.stiffness * (pow(z_eff.max(0.0), a) - pow(last, a));
         state.last_deformation = Some(z_eff);
         for (i, e) in self.effects.iter().enumerate() {
-            if let Effect::ViscoelasticRelaxation { stiffness, time_constant } = *e {
-                let s = &mut state.branch_force[i];
-                *s = if z_eff > 0.0 { maxwell_step(*s, stiffness * change, dt, time_constant) } else { 0.0 };
-                surface += *s;
-            }
+            let (drive, time_constant) = match *e {
+                Effect::ViscoelasticRelaxation { stiffness, time_constant } => (stiffness * change, time_constant),
+                Effect::QuasiLinearRelaxation { fraction, time_constant } => (fraction * elastic_change, time_constant),
+                _ => continue,
+            };
+            let s = &mut state.branch_force[i];
+            *s = if z_eff > 0.0 { maxwell_step(*s, drive, dt, time_constant) } else { 0.0 };
+            surface += *s;
         }
         state.adhesion_peak = self.adhesion_peak(state.adhesion_peak, z_eff);
         let (pull, _) = self.adhesion_pull(state.adhesion_peak, z_eff);
@@ -664,13 +694,23 @@ impl ContactModel {
         }
         let a = self.exponents.a;
         let (mut force, mut slope) = (self.stiffness * pow(z_eff, a), self.stiffness * a * pow(z_eff, a - 1.0));
-        let change = z_eff - state.last_deformation.unwrap_or(z_eff).max(0.0);
+        let last = state.last_deformation.unwrap_or(z_eff).max(0.0);
+        let change = z_eff - last;
+        let elastic_change = self.stiffness * (pow(z_eff, a) - pow(last, a));
+        let elastic_slope = self.stiffness * a * pow(z_eff, a - 1.0);
         for (i, e) in self.effects.iter().enumerate() {
-            if let Effect::ViscoelasticRelaxation { stiffness, time_constant } = *e {
-                let s = state.branch_force.get(i).copied().unwrap_or(0.0);
-                force += maxwell_step(s, stiffness * change, dt, time_constant);
-                slope += maxwell_step(0.0, stiffness, dt, time_constant);
-            }
+            let (drive, drive_slope, time_constant) = match *e {
+                Effect::ViscoelasticRelaxation { stiffness, time_constant } => {
+                    (stiffness * change, stiffness, time_constant)
+                }
+                Effect::QuasiLinearRelaxation { fraction, time_constant } => {
+                    (fraction * elastic_change, fraction * elastic_slope, time_constant)
+                }
+                _ => continue,
+            };
+            let s = state.branch_force.get(i).copied().unwrap_or(0.0);
+            force += maxwell_step(s, drive, dt, time_constant);
+            slope += maxwell_step(0.0, drive_slope, dt, time_constant);
         }
         Ok((force.max(0.0) - pull, slope - pull_slope))
     }

@@ -127,6 +127,7 @@ fn an_effect_travels_as_its_id_and_its_fields_in_file_order() {
         Effect::SensorCrosstalk { coupling: [0.01, -0.02, 0.0] },
         Effect::ToolGravity { mass: 0.3 },
         Effect::Adhesion { force: 1.5, range: 0.002 },
+        Effect::QuasiLinearRelaxation { fraction: 0.4, time_constant: 2.0 },
     ];
     for effect in every {
         let list = effect.parameter_list();
@@ -153,6 +154,7 @@ fn an_effect_travels_as_its_id_and_its_fields_in_file_order() {
         ("adhesion", vec![-1.0, 0.002], "force must be ≥ 0 and range > 0"),
         ("adhesion", vec![1.0, 0.0], "force must be ≥ 0 and range > 0"),
         ("adhesion", vec![1.0, f64::INFINITY], "finite"),
+        ("quasi_linear_relaxation", vec![-0.1, 1.0], "fraction must be ≥ 0 and time_constant > 0"),
     ] {
         let err = Effect::from_parameters(id, &p).unwrap_err().to_string();
         assert!(err.contains(words), "{id} {p:?}: expected `{words}` in `{err}`");
@@ -433,4 +435,59 @@ fn adhesion_beyond_what_a_surface_can_pull_is_implausible() {
     }
     model.effects = vec![Effect::Adhesion { force: 30.0, range: 0.002 }; 2];
     assert!(model.plausible().unwrap_err().to_string().contains("in all"));
+}
+
+#[test]
+fn quasi_linear_relaxation_is_fungs_reduced_relaxation_on_the_elastic_force() {
+    // A step to z₀ then a hold: f(t) = k z₀ᵃ (1 + g e^{−t/τ}) (Fung's G(t) = 1 + g e^{−t/τ}).
+    let (k, g, tau, z0) = (2e4, 0.6, 0.5, 0.02);
+    let mut model = ContactModel::new(Kind::HuntCrossley, k, 0.0).unwrap();
+    model.effects = vec![Effect::QuasiLinearRelaxation { fraction: g, time_constant: tau }];
+    let mut state = model.effect_state();
+    let dt = 1e-5;
+    model.step_surface(&mut state, 0.0, 0.0, dt).unwrap();
+    model.step_surface(&mut state, z0, z0 / dt, dt).unwrap();
+    let mut t = 0.0;
+    for _ in 0..200 {
+        let hold = 0.01;
+        let force = model.step_surface(&mut state, z0, 0.0, hold).unwrap();
+        t += hold;
+        let fung = k * z0.powf(1.5) * (1.0 + g * (-t / tau).exp());
+        assert!((force / fung - 1.0).abs() < 1e-4, "t {t}: {force} N, Fung {fung} N");
+    }
+    // The branch is the elastic force's, not the deformation's: at twice the depth, 2^1.5 times the force.
+    let at = |z: f64| {
+        let mut state = model.effect_state();
+        model.step_surface(&mut state, 0.0, 0.0, dt).unwrap();
+        model.step_surface(&mut state, z, z / dt, dt).unwrap() - k * z.powf(1.5)
+    };
+    assert!((at(2.0 * z0) / at(z0) - 2f64.powf(1.5)).abs() < 1e-3);
+    // At rest: the step, and its slope the difference quotient.
+    for z in [0.019, 0.03] {
+        let (f, slope) = model.force_at_rest(&state, z, 0.001).unwrap();
+        let stepped = model.step_surface(&mut state.clone(), z, 0.0, 0.001).unwrap();
+        assert!((f - stepped).abs() < 1e-9 * f.abs().max(1.0), "z {z}: {f} vs {stepped}");
+        let h = 1e-7;
+        let q = (model.force_at_rest(&state, z + h, 0.001).unwrap().0
+            - model.force_at_rest(&state, z - h, 0.001).unwrap().0)
+            / (2.0 * h);
+        assert!((slope / q - 1.0).abs() < 1e-5, "z {z}: slope {slope} vs {q}");
+    }
+}
+
+#[test]
+fn on_a_linear_law_a_quasi_linear_branch_is_a_maxwell_branch_of_g_k() {
+    let (k, g, tau) = (3000.0, 0.3, 0.4);
+    let mut quasi = ContactModel::new(Kind::KelvinVoigt, k, 20.0).unwrap();
+    quasi.effects = vec![Effect::QuasiLinearRelaxation { fraction: g, time_constant: tau }];
+    let mut maxwell = quasi.clone();
+    maxwell.effects = vec![Effect::ViscoelasticRelaxation { stiffness: g * k, time_constant: tau }];
+    let (mut a, mut b) = (quasi.effect_state(), maxwell.effect_state());
+    for i in 0..3000 {
+        let t = i as f64 * 1e-3;
+        let (z, zd) = (0.01 * (1.0 - (3.0 * t).cos()) - 0.002, 0.03 * (3.0 * t).sin());
+        let (fa, fb) =
+            (quasi.step_surface(&mut a, z, zd, 1e-3).unwrap(), maxwell.step_surface(&mut b, z, zd, 1e-3).unwrap());
+        assert!((fa - fb).abs() < 1e-9 * fb.abs().max(1.0), "t {t}: {fa} vs {fb}");
+    }
 }

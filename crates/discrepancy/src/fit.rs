@@ -18,6 +18,8 @@ pub(crate) enum Term {
     SensorDrift,
     /// Maxwell branch of unit stiffness and time constant τ [s]; coefficient k_m [N/m].
     Relax(f64),
+    /// Quasi-linear branch: driven by zᵃ instead of z, time constant τ [s]; coefficient g·k.
+    QuasiRelax(f64),
     /// zᵃ·tanh(ż/v₀) with v₀ [m/s]; coefficient k·h [N/mᵃ].
     Hyst(f64),
     /// −a·zᵃ⁻¹ (linearised shift of the surface position); coefficient k·δz₀. Always in the structure: the
@@ -224,6 +226,7 @@ fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
         let key = match id {
             Column::Term(t) if t.of_sensor() => [0.0; 5],
             Column::Term(Term::Relax(_) | Term::Adhesion(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
+            Column::Term(Term::QuasiRelax(_)) => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
             Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
             _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
         };
@@ -282,15 +285,19 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
     match t {
         Term::Bias => vec![1.0; n],
         Term::SensorDrift => d.since_tare.clone(),
-        Term::Relax(tau) => {
-            // The branch of unit stiffness, updated as ContactModel::step_surface updates it.
+        Term::Relax(tau) | Term::QuasiRelax(tau) => {
+            // The branch of unit stiffness, updated as ContactModel::step_surface updates it; a
+            // quasi-linear one driven by zᵃ.
+            let elastic = matches!(t, Term::QuasiRelax(_));
+            let drive = |z: f64| if elastic { pow(z.max(0.0), st.a) } else { z.max(0.0) };
             let mut x = 0.0;
             // exp(−dt/τ) again only where the step changes (a steady rate: once).
             let mut last = (f64::NAN, 0.0);
             (0..n)
                 .map(|i| {
                     if zeff[i] > 0.0 {
-                        let change = if i == 0 { s.zdot[i] * d.dt[i] } else { zeff[i] - zeff[i - 1].max(0.0) };
+                        let before = if i == 0 { zeff[i] - s.zdot[i] * d.dt[i] } else { zeff[i - 1] };
+                        let change = drive(zeff[i]) - drive(before);
                         x = if d.dt[i] > 0.0 {
                             if d.dt[i] != last.0 {
                                 last = (d.dt[i], (-d.dt[i] / tau).exp());

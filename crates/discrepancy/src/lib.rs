@@ -144,7 +144,7 @@ impl Scales {
     /// A shape at an end of the range it was screened on: a bound, not a finding (see [`Bound`]).
     fn at_edge(&self, family: Family, shape: f64) -> Option<(f64, f64)> {
         let range = match family {
-            Family::Relaxation => self.time_constants,
+            Family::Relaxation | Family::QuasiLinear => self.time_constants,
             Family::Hysteresis => (0.01 * self.p95_speed, self.saturating_speed),
             Family::TimeDelay => self.delays,
             Family::Adhesion => self.adhesion_ranges,
@@ -872,10 +872,11 @@ enum Family {
     Crosstalk,
     ToolGravity,
     Adhesion,
+    QuasiLinear,
 }
 
 impl Family {
-    const ALL: [Family; 10] = [
+    const ALL: [Family; 11] = [
         Family::SensorBias,
         Family::SensorDrift,
         Family::Relaxation,
@@ -886,6 +887,7 @@ impl Family {
         Family::Crosstalk,
         Family::ToolGravity,
         Family::Adhesion,
+        Family::QuasiLinear,
     ];
 
     fn id(self) -> &'static str {
@@ -900,6 +902,7 @@ impl Family {
             Family::Crosstalk => "sensor_crosstalk",
             Family::ToolGravity => "tool_gravity",
             Family::Adhesion => "adhesion",
+            Family::QuasiLinear => "quasi_linear_relaxation",
         }
     }
 
@@ -948,6 +951,7 @@ impl Family {
             Family::Relaxation => Some(Term::Relax(shape)),
             Family::Hysteresis => Some(Term::Hyst(shape)),
             Family::Adhesion => Some(Term::Adhesion(shape)),
+            Family::QuasiLinear => Some(Term::QuasiRelax(shape)),
             Family::OffsetDrift => Some(Term::OffsetLin),
             Family::StiffnessExponent => None,
         }
@@ -998,6 +1002,7 @@ impl Family {
             }
             Family::TimeDelay => log(scales.delays.0, scales.delays.1, 8),
             Family::Adhesion => log(scales.adhesion_ranges.0, scales.adhesion_ranges.1, 9),
+            Family::QuasiLinear => log(scales.time_constants.0, scales.time_constants.1, 14),
             _ => vec![0.0],
         }
     }
@@ -1005,7 +1010,12 @@ impl Family {
     fn has_shape(self) -> bool {
         matches!(
             self,
-            Family::Relaxation | Family::Hysteresis | Family::StiffnessExponent | Family::TimeDelay | Family::Adhesion
+            Family::Relaxation
+                | Family::Hysteresis
+                | Family::StiffnessExponent
+                | Family::TimeDelay
+                | Family::Adhesion
+                | Family::QuasiLinear
         )
     }
 }
@@ -1021,6 +1031,9 @@ fn would_separate(a: Family, b: Family) -> String {
         }
         (Relaxation, Hysteresis) => {
             "a hold of several seconds (relaxation decays under held deformation, hysteresis does not act at rest) and pushes at two speeds"
+        }
+        (Relaxation, QuasiLinear) => {
+            "holds at two depths: a quasi-linear branch relaxes in proportion to the law's elastic force, a Maxwell branch to the deformation"
         }
         (Hysteresis, Adhesion) | (Relaxation, Adhesion) => {
             "a retract well past the surface: an adhesion still pulls there, a loop of the surface's own force ends at it"
@@ -1076,7 +1089,7 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: &Scales) ->
             t.push(b / fit.se[j]);
             stable.push(fit.fold_beta.iter().all(|fb| fb[j].signum() == b.signum()));
             match f {
-                Family::Relaxation => physical &= b > 0.0,
+                Family::Relaxation | Family::QuasiLinear => physical &= b > 0.0,
                 // A loop whose velocity scale is above the speeds reached never saturates: there it is a
                 // damping ∝ the elastic force, the proxy of a rate law the baseline lacks, not hysteresis.
                 Family::Hysteresis => physical &= b > 0.0 && b / k < 1.0 && sh <= v_sat,
@@ -1282,6 +1295,9 @@ fn to_model(
                 }
                 Family::ToolGravity => Some(Effect::ToolGravity { mass: b(f) }),
                 Family::Adhesion => Some(Effect::Adhesion { force: b(f).max(0.0), range: sh }),
+                Family::QuasiLinear => {
+                    Some(Effect::QuasiLinearRelaxation { fraction: (b(f) / k).max(0.0), time_constant: sh })
+                }
                 Family::StiffnessExponent => None,
             }
         })
@@ -1422,6 +1438,10 @@ fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, rate_s
         Family::ToolGravity => {
             u.insert("mass_kg".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
         }
+        Family::QuasiLinear => {
+            u.insert("fraction".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)] / k);
+            u.insert("time_constant_s".into(), z * shape_se(&Term::QuasiRelax));
+        }
         Family::Adhesion => {
             u.insert("force_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
             // Where it lets go is known to within the deformation's step across the letting go, however
@@ -1477,6 +1497,10 @@ fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String,
             (Effect::ToolGravity { mass }, Family::ToolGravity) => {
                 p.insert("mass_kg".into(), mass);
             }
+            (Effect::QuasiLinearRelaxation { fraction, time_constant }, Family::QuasiLinear) => {
+                p.insert("fraction".into(), fraction);
+                p.insert("time_constant_s".into(), time_constant);
+            }
             (Effect::Adhesion { force, range }, Family::Adhesion) => {
                 p.insert("force_n".into(), force);
                 p.insert("range_m".into(), range);
@@ -1519,6 +1543,7 @@ fn polish(
             Term::Relax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
             Term::Hyst(v0) => v0 > 0.0 && v0 <= v_sat,
             Term::Adhesion(range) => (scales.adhesion_ranges.0..=scales.adhesion_ranges.1).contains(&range),
+            Term::QuasiRelax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
             _ => true,
         }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
     };
@@ -1639,6 +1664,7 @@ fn shape_of(t: Term) -> Option<(Family, f64)> {
         Term::Relax(x) => Some((Family::Relaxation, x)),
         Term::Hyst(x) => Some((Family::Hysteresis, x)),
         Term::Adhesion(x) => Some((Family::Adhesion, x)),
+        Term::QuasiRelax(x) => Some((Family::QuasiLinear, x)),
         _ => None,
     }
 }
@@ -1729,10 +1755,16 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
         // Each family once, but relaxation up to twice: real elastomers relax on several time scales (a fast
         // and a slow Maxwell branch are one effect id with two time constants).
+        // A second branch takes the form of the first (a material relaxes on its deformation or on its
+        // elastic force, not both).
         let times = |f: Family| order.iter().filter(|x| x.0 == f).count();
+        let forms = [Family::Relaxation, Family::QuasiLinear];
+        let branches = |f: Family| if forms.contains(&f) { forms.map(times).iter().sum() } else { times(f) };
+        let other_form_named = |f: Family| forms.contains(&f) && forms.iter().any(|&g| g != f && times(g) > 0);
         let left: Vec<Family> = Family::ALL
             .into_iter()
-            .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
+            .filter(|&f| branches(f) < if forms.contains(&f) { MAX_RELAXATION_BRANCHES } else { 1 })
+            .filter(|&f| !other_form_named(f))
             .filter(|&f| f.observable(&d))
             .collect();
         let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, &scales, cur.cv_mse)).collect();
@@ -1768,7 +1800,17 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         // One effect at a time while one passes (the next round judges the rest at the surface and noise
         // floor this one moves); pairs only when no single does, so that two effects that mask each other
         // (each one's residual autocorrelation deflating the other's t) are still found.
-        let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c)).cloned().collect();
+        // A relaxation's two forms, on the deformation (Maxwell) and on the elastic force (quasi-linear),
+        // are one effect's: the quasi-linear form is taken only where it predicts held-out data better by
+        // the gain a new effect needs, else the Maxwell form; they are not each other's rivals.
+        let cv_of = |f: Family| singles.iter().find(|c| c.fams[0].0 == f).map(|c| c.fit.cv_mse);
+        let the_other_form_wins = |c: &Cand| match (c.fams[0].0, cv_of(Family::Relaxation), cv_of(Family::QuasiLinear))
+        {
+            (Family::QuasiLinear, Some(maxwell), Some(quasi)) => quasi > maxwell * (1.0 - o.min_gain),
+            (Family::Relaxation, Some(maxwell), Some(quasi)) => quasi <= maxwell * (1.0 - o.min_gain),
+            _ => false,
+        };
+        let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c) && !the_other_form_wins(c)).cloned().collect();
         for i in 0..singles.len() * usize::from(options.is_empty()) {
             for j in i + 1..singles.len() {
                 // Pairs are for effects of the surface that mask each other; a delay reads everything late
@@ -1794,7 +1836,10 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             for &(f, _) in &best.fams {
                 let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
                 let cm = contribution(mine);
-                for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
+                for rival in singles.iter().filter(|c| {
+                    best.fams.iter().all(|x| x.0 != c.fams[0].0)
+                        && !(forms.contains(&f) && forms.contains(&c.fams[0].0))
+                }) {
                     if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
                         && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
                         && gain(rival) * o.rival_ratio >= gain(mine)

@@ -713,3 +713,34 @@ fn an_adhesion_written_by_hand_is_named_with_its_pull_off_force_and_range() {
         assert!(shrink_ratio(&r) >= 0.8, "shrink {} of the ideal", shrink_ratio(&r));
     }
 }
+
+/// Fung's quasi-linear relaxation written here: a branch s driven by the law's elastic force, integrated
+/// exactly for a force changing linearly over each step, ṡ = g·d(k zᵃ)/dt − s/τ.
+#[test]
+fn a_quasi_linear_relaxation_written_by_hand_is_named_in_its_own_form() {
+    let (g, tau): (f64, f64) = (0.2, 0.8);
+    let m = af();
+    let branch = std::cell::Cell::new((0.0_f64, None::<f64>));
+    let dt = 1.0 / 200.0;
+    // (A surface pushes: where a fast unloading takes the branch below the law's force, the total is 0.)
+    let fung = |_: f64, z: f64, zd: f64| -> f64 {
+        let (s, last) = branch.get();
+        let elastic = m.stiffness * z.max(0.0).powf(1.5);
+        let s = match last {
+            Some(before) if z > 0.0 => {
+                let decay = (-dt / tau).exp();
+                s * decay + g * (elastic - before) * tau * (1.0 - decay) / dt
+            }
+            _ => 0.0,
+        };
+        branch.set((s, Some(elastic)));
+        s.max(-m.force(z, zd).unwrap())
+    };
+    let s = record(&m, Exc::new(200.0), 0.02, 95, &fung);
+    let r = analyse(&s, &m, &Options::default()).unwrap();
+    show("quasi-linear by hand", &r);
+    assert_eq!(ids(&r), ["quasi_linear_relaxation"]);
+    assert_eq!(r.remaining, Remaining::None);
+    within("fraction", param(&r, "quasi_linear_relaxation", "fraction"), g, 0.05);
+    within("τ", param(&r, "quasi_linear_relaxation", "time_constant_s"), tau, 0.05);
+}
