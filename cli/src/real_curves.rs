@@ -28,6 +28,13 @@ struct Curve {
     outside: Option<String>,
 }
 
+/// Whether the id `named` answers the expected id `seen`: the same id, or the quasi-linear form of a
+/// relaxation where a person saw a relaxation (the expected answers were written when the library had one
+/// relaxation id; they do not move).
+fn same_effect(named: &str, seen: &str) -> bool {
+    named == seen || (seen == "viscoelastic_relaxation" && named == "quasi_linear_relaxation")
+}
+
 /// One curve's outcome.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Outcome {
@@ -87,7 +94,10 @@ pub fn run(dir: &Path) -> anyhow::Result<Vec<Outcome>> {
                 Outcome {
                     file: curve.file.clone(),
                     expected: expected_text,
-                    named_as_expected: curve.named.iter().all(|g| g.iter().any(|id| names.contains(id))),
+                    named_as_expected: curve
+                        .named
+                        .iter()
+                        .all(|g| g.iter().any(|id| names.iter().any(|n| same_effect(n, id)))),
                     outside_not_denied: curve.outside.is_none() || r.remaining != Remaining::None,
                     not_worse: r.final_rms <= r.baseline.rms,
                     answer: Ok(names.into_iter().collect()),

@@ -1755,16 +1755,13 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         }
         // Each family once, but relaxation up to twice: real elastomers relax on several time scales (a fast
         // and a slow Maxwell branch are one effect id with two time constants).
-        // A second branch takes the form of the first (a material relaxes on its deformation or on its
-        // elastic force, not both).
+        // Relaxation is screened in its Maxwell form; its quasi-linear form is tried once the branches are
+        // named (below).
         let times = |f: Family| order.iter().filter(|x| x.0 == f).count();
-        let forms = [Family::Relaxation, Family::QuasiLinear];
-        let branches = |f: Family| if forms.contains(&f) { forms.map(times).iter().sum() } else { times(f) };
-        let other_form_named = |f: Family| forms.contains(&f) && forms.iter().any(|&g| g != f && times(g) > 0);
         let left: Vec<Family> = Family::ALL
             .into_iter()
-            .filter(|&f| branches(f) < if forms.contains(&f) { MAX_RELAXATION_BRANCHES } else { 1 })
-            .filter(|&f| !other_form_named(f))
+            .filter(|&f| f != Family::QuasiLinear)
+            .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&d))
             .collect();
         let singles: Vec<Cand> = left.iter().map(|&f| screen(&d, &st, f, &scales, cur.cv_mse)).collect();
@@ -1800,17 +1797,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         // One effect at a time while one passes (the next round judges the rest at the surface and noise
         // floor this one moves); pairs only when no single does, so that two effects that mask each other
         // (each one's residual autocorrelation deflating the other's t) are still found.
-        // A relaxation's two forms, on the deformation (Maxwell) and on the elastic force (quasi-linear),
-        // are one effect's: the quasi-linear form is taken only where it predicts held-out data better by
-        // the gain a new effect needs, else the Maxwell form; they are not each other's rivals.
-        let cv_of = |f: Family| singles.iter().find(|c| c.fams[0].0 == f).map(|c| c.fit.cv_mse);
-        let the_other_form_wins = |c: &Cand| match (c.fams[0].0, cv_of(Family::Relaxation), cv_of(Family::QuasiLinear))
-        {
-            (Family::QuasiLinear, Some(maxwell), Some(quasi)) => quasi > maxwell * (1.0 - o.min_gain),
-            (Family::Relaxation, Some(maxwell), Some(quasi)) => quasi <= maxwell * (1.0 - o.min_gain),
-            _ => false,
-        };
-        let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c) && !the_other_form_wins(c)).cloned().collect();
+        let mut options: Vec<Cand> = singles.iter().filter(|c| passes(c)).cloned().collect();
         for i in 0..singles.len() * usize::from(options.is_empty()) {
             for j in i + 1..singles.len() {
                 // Pairs are for effects of the surface that mask each other; a delay reads everything late
@@ -1836,10 +1823,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             for &(f, _) in &best.fams {
                 let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
                 let cm = contribution(mine);
-                for rival in singles.iter().filter(|c| {
-                    best.fams.iter().all(|x| x.0 != c.fams[0].0)
-                        && !(forms.contains(&f) && forms.contains(&c.fams[0].0))
-                }) {
+                for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
                     if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
                         && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
                         && gain(rival) * o.rival_ratio >= gain(mine)
@@ -1970,6 +1954,36 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         model = to_model(baseline, d.lateral_axis, &st, &cur, &order);
         (ph, noise, _) = at_surface(st.shift);
         sigma = sigma_of(&noise);
+    }
+
+    // The relaxation's form: the branches named on the deformation (Maxwell) tried on the law's elastic
+    // force (Fung's quasi-linear form), polished there; taken where it predicts held-out data better by
+    // the gain a new effect needs and the simulated gap closes further.
+    if ambiguous.is_empty() && order.iter().any(|x| x.0 == Family::Relaxation) {
+        let mut quasi = st.clone();
+        for t in quasi.terms.iter_mut() {
+            if let Term::Relax(tau) = *t {
+                *t = Term::QuasiRelax(tau);
+            }
+        }
+        let mut quasi_order: Vec<(Family, f64)> =
+            order.iter().map(|&(f, sh)| (if f == Family::Relaxation { Family::QuasiLinear } else { f }, sh)).collect();
+        let (mut quasi, _, _) = refine_surface(&d, &quasi);
+        let mut quasi_fit = fit::fit(&d, &quasi);
+        polish(&d, &mut quasi, &mut quasi_fit, &mut quasi_order, &scales, false);
+        if quasi_fit.cv_mse <= cur.cv_mse * (1.0 - o.min_gain) {
+            let m = to_model(baseline, d.lateral_axis, &quasi, &quasi_fit, &quasi_order);
+            m.validate()?;
+            let g = gap(series, &ph, &simulate(&m, &series.shifted(quasi.shift))?);
+            if g.rms < cur_gap.rms {
+                (st, cur, order, model, cur_gap) = (quasi, quasi_fit, quasi_order, m, g);
+                if let Some(last) = stages.last_mut() {
+                    last.1 = cur_gap.rms;
+                }
+                (ph, noise, _) = at_surface(st.shift);
+                sigma = sigma_of(&noise);
+            }
+        }
     }
 
     // A shape still at an end of its range after every polish is a bound, not a finding: the effect is
