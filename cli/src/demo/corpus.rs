@@ -78,11 +78,6 @@ fn dice_law() -> ContactModel {
     softcontact_sim::dice()
 }
 
-/// The peak force of a surface's pushes [N].
-fn max_force_of(((_, _), max_force): ((f64, f64), f64)) -> f64 {
-    max_force
-}
-
 fn with(mut m: ContactModel, effects: &[Effect]) -> ContactModel {
     m.effects.extend_from_slice(effects);
     m
@@ -324,7 +319,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
     for (law, base, geometry) in [("sponge", sponge_law(), sponge), ("dice", dice_law(), dice)] {
         case(
             format!("{law}: adhesion pulling 10 % of the peak force, letting go 2 mm beyond the surface"),
-            with(base.clone(), &[Effect::Adhesion { force: 0.1 * max_force_of(geometry), range: 0.002 }]),
+            with(base.clone(), &[Effect::Adhesion { force: 0.1 * geometry.1, range: 0.002 }]),
             FtSensorConfig::gamma(),
             geometry,
             vec!["adhesion"],

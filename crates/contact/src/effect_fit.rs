@@ -21,7 +21,7 @@ use faer::linalg::solvers::SolveLstsq;
 use crate::ContactError;
 use crate::exponent::minimize_scalar;
 use crate::fit::Sample;
-use crate::model::{ContactModel, Effect, maxwell_step, pow};
+use crate::model::{ContactModel, Effect, adhesion_share, maxwell_step, pow};
 
 /// A window sample with its time [s].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,7 +107,7 @@ fn design(samples: &[TimedSample], cols: &[Column], structure: &ContactModel, of
                     let z = samples[i].sample.z - offset;
                     peak = peak.max(z);
                     if z >= -range && peak > 0.0 {
-                        a[(i, j)] = -((peak - z) / (peak + range)).clamp(0.0, 1.0);
+                        a[(i, j)] = -adhesion_share(peak, z, range);
                     }
                 }
             }

@@ -354,6 +354,26 @@ pub const MAX_ADHESION: f64 = 50.0;
 /// The farthest beyond the surface a plausible model's adhesion holds on [m].
 pub const MAX_ADHESION_RANGE: f64 = 0.02;
 
+/// The share of an [`Effect::Adhesion`]'s pull-off force at deformation z [m] after the contact's deepest
+/// deformation `peak`: min(1, (peak − z)/(peak + range)), 0 while pressing deeper.
+#[inline]
+pub fn adhesion_share(peak: f64, z: f64, range: f64) -> f64 {
+    ((peak - z) / (peak + range)).clamp(0.0, 1.0)
+}
+
+/// The contact's deepest deformation after a step to z: deeper in contact, kept until z is `reach` [m]
+/// beyond the surface (the farthest an adhesion holds on), then forgotten.
+#[inline]
+pub fn next_adhesion_peak(peak: Option<f64>, z: f64, reach: f64) -> Option<f64> {
+    if z > 0.0 {
+        Some(peak.map_or(z, |p| p.max(z)))
+    } else if z < -reach {
+        None
+    } else {
+        peak
+    }
+}
+
 /// State of the effects that have memory (see [`ContactModel::step`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EffectState {
@@ -634,13 +654,7 @@ impl ContactModel {
             .iter()
             .filter_map(|e| if let Effect::Adhesion { range, .. } = *e { Some(range) } else { None })
             .fold(None, |r: Option<f64>, x| Some(r.map_or(x, |r| r.max(x))))?;
-        if z_eff > 0.0 {
-            Some(peak.map_or(z_eff, |p| p.max(z_eff)))
-        } else if z_eff < -reach {
-            None
-        } else {
-            peak
-        }
+        next_adhesion_peak(peak, z_eff, reach)
     }
 
     /// The adhesions' pull [N] at z_eff with the contact's deepest deformation `peak`, and its derivative
@@ -653,8 +667,8 @@ impl ContactModel {
             if let Effect::Adhesion { force, range } = *e
                 && z_eff >= -range
             {
-                let share = (peak - z_eff) / (peak + range);
-                pull += force * share.clamp(0.0, 1.0);
+                let share = adhesion_share(peak, z_eff, range);
+                pull += force * share;
                 if share > 0.0 && share < 1.0 {
                     slope -= force / (peak + range);
                 }

@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, DVector};
 use std::ops::Range;
 
-use softcontact_contact::{ContactModel, maxwell_step, maxwell_step_with_decay};
+use softcontact_contact::{ContactModel, adhesion_share, maxwell_step, maxwell_step_with_decay, next_adhesion_peak};
 
 use crate::Series;
 
@@ -319,17 +319,8 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
             let mut peak: Option<f64> = None;
             zeff.iter()
                 .map(|&z| {
-                    peak = if z > 0.0 {
-                        Some(peak.map_or(z, |p| p.max(z)))
-                    } else if z < -range {
-                        None
-                    } else {
-                        peak
-                    };
-                    match peak {
-                        Some(p) => -((p - z) / (p + range)).clamp(0.0, 1.0),
-                        None => 0.0,
-                    }
+                    peak = next_adhesion_peak(peak, z, range);
+                    peak.map_or(0.0, |p| -adhesion_share(p, z, range))
                 })
                 .collect()
         }

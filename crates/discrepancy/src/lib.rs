@@ -1097,10 +1097,7 @@ fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: &Scales) ->
                 Family::Crosstalk => physical &= b.abs() < 0.3,
                 Family::ToolGravity => physical &= b.abs() <= 100.0,
                 // Its letting go seen: the hand goes past the range after a contact at least once.
-                Family::Adhesion => {
-                    let col = &fit::columns(d, &st)[j];
-                    physical &= b > 0.0 && (1..col.len()).any(|i| col[i - 1] != 0.0 && col[i] == 0.0 && d.s.z[i] < 0.0)
-                }
+                Family::Adhesion => physical &= b > 0.0 && let_go_steps(d, &st, j).next().is_some(),
                 _ => {}
             }
         } else if f == Family::TimeDelay {
@@ -1446,17 +1443,21 @@ fn uncertainty(d: &Data, st: &Structure, fit: &Fit, fam: Family, sh: f64, rate_s
             u.insert("force_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
             // Where it lets go is known to within the deformation's step across the letting go, however
             // sharp the fit's minimum.
-            let j = term_index(st, fam, sh).unwrap_or(2);
-            let col = &fit::columns(d, st)[j];
-            let zeff = |i: usize| d.s.z[i] - st.shift - st.offset_rate * d.time[i];
-            let step = (1..col.len())
-                .filter(|&i| col[i - 1] != 0.0 && col[i] == 0.0 && zeff(i) < 0.0)
-                .map(|i| (zeff(i) - zeff(i - 1)).abs())
-                .fold(0.0, f64::max);
+            let step = let_go_steps(d, st, term_index(st, fam, sh).unwrap_or(2)).fold(0.0, f64::max);
             u.insert("range_m".into(), (z * shape_se(&Term::Adhesion)).max(step));
         }
     }
     u
+}
+
+/// Where the adhesion of column `j` lets go: the deformation's step across each letting go [m] (the pull
+/// was on before the sample and is off at it, beyond the surface).
+fn let_go_steps<'a>(d: &'a Data, st: &'a Structure, j: usize) -> impl Iterator<Item = f64> + 'a {
+    let col = fit::columns(d, st).swap_remove(j);
+    let zeff = move |i: usize| d.s.z[i] - st.shift - st.offset_rate * d.time[i];
+    (1..col.len())
+        .filter(move |&i| col[i - 1] != 0.0 && col[i] == 0.0 && zeff(i) < 0.0)
+        .map(move |i| (zeff(i) - zeff(i - 1)).abs())
 }
 
 fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTreeMap<String, f64> {
