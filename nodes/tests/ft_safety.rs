@@ -40,23 +40,30 @@ fn node() -> FtSensorNode {
 /// until stopped; `extra` sends, after every 100th record, a copy of it and one 50 records older
 /// (what a misbehaving network or a replay would deliver). Returns the records sent.
 fn fake_box(addr: SocketAddr, extra: bool, stop: Arc<AtomicBool>) -> JoinHandle<usize> {
+    slow_box(addr, extra, Duration::ZERO, stop)
+}
+
+/// [`fake_box`] that begins a stream `answer_after` a start request (a busy box or network).
+fn slow_box(addr: SocketAddr, extra: bool, answer_after: Duration, stop: Arc<AtomicBool>) -> JoinHandle<usize> {
     let socket = UdpSocket::bind(addr).unwrap();
     socket.set_read_timeout(Some(Duration::from_millis(1))).unwrap();
     std::thread::spawn(move || {
         let mut buf = [0u8; 64];
         let mut client: Option<SocketAddr> = None;
-        let (mut seq, mut sent) = (0u32, 0usize);
+        let (mut seq, mut sent, mut begin) = (0u32, 0usize, Instant::now());
         let counts = Calibration::gamma_si_130_10().to_counts(&[0.1, 0.2, 1.5, 0.0, 0.0, 0.0]).0;
         let rec = |s: u32| Record { rdt_sequence: s, ft_sequence: s, status: Status(0), counts }.encode();
         while !stop.load(Ordering::Relaxed) {
             if let Ok((n, from)) = socket.recv_from(&mut buf) {
                 match Request::decode(&buf[..n]).map(|r| r.command) {
-                    Ok(RdtCommand::StartRealTime) => (client, seq) = (Some(from), 0),
+                    Ok(RdtCommand::StartRealTime) => {
+                        (client, seq, begin) = (Some(from), 0, Instant::now() + answer_after)
+                    }
                     Ok(RdtCommand::Stop) => client = None,
                     _ => {}
                 }
             }
-            if let Some(to) = client {
+            if let Some(to) = client.filter(|_| Instant::now() >= begin) {
                 let _ = socket.send_to(&rec(seq), to);
                 sent += 1;
                 if extra && seq % 100 == 99 {
@@ -142,4 +149,36 @@ fn the_ft_sensor_node_outlives_a_box_that_is_not_up_and_streams_once_it_is() {
     let errors = counter(&report, "network_errors").unwrap();
     assert!(errors >= 1, "the refused start requests are counted: {errors}");
     assert!(records >= 200 && records as usize <= sent, "records flow once the box is up: {records} of {sent}");
+}
+
+#[test]
+fn an_ft_sensor_told_to_exit_after_a_silence_of_1_s_waits_for_a_box_that_answers_20_ms_late() {
+    if std::env::var(INNER).is_err() {
+        in_isolated_namespace(
+            "an_ft_sensor_told_to_exit_after_a_silence_of_1_s_waits_for_a_box_that_answers_20_ms_late",
+        );
+        return;
+    }
+    let addr = closed_port();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ft_sensor"))
+        .args(["-p", &format!("sensor:={addr}"), "-p", "tare_after:=-1", "-p", "exit_after_silence:=1"])
+        .stdin(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The box comes up after the node's first start request, and streams 20 ms after each request.
+    std::thread::sleep(Duration::from_millis(300));
+    let stop = Arc::new(AtomicBool::new(false));
+    let ft_box = slow_box(addr, false, Duration::from_millis(20), stop.clone());
+    std::thread::sleep(Duration::from_millis(2200));
+    let early = child.try_wait().unwrap();
+    signal(&[&child], libc::SIGINT);
+    let out = child.wait_with_output().unwrap();
+    stop.store(true, Ordering::Relaxed);
+    let sent = ft_box.join().unwrap();
+    let report = String::from_utf8_lossy(&out.stderr);
+    eprintln!("{report}");
+    assert!(early.is_none(), "ft_sensor gave up on a box that answers late: {early:?}");
+    let records = counter(&report, "records").expect("exit report with counters");
+    assert!(records >= 100 && records as usize <= sent, "records flow once the box answers: {records} of {sent}");
 }

@@ -43,6 +43,11 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let ft = FtSensorNode::new(config).map_err(anyhow::Error::msg)?.with_tare_policy(p.tare_policy());
     let mut client = RdtClient::connect(p.sensor, ft)?;
     client.new_stream_after = Duration::from_secs_f64(p.stale_after);
+    if p.exit_after_silence > 0.0 {
+        // A node that gives up after a silence asks the box at least four times before it does: a box
+        // that came up just after the first request must not find the node gone a moment after the retry.
+        client.restart_after = client.restart_after.min(Duration::from_secs_f64(p.exit_after_silence / 4.0));
+    }
     let mut node = ros::node_with_parameters("ft_sensor", declared)?;
     let raw_pub = ros::publisher(&mut node, &topics::WRENCH_RAW, ros::sensor_qos())?;
     let wrench_pub = ros::publisher(&mut node, &topics::WRENCH, ros::sensor_qos())?;
