@@ -12,6 +12,7 @@
 //! measured = external + (R_WSᵀ m g_W, c × R_WSᵀ m g_W) + bias. `wrench_raw` removes the bias,
 //! `wrench` also the tool's weight.
 
+pub mod calibration;
 pub mod component;
 
 use std::collections::VecDeque;
@@ -527,10 +528,14 @@ pub const LOWEST_LOW_PASS: f64 = 100.0;
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
     pub sensor: std::net::SocketAddr,
+    pub http_port: i64,
+    pub http_timeout: f64,
     pub counts_per_force: f64,
     pub counts_per_torque: f64,
     pub force_unit: String,
     pub torque_unit: String,
+    pub ranges: Vec<f64>,
+    pub calibration_override: bool,
     pub low_pass: f64,
     pub rate: f64,
     pub stale_after: f64,
@@ -551,10 +556,14 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             sensor: ([127, 0, 0, 1], 49152).into(),
-            counts_per_force: 1e6,
-            counts_per_torque: 1e6,
-            force_unit: "N".into(),
-            torque_unit: "Nm".into(),
+            http_port: crate::sim_arm::HTTP_PORT as i64,
+            http_timeout: 10.0,
+            counts_per_force: 0.0,
+            counts_per_torque: 0.0,
+            force_unit: String::new(),
+            torque_unit: String::new(),
+            ranges: Vec::new(),
+            calibration_override: false,
             low_pass: 0.0,
             rate: 1000.0,
             stale_after: 0.1,
@@ -574,15 +583,9 @@ impl Default for Params {
 }
 
 impl Params {
-    pub fn calibration(&self) -> Result<Calibration, String> {
-        Calibration::from_settings(
-            self.counts_per_force,
-            self.counts_per_torque,
-            &self.force_unit,
-            &self.torque_unit,
-            Calibration::gamma_si_130_10().range,
-        )
-        .map_err(|e| e.to_string())
+    /// Where the box serves its settings page; None when it is not read (`http_port` 0).
+    pub fn settings_page(&self) -> Option<std::net::SocketAddr> {
+        (self.http_port != 0).then(|| std::net::SocketAddr::new(self.sensor.ip(), self.http_port as u16))
     }
 
     /// The tare checks of these parameters.
@@ -601,31 +604,71 @@ impl Params {
 impl crate::params::NodeParams for Params {
     fn declare(&self, d: &mut crate::params::Declarations) {
         d.any("sensor", "the Net F/T box's RDT address");
-        // The box's counts per unit (netftapi2.xml): 1 to 10⁹ covers every ATI calibration.
+        d.integer(
+            "http_port",
+            self.http_port,
+            (0, 65535),
+            "the box's web server port, where the node reads its calibration, units, ranges and RDT rate (netftapi2.xml) at start-up; 0: not read, the calibration parameters below are then all needed",
+        );
         d.within(
+            "http_timeout",
+            self.http_timeout,
+            (0.1, 600.0),
+            "how long start-up keeps asking the box for its settings page before the node refuses to start [s]",
+        );
+        // The box's counts per unit: 1 to 10⁹ covers every ATI calibration; 0 takes the box's.
+        let counts = |v: f64| {
+            if v == 0.0 || (1.0..=1e9).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!("must be 0 or lie in [1, 1e9], not {v}"))
+            }
+        };
+        d.rule(
             "counts_per_force",
-            self.counts_per_force,
-            (1.0, 1e9),
-            "counts per force unit, as the box's netftapi2.xml gives them",
+            counts(self.counts_per_force),
+            "0 (the box's), or 1 to 1e9",
+            "counts per force unit (the box's cfgcpf); 0: the box's",
         );
-        d.within(
+        d.rule(
             "counts_per_torque",
-            self.counts_per_torque,
-            (1.0, 1e9),
-            "counts per torque unit, as netftapi2.xml gives them",
+            counts(self.counts_per_torque),
+            "0 (the box's), or 1 to 1e9",
+            "counts per torque unit (cfgcpt); 0: the box's",
         );
-        let units = self.calibration().map(|_| ());
+        let unit = |force: &str, torque: &str| {
+            Calibration::from_settings(1.0, 1.0, force, torque, [0.0; 6]).map(|_| ()).map_err(|e| e.to_string())
+        };
+        let force_unit = if self.force_unit.is_empty() { Ok(()) } else { unit(&self.force_unit, "Nm") };
+        let torque_unit = if self.torque_unit.is_empty() { Ok(()) } else { unit("N", &self.torque_unit) };
         d.rule(
             "force_unit",
-            units.clone(),
-            "a force unit of the Net F/T (N, lbf, kgf, ...)",
-            "the force unit of the counts, as netftapi2.xml gives it",
+            force_unit,
+            "\"\" (the box's), or N, lbf, klbf, kN, kgf, gf",
+            "the force unit of the counts (scfgfu); \"\": the box's",
         );
         d.rule(
             "torque_unit",
-            units,
-            "a torque unit of the Net F/T (Nm, Nmm, lbf-in, ...)",
-            "the torque unit of the counts, as netftapi2.xml gives it",
+            torque_unit,
+            "\"\" (the box's), or Nm, N-m, Nmm, N-mm, lbf-in, lbf-ft, kgf-cm, kN-m",
+            "the torque unit of the counts (scfgtu); \"\": the box's",
+        );
+        let ranges = if self.ranges.is_empty()
+            || (self.ranges.len() == 6 && self.ranges.iter().all(|r| r.is_finite() && *r > 0.0 && *r <= 1e6))
+        {
+            Ok(())
+        } else {
+            Err(format!("must be empty or six positive ranges, not {:?}", self.ranges))
+        };
+        d.rule(
+            "ranges",
+            ranges,
+            "[] (the box's), or six values in (0, 1e6]",
+            "the calibrated range of Fx Fy Fz Tx Ty Tz in the configured units (cfgmr): a reading at or beyond it is not used; []: the box's",
+        );
+        d.any(
+            "calibration_override",
+            "true: calibration parameters that are set win over the box's page where they differ (the node otherwise refuses to start)",
         );
         // The Net F/T streams RDT at up to 7 kHz; below 100 Hz a force loop has nothing to run on.
         d.within("rate", self.rate, (100.0, 7000.0), "the box's RDT output rate [Hz]");

@@ -1,14 +1,18 @@
-//! The simulated cell behind real UDP sockets: the KRC's side of FRI (a measurement to the remote every
-//! cycle, its answer applied) and the Net F/T's side of RDT (records streamed on request), paced in
-//! real time. Optional loss in both directions for robustness tests.
+//! The simulated cell behind real sockets: the KRC's side of FRI (a measurement to the remote every
+//! cycle, its answer applied), the Net F/T's side of RDT (records streamed on request, one a datagram or
+//! the box's buffer size a datagram, biased on the reading of the moment) and the box's settings page over
+//! HTTP (`netftapi2.xml`: its calibration, units and ranges), paced in real time against deadlines.
+//! Optional loss in both directions for robustness tests.
 
 use std::net::{SocketAddr, UdpSocket};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use softcontact_contact::ContactModel;
 use softcontact_sim::Simulator;
+use softcontact_wire::netft_xml::{self, BoxSettings};
 use softcontact_wire::{fri, rdt};
 
 #[derive(Debug, Clone)]
@@ -17,6 +21,11 @@ pub struct SimArmConfig {
     /// Where the driver listens (the KRC's `FRIHOST`/`FRISOCK`).
     pub fri_remote: SocketAddr,
     pub rdt_bind: SocketAddr,
+    /// Where the box serves its settings page (`netftapi2.xml`); None: no web server.
+    pub http_bind: Option<SocketAddr>,
+    /// The box's transducer and configuration as its settings page gives them (its calibration is the
+    /// one the records are counted in; its buffer size is what buffered mode packs a datagram with).
+    pub box_settings: BoxSettings,
     /// Fractions of measurements (KRC → remote) and of commands (remote → KRC) lost, once the KRC is in
     /// command mode (a KRC will not enter command mode over a lossy link).
     pub measurement_loss: f64,
@@ -52,9 +61,12 @@ pub struct SimArmServer {
     sim: Simulator,
     fri: UdpSocket,
     rdt: UdpSocket,
+    http: Option<Arc<tiny_http::Server>>,
     config: SimArmConfig,
     stream_to: Option<SocketAddr>,
     remaining: Option<u32>,
+    /// Buffered mode: the records of the datagram being filled.
+    buffered: Option<Vec<rdt::Record>>,
     rng: SmallRng,
     records_due: f64,
     pub stats: SimArmStats,
@@ -62,20 +74,38 @@ pub struct SimArmServer {
 
 impl SimArmServer {
     pub fn bind(sim: Simulator, config: SimArmConfig) -> std::io::Result<Self> {
+        let invalid = |what: &str| std::io::Error::new(std::io::ErrorKind::InvalidInput, what.to_string());
+        if !(1.0..=7000.0).contains(&config.rdt_rate) {
+            return Err(invalid("RDT rate must lie in 1..=7000 Hz"));
+        }
+        if !config.box_settings.rdt_buffer.is_some_and(|n| (1..=40).contains(&n)) {
+            return Err(invalid("the box's RDT buffer size must lie in 1..=40 records"));
+        }
+        let page = config.box_settings.calibration().map_err(|e| invalid(&e.to_string()))?;
+        if page != *sim.sensor.calibration() {
+            return Err(invalid("the box's settings page must give the calibration its records are counted in"));
+        }
         let fri = UdpSocket::bind(config.fri_bind)?;
+        fri.set_nonblocking(true)?;
         let rdt = UdpSocket::bind(config.rdt_bind)?;
         rdt.set_nonblocking(true)?;
-        let rng = SmallRng::seed_from_u64(config.seed ^ 0x5eed);
-        if !(1.0..=7000.0).contains(&config.rdt_rate) {
-            return Err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "RDT rate must lie in 1..=7000 Hz"));
+        let http = match config.http_bind {
+            Some(addr) => Some(Arc::new(tiny_http::Server::http(addr).map_err(std::io::Error::other)?)),
+            None => None,
+        };
+        if let Some(server) = &http {
+            serve_settings_page(server.clone(), config.box_settings.to_xml());
         }
+        let rng = SmallRng::seed_from_u64(config.seed ^ 0x5eed);
         Ok(Self {
             sim,
             fri,
             rdt,
+            http,
             config,
             stream_to: None,
             remaining: None,
+            buffered: None,
             rng,
             records_due: 0.0,
             stats: SimArmStats::default(),
@@ -88,6 +118,11 @@ impl SimArmServer {
 
     pub fn rdt_addr(&self) -> std::io::Result<SocketAddr> {
         self.rdt.local_addr()
+    }
+
+    /// Where the box's settings page is served, if it is.
+    pub fn http_addr(&self) -> Option<SocketAddr> {
+        self.http.as_ref().and_then(|h| h.server_addr().to_ip())
     }
 
     pub fn simulator(&mut self) -> &mut Simulator {
@@ -103,10 +138,11 @@ impl SimArmServer {
                         // A newer start steals the stream.
                         self.stream_to = Some(from);
                         self.remaining = (req.sample_count > 0).then_some(req.sample_count);
+                        self.buffered = (req.command == rdt::RdtCommand::StartBuffered).then(Vec::new);
                         self.sim.sensor.start_stream();
                     }
                     rdt::RdtCommand::Stop => self.stream_to = None,
-                    rdt::RdtCommand::SetBias => self.sim.sensor.set_bias(),
+                    rdt::RdtCommand::SetBias => self.sim.ft_set_bias(),
                     _ => {}
                 },
                 Err(_) => self.stats.malformed += 1,
@@ -119,6 +155,7 @@ impl SimArmServer {
     pub fn run(&mut self, mut observe: impl FnMut(&mut Simulator) -> bool) -> std::io::Result<SimArmStats> {
         let cycle = Duration::from_secs_f64(self.sim.krc_cycle());
         let mut next = Instant::now();
+        let mut box_clock: Option<Instant> = None;
         let mut buf = [0u8; 2048];
         loop {
             let m = self.sim.measurement();
@@ -137,10 +174,9 @@ impl SimArmServer {
             let deadline = Instant::now() + wait;
             loop {
                 let now = Instant::now();
-                if now >= deadline {
+                if now >= deadline || !crate::udp::wait_readable(&self.fri, deadline - now)? {
                     break;
                 }
-                self.fri.set_read_timeout(Some(deadline - now))?;
                 match self.fri.recv_from(&mut buf) {
                     Ok((n, _)) => match fri::Command::decode(&buf[..n]) {
                         Ok(cmd) => {
@@ -156,24 +192,49 @@ impl SimArmServer {
                         }
                         Err(_) => self.stats.malformed += 1,
                     },
-                    Err(e) if crate::udp::no_datagram(&e) => break,
+                    Err(e) if crate::udp::no_datagram(&e) => continue,
                     Err(e) => return Err(e),
                 }
             }
             self.serve_rdt_requests();
             self.sim.step_cycle().map_err(std::io::Error::other)?;
-            self.records_due += self.config.rdt_rate * self.sim.krc_cycle();
+            // The box streams on its own clock: in real time by the wall clock (a late cycle costs no
+            // records), in lockstep by the simulated time.
+            let elapsed = match self.config.pacing {
+                Pacing::RealTime => {
+                    let now = Instant::now();
+                    let dt = now.duration_since(*box_clock.get_or_insert(now)).as_secs_f64();
+                    box_clock = Some(now);
+                    dt
+                }
+                Pacing::Lockstep { .. } => self.sim.krc_cycle(),
+            };
+            self.records_due = (self.records_due + self.config.rdt_rate * elapsed).min(RECORDS_DUE_AT_MOST);
             while self.records_due >= 1.0 {
                 self.records_due -= 1.0;
                 let Some(to) = self.stream_to else { continue };
                 let record = self.sim.ft_record();
-                self.rdt.send_to(&record.encode(), to)?;
-                self.stats.records_sent += 1;
-                if let Some(left) = self.remaining.as_mut() {
+                let last = self.remaining.as_mut().is_some_and(|left| {
                     *left -= 1;
-                    if *left == 0 {
-                        self.stream_to = None;
+                    *left == 0
+                });
+                let per_datagram = self.config.box_settings.rdt_buffer.unwrap_or(1) as usize;
+                match self.buffered.as_mut() {
+                    None => {
+                        self.rdt.send_to(&record.encode(), to)?;
+                        self.stats.records_sent += 1;
                     }
+                    Some(pending) => {
+                        pending.push(record);
+                        if pending.len() == per_datagram || last {
+                            self.rdt.send_to(&rdt::Record::encode_buffered(pending), to)?;
+                            self.stats.records_sent += pending.len() as u64;
+                            pending.clear();
+                        }
+                    }
+                }
+                if last {
+                    self.stream_to = None;
                 }
             }
             self.stats.cycles += 1;
@@ -197,6 +258,38 @@ impl SimArmServer {
     }
 }
 
+/// Records the box sends at once after the cell stalled (a debugger, an overloaded machine): a stall's
+/// backlog beyond this is dropped, as a box's socket buffer would.
+const RECORDS_DUE_AT_MOST: f64 = 50.0;
+
+/// Serves the box's settings page on its own thread for the server's life: `GET /netftapi2.xml` answers
+/// the page, anything else 404.
+fn serve_settings_page(server: Arc<tiny_http::Server>, page: String) {
+    std::thread::Builder::new()
+        .name("netft_http".into())
+        .spawn(move || {
+            for request in server.incoming_requests() {
+                let path = request.url().split('?').next().unwrap_or_default();
+                let response = if *request.method() == tiny_http::Method::Get && path == netft_xml::PATH {
+                    let xml = "Content-Type: text/xml".parse::<tiny_http::Header>().expect("a valid header");
+                    tiny_http::Response::from_string(page.clone()).with_header(xml)
+                } else {
+                    tiny_http::Response::from_string("not found").with_status_code(404)
+                };
+                let _ = request.respond(response);
+            }
+        })
+        .expect("a thread for the settings page");
+}
+
+impl Drop for SimArmServer {
+    fn drop(&mut self) {
+        if let Some(server) = &self.http {
+            server.unblock();
+        }
+    }
+}
+
 /// The simulated surface under the hand.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -208,6 +301,30 @@ pub enum SurfaceKind {
     LabSponge,
     LabDice,
     None,
+}
+
+/// The transducer of the simulated Net F/T box, and the settings page it serves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Transducer {
+    /// Gamma SI-130-10 in N and N·m (the cell's sensor).
+    Gamma,
+    /// Nano17 SI-25-0.25 in N and N·mm.
+    Nano17,
+    /// Mini45 US-60-80 in lbf and lbf-in.
+    Mini45,
+}
+
+impl Transducer {
+    /// The box's settings page at this RDT rate and buffer size.
+    pub fn settings(self, rdt_rate: f64, rdt_buffer: u32) -> BoxSettings {
+        let page = match self {
+            Self::Gamma => BoxSettings::gamma_si_130_10(),
+            Self::Nano17 => BoxSettings::nano17_si_25_025(),
+            Self::Mini45 => BoxSettings::mini45_us_60_80(),
+        };
+        BoxSettings { rdt_rate: Some(rdt_rate.round() as u32), rdt_buffer: Some(rdt_buffer), ..page }
+    }
 }
 
 /// The KRL program the simulated KRC runs (`krl/README.md`).
@@ -240,6 +357,9 @@ pub struct Params {
     pub fri_remote: SocketAddr,
     pub fri_bind: SocketAddr,
     pub rdt_bind: SocketAddr,
+    pub http_bind: SocketAddr,
+    pub transducer: Transducer,
+    pub rdt_buffer: i64,
     pub surface: SurfaceKind,
     pub surface_model: String,
     pub seconds: f64,
@@ -250,12 +370,18 @@ pub struct Params {
     pub krl_program: KrlProgramKind,
 }
 
+/// The simulated box's web server port (a real box serves on 80, which needs privileges here).
+pub const HTTP_PORT: u16 = 49180;
+
 impl Default for Params {
     fn default() -> Self {
         Self {
             fri_remote: ([127, 0, 0, 1], 49938).into(),
             fri_bind: ([127, 0, 0, 1], 0).into(),
             rdt_bind: ([127, 0, 0, 1], 49152).into(),
+            http_bind: ([127, 0, 0, 1], HTTP_PORT).into(),
+            transducer: Transducer::Gamma,
+            rdt_buffer: 1,
             surface: SurfaceKind::Sponge,
             surface_model: String::new(),
             seconds: 0.0,
@@ -291,6 +417,9 @@ impl crate::params::NodeParams for Params {
         d.any("fri_remote", "where the FRI driver listens (the KRC's FRIHOST:FRISOCK)");
         d.any("fri_bind", "the simulated KRC's own FRI address");
         d.any("rdt_bind", "the simulated Net F/T box's RDT address");
+        d.any("http_bind", "where the simulated box serves its settings page, netftapi2.xml (port 0: no web server)");
+        d.any("transducer", "the simulated box's transducer and calibration: gamma (SI-130-10, N, N·m), nano17 (SI-25-0.25, N, N·mm) or mini45 (US-60-80, lbf, lbf-in)");
+        d.integer("rdt_buffer", self.rdt_buffer, (1, 40), "records a datagram in buffered mode (the box's comrdtbsiz)");
         d.any("surface", "the simulated surface: its preset law, place and sensor (none: free space)");
         d.any(
             "krl_program",

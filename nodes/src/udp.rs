@@ -266,3 +266,16 @@ impl RdtClient {
         }
     }
 }
+
+/// Waits until `socket` has a datagram or `timeout` has passed (`ppoll`: to the microsecond, where a
+/// socket's receive timeout is rounded up to the kernel's tick, 4 ms on many kernels). True if readable.
+pub fn wait_readable(socket: &UdpSocket, timeout: Duration) -> std::io::Result<bool> {
+    use nix::poll::{PollFd, PollFlags, ppoll};
+    use std::os::fd::AsFd;
+    let mut fds = [PollFd::new(socket.as_fd(), PollFlags::POLLIN)];
+    match ppoll(&mut fds, Some(nix::sys::time::TimeSpec::from_duration(timeout)), None) {
+        Ok(n) => Ok(n > 0),
+        Err(nix::errno::Errno::EINTR) => Ok(false),
+        Err(e) => Err(e.into()),
+    }
+}

@@ -20,6 +20,22 @@ use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::udp::RdtClient;
 use softcontact_wire::rdt::{Calibration, RdtCommand, Record, Request, Status};
 
+/// The fake box serves no settings page: the node starts from the Gamma's calibration given by hand.
+const CALIBRATION_BY_HAND: [&str; 12] = [
+    "-p",
+    "http_port:=0",
+    "-p",
+    "counts_per_force:=1000000",
+    "-p",
+    "counts_per_torque:=1000000",
+    "-p",
+    "force_unit:=N",
+    "-p",
+    "torque_unit:=Nm",
+    "-p",
+    "ranges:=[130, 130, 400, 10, 10, 10]",
+];
+
 /// A port on 127.0.0.1 that nothing listens on (bound, then closed).
 fn closed_port() -> SocketAddr {
     UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap()
@@ -125,6 +141,7 @@ fn the_ft_sensor_node_outlives_a_box_that_is_not_up_and_streams_once_it_is() {
     let addr = closed_port();
     let mut child = Command::new(env!("CARGO_BIN_EXE_ft_sensor"))
         .args(["-p", &format!("sensor:={addr}"), "-p", "tare_after:=-1"])
+        .args(CALIBRATION_BY_HAND)
         .stdin(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -162,6 +179,7 @@ fn an_ft_sensor_told_to_exit_after_a_silence_of_1_s_waits_for_a_box_that_answers
     let addr = closed_port();
     let mut child = Command::new(env!("CARGO_BIN_EXE_ft_sensor"))
         .args(["-p", &format!("sensor:={addr}"), "-p", "tare_after:=-1", "-p", "exit_after_silence:=1"])
+        .args(CALIBRATION_BY_HAND)
         .stdin(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()

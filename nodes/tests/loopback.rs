@@ -46,6 +46,8 @@ fn start_cell(
             fri_bind: "127.0.0.1:0".parse().unwrap(),
             fri_remote: driver,
             rdt_bind: "127.0.0.1:0".parse().unwrap(),
+            http_bind: None,
+            box_settings: softcontact_nodes::sim_arm::Transducer::Gamma.settings(1000.0, 1),
             measurement_loss: loss_each_way,
             command_loss: loss_each_way,
             rdt_rate: 1000.0,

@@ -296,6 +296,21 @@ impl Simulator {
         )
     }
 
+    /// RDT 0x0042 to the simulated box: it biases on the reading of this moment.
+    pub fn ft_set_bias(&mut self) {
+        self.model.forward_kinematics(&mut self.data, &self.q);
+        let sensor_pose = self.model.frame_pose(&self.data, self.sensor_frame);
+        let tool_pose = self.model.frame_pose(&self.data, self.tool);
+        self.sensor.set_bias(
+            &sensor_pose,
+            &tool_pose,
+            &self.last_contact.sensed_force,
+            self.model.gravity,
+            self.time,
+            &mut self.rng,
+        )
+    }
+
     /// Advances one FRI cycle: the KRC closes its cycle (quality, watchdog), then the arm moves under
     /// the KRC's torques and the surface's force.
     pub fn step_cycle(&mut self) -> Result<Option<KrcEvent>, SimError> {

@@ -85,7 +85,6 @@ pub struct FtSensor {
     rdt_sequence: u32,
     ft_sequence: u32,
     tare: [i32; 6],
-    last_raw: [i32; 6],
     /// The coloured noise's state and the time it was last advanced to.
     coloured: [f64; 6],
     coloured_at: Option<f64>,
@@ -93,26 +92,12 @@ pub struct FtSensor {
 
 impl FtSensor {
     pub fn new(config: FtSensorConfig, load: BodyInertia) -> Self {
-        Self {
-            config,
-            load,
-            rdt_sequence: 0,
-            ft_sequence: 0,
-            tare: [0; 6],
-            last_raw: [0; 6],
-            coloured: [0.0; 6],
-            coloured_at: None,
-        }
+        Self { config, load, rdt_sequence: 0, ft_sequence: 0, tare: [0; 6], coloured: [0.0; 6], coloured_at: None }
     }
 
     /// A new stream starts (RDT start request): the stream counter restarts.
     pub fn start_stream(&mut self) {
         self.rdt_sequence = 0;
-    }
-
-    /// RDT 0x0042: the box subtracts the current reading from now on.
-    pub fn set_bias(&mut self) {
-        self.tare = self.last_raw;
     }
 
     /// The exact wrench on the sensing frame, in it: contact force at the tool plus the hand's weight.
@@ -161,6 +146,41 @@ impl FtSensor {
         time: f64,
         rng: &mut impl Rng,
     ) -> Record {
+        let (raw, saturated) = self.sample(sensor, tool, contact_force, gravity, time, rng);
+        let record = Record {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            status: Status(if saturated { Status::ERROR_SUMMARY | Status::SATURATION } else { 0 }),
+            counts: std::array::from_fn(|i| raw[i].wrapping_sub(self.tare[i])),
+        };
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        record
+    }
+
+    /// RDT 0x0042: the box takes a reading now (streaming or not: its converter always runs) and
+    /// subtracts it from every record after.
+    pub fn set_bias(
+        &mut self,
+        sensor: &Isometry3<f64>,
+        tool: &Isometry3<f64>,
+        contact_force: &Vector3<f64>,
+        gravity: Vector3<f64>,
+        time: f64,
+        rng: &mut impl Rng,
+    ) {
+        self.tare = self.sample(sensor, tool, contact_force, gravity, time, rng).0;
+    }
+
+    /// One conversion of the box: the raw counts (before its bias) and whether an axis saturated.
+    fn sample(
+        &mut self,
+        sensor: &Isometry3<f64>,
+        tool: &Isometry3<f64>,
+        contact_force: &Vector3<f64>,
+        gravity: Vector3<f64>,
+        time: f64,
+        rng: &mut impl Rng,
+    ) -> ([i32; 6], bool) {
         let exact = self.true_wrench(sensor, tool, contact_force, gravity);
         self.advance_coloured(time, rng);
         let c = &self.config;
@@ -170,16 +190,8 @@ impl FtSensor {
             exact[i] + c.bias[i] + c.drift[i] * time + noise + self.coloured[i]
         });
         let (raw, saturated) = c.calibration.to_counts(&reading);
-        self.last_raw = raw;
         self.ft_sequence = self.ft_sequence.wrapping_add(1);
-        let record = Record {
-            rdt_sequence: self.rdt_sequence,
-            ft_sequence: self.ft_sequence,
-            status: Status(if saturated { Status::ERROR_SUMMARY | Status::SATURATION } else { 0 }),
-            counts: std::array::from_fn(|i| raw[i].wrapping_sub(self.tare[i])),
-        };
-        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
-        record
+        (raw, saturated)
     }
 
     pub fn calibration(&self) -> &rdt::Calibration {

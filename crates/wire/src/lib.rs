@@ -1,10 +1,11 @@
 //! The hardware boundary as bytes: codecs of the KUKA LWR IV's FRI ([`fri`]) and the ATI Net F/T's RDT
-//! ([`rdt`]). No sockets: the driver nodes and the simulator share these codecs, so nothing else in
+//! ([`rdt`]), and the Net F/T's settings page ([`netft_xml`]). No sockets: the driver nodes and the simulator share these codecs, so nothing else in
 //! the product knows the wire formats. Every decoder checks length, size fields and ids before it
 //! trusts a field, refuses NaN or ±∞ in control data, and never panics on any input.
 
 mod bytes;
 pub mod fri;
+pub mod netft_xml;
 pub mod rdt;
 
 /// Why a datagram was refused.
@@ -22,4 +23,6 @@ pub enum WireError {
     UnknownCommand { code: u16 },
     #[error("unsupported unit or calibration: {0}")]
     Unit(String),
+    #[error("the box's netftapi2.xml: {0}")]
+    Settings(String),
 }

@@ -247,6 +247,7 @@ impl Calibration {
             "klbf" => 4_448.221_615_260_5,
             "kN" => 1000.0,
             "kgf" => 9.806_65,
+            "gf" => 9.806_65e-3,
             other => return Err(WireError::Unit(other.to_string())),
         };
         let torque = match torque_unit {
@@ -255,7 +256,7 @@ impl Calibration {
             "lbf-in" => 0.112_984_829_027_616_7,
             "lbf-ft" => 1.355_817_948_331_400_4,
             "kgf-cm" | "kg-cm" => 0.098_066_5,
-            "kN-m" => 1000.0,
+            "kN-m" | "kNm" => 1000.0,
             other => return Err(WireError::Unit(other.to_string())),
         };
         if !(cpf.is_finite() && cpf > 0.0 && cpt.is_finite() && cpt > 0.0) {

@@ -46,6 +46,8 @@ fn main() -> anyhow::Result<()> {
     if matches!(p.surface, SurfaceKind::LabSponge | SurfaceKind::LabDice) {
         config.sensor = softcontact_sim::FtSensorConfig::gamma_drifting();
     }
+    let box_settings = p.transducer.settings(p.rdt_rate, p.rdt_buffer as u32);
+    config.sensor.calibration = box_settings.calibration()?;
     let sim = Simulator::new(config)?;
     let mut server = SimArmServer::bind(
         sim,
@@ -53,6 +55,8 @@ fn main() -> anyhow::Result<()> {
             fri_bind: p.fri_bind,
             fri_remote: p.fri_remote,
             rdt_bind: p.rdt_bind,
+            http_bind: (p.http_bind.port() != 0).then_some(p.http_bind),
+            box_settings,
             measurement_loss: p.drop_rate,
             command_loss: p.drop_rate,
             rdt_rate: p.rdt_rate,
@@ -65,7 +69,13 @@ fn main() -> anyhow::Result<()> {
     let mut node = ros::node_with_parameters("sim_arm", declared)?;
     let clock = if p.lockstep { Some(ros::publisher(&mut node, &topics::CLOCK, ros::reliable_qos())?) } else { None };
     let contact_wrench = ros::publisher(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
-    eprintln!("sim_arm: ready: FRI from {} to {}, RDT at {}", server.fri_addr()?, p.fri_remote, server.rdt_addr()?);
+    let http = server.http_addr().map_or("no settings page".into(), |a| format!("netftapi2.xml at http://{a}"));
+    eprintln!(
+        "sim_arm: ready: FRI from {} to {}, RDT at {}, {http}",
+        server.fri_addr()?,
+        p.fri_remote,
+        server.rdt_addr()?
+    );
     let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());
     let stats = server.run(|sim| {
         // Stamped on the nodes' clock: the simulated time in lockstep, the system's in real time.

@@ -12,7 +12,7 @@ use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
-use super::{FtConfig, FtSensorNode, Params, StartupTare};
+use super::{FtConfig, FtSensorNode, Params, StartupTare, calibration};
 use crate::contact_estimator::ForcePairing;
 use crate::geometry;
 use crate::handover::{ForceReading, Latest, ToolPose};
@@ -33,8 +33,24 @@ pub struct Links {
 /// The node until `stop` is set (or it exits after a silence): the binary's `main`, and a thread of
 /// `lwr_control`.
 pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
+    // The box's calibration before anything else: without it no count means a force.
+    let page = match p.settings_page() {
+        Some(http) => Some(
+            calibration::fetch_settings_patiently(http, Duration::from_secs_f64(p.http_timeout), || {
+                !ros::stopping(&stop)
+            })
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "no settings page from the box within {} s ({e}); set http_port:=0 and every calibration parameter to start without it",
+                    p.http_timeout
+                )
+            })?,
+        ),
+        None => None,
+    };
+    let (calibration, calibration_source) = calibration::resolve(&p, page.as_ref()).map_err(anyhow::Error::msg)?;
     let config = FtConfig {
-        calibration: p.calibration().map_err(anyhow::Error::msg)?,
+        calibration,
         tool: lwr4::tool_load(),
         gravity: Vector3::new(0.0, 0.0, -9.81),
         low_pass: (p.low_pass > 0.0).then_some(p.low_pass),
@@ -74,6 +90,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     if let Err(e) = client.start() {
         ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));
     }
+    ros::log(&node, LogLevel::Info, &calibration_source);
     ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
     let mut orientation: Option<UnitQuaternion<f64>> = None;
     let mut last_status = 0u32;
