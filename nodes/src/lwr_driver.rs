@@ -75,6 +75,9 @@ pub const HOLD_STIFFNESS: [(f64, f64); 7] =
 pub const LIMIT_LOOKAHEAD: f64 = 0.05;
 /// Sample times the KRC can be configured to (FRI: 1 to 100 ms), with a margin below.
 const SAMPLE_TIME: std::ops::RangeInclusive<f64> = 0.0005..=0.1;
+/// The slowest FRI cycle torque is applied at: the loop is shown to hold a press from 1 to 10 ms
+/// (`nodes/tests/closed_loop.rs`); a slower cycle gets the safe command of its mode and no torque.
+pub const TORQUE_CYCLE_AT_MOST: f64 = 0.010;
 
 /// KRL exchange (krl/softcontact.src, as ros_control.src of the LWR's ROS 1 stack): `$FRI_FRM_INT[1]`
 /// the strategy the remote asks for, `$FRI_FRM_INT[2]` 1 start / 0 stop; `$FRI_TO_INT[2]` 1 started,
@@ -234,6 +237,8 @@ pub enum Waiting {
     DriveError(u16),
     /// The link graded below OK.
     Quality(Quality),
+    /// The KRL program opened FRI at a cycle [s] slower than torque control is run at.
+    SlowCycle(f64),
     Fault(Fault),
 }
 
@@ -258,6 +263,12 @@ impl std::fmt::Display for Waiting {
             Waiting::DrivesOff(power) => write!(f, "drives off (robot.power {power:#04x}): waiting for all seven"),
             Waiting::DriveError(error) => write!(f, "drive error {error:#06x}: waiting for the KRC to clear it"),
             Waiting::Quality(q) => write!(f, "FRI link quality {q:?}: waiting for OK or better"),
+            Waiting::SlowCycle(t) => write!(
+                f,
+                "FRI cycle {:.0} ms: torque control runs at 1 to {:.0} ms; no torque applied (friOpen in the KRL program)",
+                t * 1e3,
+                TORQUE_CYCLE_AT_MOST * 1e3
+            ),
             Waiting::Fault(fault) => write!(f, "{fault}"),
         }
     }
@@ -502,6 +513,8 @@ impl LwrDriver {
             Some(Waiting::DriveError(m.robot.error))
         } else if m.intf.quality < Quality::Ok {
             Some(Waiting::Quality(m.intf.quality))
+        } else if m.intf.desired_msr_sample_time as f64 > TORQUE_CYCLE_AT_MOST + 1e-6 {
+            Some(Waiting::SlowCycle(m.intf.desired_msr_sample_time as f64))
         } else {
             None
         }

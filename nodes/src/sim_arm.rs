@@ -368,6 +368,7 @@ pub struct Params {
     pub lockstep: bool,
     pub seed: u64,
     pub krl_program: KrlProgramKind,
+    pub fri_cycle: f64,
 }
 
 /// The simulated box's web server port (a real box serves on 80, which needs privileges here).
@@ -390,6 +391,7 @@ impl Default for Params {
             lockstep: false,
             seed: 1,
             krl_program: KrlProgramKind::Softcontact,
+            fri_cycle: 0.001,
         }
     }
 }
@@ -450,6 +452,18 @@ impl crate::params::NodeParams for Params {
             "faster than real time: step as soon as the driver has answered, and publish the simulated time on /clock",
         );
         d.any("seed", "seed of the simulated noise and losses");
+        let whole_ms = (self.fri_cycle * 1e3 - (self.fri_cycle * 1e3).round()).abs() < 1e-9;
+        let cycle = if whole_ms && (0.001..=0.1).contains(&self.fri_cycle) {
+            Ok(())
+        } else {
+            Err(format!("must be 1 to 100 whole milliseconds, not {} s", self.fri_cycle))
+        };
+        d.rule(
+            "fri_cycle",
+            cycle,
+            "0.001 to 0.1 s in whole ms",
+            "the FRI cycle the KRL program opens (friOpen(1): 0.001 s; ros_control.src's friOpen(2): 0.002 s); the driver applies torque at 1 to 10 ms [s]",
+        );
     }
 }
 

@@ -257,3 +257,51 @@ fn every_measurement_is_answered_with_the_torque_computed_for_it() {
     assert!(answered == 8000 && commands == 1);
     assert!(l.0.sim.contact().normal_force > 60.0, "the force command was carried out");
 }
+
+#[test]
+fn a_force_is_reached_and_held_at_every_fri_cycle_the_krc_offers_from_1_to_10_ms() {
+    for ms in [1u32, 2, 5, 10] {
+        let cycle = f64::from(ms) * 1e-3;
+        let mut config = SimConfig::above_surface(softcontact_sim::dice(), 12);
+        config.sensor = softcontact_sim::FtSensorConfig::ideal();
+        config.cycle = cycle;
+        config.krc.cycle = cycle;
+        let controller =
+            DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap();
+        let mut l = Loop::new(config, controller);
+        let per_second = 1000 / ms as usize;
+        let mut cycles = 0;
+        while !l.cycle().is_some_and(|s| s.in_contact) {
+            cycles += 1;
+            assert!(cycles < 20 * per_second, "{ms} ms: no contact after 20 s");
+        }
+        l.0.controller.law.command_force(60.0, 2.0).unwrap();
+        let (mut last, mut peak) = (Vec::new(), 0.0f64);
+        for k in 0..4 * per_second {
+            let s = l.cycle().unwrap();
+            assert!(!s.contact_lost, "{ms} ms");
+            peak = peak.max(s.f);
+            if k >= 15 * per_second / 4 {
+                last.push(s.f);
+            }
+        }
+        let f = last.iter().sum::<f64>() / last.len() as f64;
+        eprintln!("FRI cycle {ms} ms: 60 N held at {f:.2} N, peak {peak:.2} N");
+        assert!((l.0.driver.sample_time() - cycle).abs() < 1e-6, "the driver runs the KRC's cycle");
+        assert!((f - 60.0).abs() < 0.05 * 60.0 && peak < 1.05 * 60.0, "{ms} ms: {f:.2} N, peak {peak:.2} N");
+        assert_eq!(l.0.sim.krc.state(), InterfaceState::Command);
+    }
+    // A KRL program that opens FRI at 20 ms gets no torque: the hand stays where it is.
+    let mut config = SimConfig::above_surface(softcontact_sim::dice(), 12);
+    (config.cycle, config.krc.cycle) = (0.020, 0.020);
+    let controller = DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap();
+    let mut l = Loop::new(config, controller);
+    let start = l.0.sim.q()[1];
+    for _ in 0..250 {
+        assert!(l.cycle().is_none(), "no controller tick at 20 ms");
+    }
+    assert!((l.0.sim.q()[1] - start).abs() < 1e-3, "joint 2 moved {} rad", l.0.sim.q()[1] - start);
+    let measured = l.0.driver.measure(&l.0.sim.measurement().encode()).unwrap();
+    let waiting = measured.output.waiting.map(|w| w.to_string()).unwrap_or_default();
+    assert!(waiting.contains("FRI cycle 20 ms"), "{waiting}");
+}

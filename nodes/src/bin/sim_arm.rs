@@ -32,6 +32,7 @@ fn main() -> anyhow::Result<()> {
     let stop = ros::shutdown_flag()?;
     let mut config = SimConfig::above_surface(softcontact_sim::sponge(), p.seed);
     config.krc.program = p.krl_program.program();
+    (config.cycle, config.krc.cycle) = (p.fri_cycle, p.fri_cycle);
     let model = match p.surface {
         SurfaceKind::Sponge => Some(softcontact_sim::sponge()),
         SurfaceKind::Dice => Some(softcontact_sim::dice()),
@@ -76,6 +77,7 @@ fn main() -> anyhow::Result<()> {
         p.fri_remote,
         server.rdt_addr()?
     );
+    eprintln!("sim_arm: FRI cycle {} ms", p.fri_cycle * 1e3);
     let cycles = (p.seconds > 0.0).then(|| (p.seconds * 1000.0).round());
     let stats = server.run(|sim| {
         // Stamped on the nodes' clock: the simulated time in lockstep, the system's in real time.
