@@ -56,7 +56,11 @@ pub struct DriverMessages {
     pub external_torque: JointState,
     pub ee_pose: PoseStamped,
     pub ee_twist: TwistStamped,
-    pub tf: TFMessage,
+}
+
+/// /tf: the tool in the world (published at most at [`crate::ros::TF_RATE`], off the 1 kHz loop).
+pub fn tool_tf(tool_pose: &Isometry3<f64>, stamp: Time) -> TFMessage {
+    TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, tool_pose, stamp)] }
 }
 
 /// What /lwr/joint_states say of the driver in `header.frame_id` (a joint state has no frame of its
@@ -129,7 +133,6 @@ impl DriverOutput {
                 header: h,
                 twist: Twist { linear: vector([v[0], v[1], v[2]]), angular: vector([v[3], v[4], v[5]]) },
             },
-            tf: TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, &self.tool_pose, stamp)] },
         }
     }
 }

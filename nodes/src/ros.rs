@@ -139,6 +139,21 @@ pub fn reliable_qos() -> QosProfile {
         .history(History::KeepLast { depth: 10 })
 }
 
+/// /tf as tf2's listeners read it: reliable, keep-last 100 (what rclcpp's tf2 broadcaster offers).
+pub fn tf_qos() -> QosProfile {
+    reliable_qos().history(History::KeepLast { depth: 100 })
+}
+
+/// The most /tf messages a second: a tf2 buffer, rviz2 or a bag needs no more, and a reliable writer
+/// at the loop's 1 kHz would load every reader's history.
+pub const TF_RATE: f64 = 100.0;
+
+/// /clock as ROS 2's ClockQoS reads it: best effort, keep-last 1 (a reliable writer — a simulator —
+/// and a best-effort one — `ros2 bag play --clock` — both match).
+pub fn clock_qos() -> QosProfile {
+    sensor_qos()
+}
+
 /// Latched (/tf_static): late joiners get the last sample.
 pub fn latched_qos() -> QosProfile {
     reliable_qos().durability(Durability::TransientLocal).history(History::KeepLast { depth: 1 })
@@ -216,7 +231,7 @@ impl Clock {
     pub fn new(node: &mut Node, use_sim_time: bool) -> anyhow::Result<Self> {
         let sim = if use_sim_time {
             Some((
-                subscription_by_name(node, topics::CLOCK.name, reliable_qos())?,
+                subscription_by_name(node, topics::CLOCK.name, clock_qos())?,
                 softcontact_msgs::builtin_interfaces::Time::default(),
             ))
         } else {

@@ -13,6 +13,7 @@ use softcontact_msgs::diagnostic_msgs::DiagnosticArray;
 use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::ros;
 
 #[test]
@@ -28,6 +29,9 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
         ros::subscription_by_name::<WrenchStamped>(&mut node, "/ft_sensor/wrench", ros::sensor_qos()).unwrap();
     let diagnostics =
         ros::subscription_by_name::<DiagnosticArray>(&mut node, "/diagnostics", ros::reliable_qos()).unwrap();
+    // As tf2's TransformListener (and rviz2, tf2_echo) reads /tf: reliable, keep-last 100.
+    let tf2_listener_qos = ros::reliable_qos().history(ros2_client::qos::History::KeepLast { depth: 100 });
+    let tf = ros::subscription_by_name::<TFMessage>(&mut node, "/tf", tf2_listener_qos).unwrap();
     let torque =
         ros::publisher_by_name::<JointState>(&mut node, "/lwr/joint_torque_command", ros::reliable_qos()).unwrap();
     let bias = node
@@ -51,6 +55,7 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
     let tool = model.frame_id(lwr4::TOOL_FRAME).unwrap();
     let start = Instant::now();
     let (mut n_joints, mut n_poses, mut n_wrenches) = (0usize, 0usize, 0usize);
+    let mut tf_stamps = Vec::new();
     let mut first_q: Option<Vec<f64>> = None;
     let mut last_q = Vec::new();
     let mut pose_error: f64 = 0.0;
@@ -94,6 +99,14 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
                 pose_error = pose_error.max((fk - nalgebra::Vector3::new(pos.x, pos.y, pos.z)).norm());
             }
         }
+        while let Ok(Some((t, _))) = tf.take() {
+            assert_eq!(t.transforms.len(), 1);
+            assert_eq!(
+                (t.transforms[0].header.frame_id.as_str(), t.transforms[0].child_frame_id.as_str()),
+                ("world", "lwr_tool")
+            );
+            tf_stamps.push((Instant::now(), t.transforms[0].header.stamp.as_secs_f64()));
+        }
         while let Ok(Some((w, _))) = wrenches.take() {
             n_wrenches += 1;
             assert_eq!(w.header.frame_id, "ft_sensor");
@@ -120,6 +133,12 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
     eprintln!("received {n_joints} joint states, {n_poses} poses, {n_wrenches} wrenches in 7 s");
     assert!(n_joints > 3000, "joint states at ~1 kHz: {n_joints}");
     assert!(n_poses > 3000 && n_wrenches > 3000, "poses {n_poses}, wrenches {n_wrenches}");
+    // /tf at most 100 Hz, to a reliable reader: over the last 4 s, 300 to 410 messages with rising stamps.
+    let late: Vec<f64> =
+        tf_stamps.iter().filter(|(at, _)| *at >= start + Duration::from_secs(3)).map(|(_, s)| *s).collect();
+    eprintln!("/tf to a reliable keep-last-100 reader: {} messages, {} in the last 4 s", tf_stamps.len(), late.len());
+    assert!((300..=410).contains(&late.len()), "/tf at ~100 Hz: {} in 4 s", late.len());
+    assert!(late.windows(2).all(|w| w[1] > w[0]), "/tf stamps rise");
     let drift = first_q.unwrap().iter().zip(&last_q).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
     assert!(drift < 2e-3, "held by its gravity torque over DDS: drift {drift} rad");
     assert!(pose_error < 2e-3, "ee_pose agrees with FK of joint_states: {pose_error} m");
@@ -144,7 +163,7 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
     }
     use softcontact_msgs::rosgraph_msgs::Clock;
     let mut node = ros::node("lockstep_test").unwrap();
-    let clock = ros::subscription_by_name::<Clock>(&mut node, "/clock", ros::reliable_qos()).unwrap();
+    let clock = ros::subscription_by_name::<Clock>(&mut node, "/clock", ros::clock_qos()).unwrap();
     let joints = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
     let mut driver =
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "use_sim_time:=true", "-p", "exit_after_silence:=1"]);

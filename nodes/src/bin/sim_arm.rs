@@ -68,7 +68,8 @@ fn main() -> anyhow::Result<()> {
     // The hardware it stands in for has no ROS side: a DDS participant only for what a simulator alone
     // knows — its time (/clock, in lockstep) and the true contact wrench, to grade runs on.
     let mut node = ros::node_with_parameters("sim_arm", declared)?;
-    let clock = if p.lockstep { Some(ros::publisher(&mut node, &topics::CLOCK, ros::reliable_qos())?) } else { None };
+    // /clock as `ros2 bag play --clock` publishes it (ClockQoS): the nodes read it the way ROS 2 nodes do.
+    let clock = if p.lockstep { Some(ros::publisher(&mut node, &topics::CLOCK, ros::clock_qos())?) } else { None };
     let contact_wrench = ros::publisher(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
     let http = server.http_addr().map_or("no settings page".into(), |a| format!("netftapi2.xml at http://{a}"));
     eprintln!(

@@ -3,9 +3,10 @@
 
 use softcontact_msgs::topics;
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use nalgebra::Isometry3;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
@@ -120,7 +121,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     };
     let ee_pose = ros::publisher(&mut node, &topics::EE_POSE, ros::sensor_qos())?;
     let ee_twist = ros::publisher(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
-    let tf = ros::publisher(&mut node, &topics::TF, ros::sensor_qos())?;
+    let tf = ros::publisher(&mut node, &topics::TF, ros::tf_qos())?;
     let tf_static = ros::publisher(&mut node, &topics::TF_STATIC, ros::latched_qos())?;
     let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
     // Composed, the controller answers in process: nobody else may command the arm.
@@ -149,6 +150,10 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut last_seen = Instant::now();
     let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
+    // /tf from its own thread at TF_RATE: a reliable write never runs on the 1 kHz loop.
+    let tool_in_world = Latest::<(Time, Isometry3<f64>)>::shared();
+    let tf_done = Arc::new(AtomicBool::new(false));
+    let tf_thread = spawn_tf(tf, tool_in_world.clone(), tf_done.clone())?;
     let start = Instant::now();
     let mut command_watch = StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, p.dead_after);
     let mut commands_dead: Option<DeadStream> = None;
@@ -259,8 +264,8 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
                 joint_states.publish(m.joint_state).is_ok(),
                 ee_pose.publish(m.ee_pose).is_ok(),
                 ee_twist.publish(m.ee_twist).is_ok(),
-                tf.publish(m.tf).is_ok(),
             ];
+            tool_in_world.put((stamp, out.tool_pose));
             publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
@@ -302,6 +307,9 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             next_diagnostics += Duration::from_secs(1);
         }
     }
+    tf_done.store(true, Ordering::Relaxed);
+    let tf_errors = tf_thread.join().unwrap_or(1);
+    publish_errors += tf_errors;
     let refusals = client.driver.counters.refusals_since(&counted);
     let strangers = client.driver.counters.commands_from_strangers - counted.commands_from_strangers;
     let dead = commands_dead.as_ref();
@@ -397,4 +405,26 @@ mod tests {
         assert!((lag.period.quantile(0.5) - 1e-3).abs() < 2e-5);
         assert!(lag.to_string().contains("25.00 / 50.00 / 15.00 / 10.00 %"), "{lag}");
     }
+}
+
+/// Publishes the newest tool pose on /tf, at most `ros::TF_RATE` times a second, until `done`; returns
+/// the publish errors. A new pose only: a stalled loop publishes nothing new.
+fn spawn_tf(
+    tf: ros2_client::Publisher<softcontact_msgs::tf2_msgs::TFMessage>,
+    tool_in_world: Arc<Latest<(Time, Isometry3<f64>)>>,
+    done: Arc<AtomicBool>,
+) -> std::io::Result<std::thread::JoinHandle<u64>> {
+    std::thread::Builder::new().name("lwr_driver_tf".into()).spawn(move || {
+        let period = Duration::from_secs_f64(1.0 / ros::TF_RATE);
+        let (mut next, mut last, mut errors) = (Instant::now(), None, 0u64);
+        while !done.load(Ordering::Relaxed) {
+            if let Some((stamp, pose)) = tool_in_world.get().filter(|(stamp, _)| Some(*stamp) != last) {
+                last = Some(stamp);
+                errors += u64::from(tf.publish(messages::tool_tf(&pose, stamp)).is_err());
+            }
+            next += period;
+            std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        }
+        errors
+    })
 }

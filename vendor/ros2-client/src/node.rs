@@ -166,7 +166,7 @@ impl Spinner {
 
     let ros_clock_reader = self
       .ros_context
-      .create_subscription::<builtin_interfaces::Time>(&self.clock_topic, None)?;
+      .create_subscription::<RosgraphClock>(&self.clock_topic, Some(clock_qos()))?;
     let ros_clock_stream = ros_clock_reader.async_stream();
     pin_mut!(ros_clock_stream);
 
@@ -209,7 +209,7 @@ impl Spinner {
             Ok((time,_msg_info)) => {
               // Simulated time is updated internally unconditionally.
               // The logic in Node decides if it is used.
-              *self.sim_time.lock().unwrap() = time.into();
+              *self.sim_time.lock().unwrap() = time.clock.into();
             }
             Err(e) => warn!("Simulated clock receive error {e:?}")
           }
@@ -714,8 +714,8 @@ impl Node {
 
     let clock_topic = self.create_topic(
       &Name::new("/", "clock").unwrap(),
-      MessageTypeName::new("builtin_interfaces", "Time"),
-      &DEFAULT_SUBSCRIPTION_QOS,
+      MessageTypeName::new("rosgraph_msgs", "Clock"),
+      &clock_qos(),
     )?;
 
     self.suppress_node_info_updates(false);
@@ -1763,4 +1763,20 @@ mod tests {
     fn requires_send_sync<T: Send + Sync>(_t: T) {}
     requires_send_sync(node);
   }
+}
+
+/// rosgraph_msgs/msg/Clock, the type ROS 2 publishes on /clock (vendored patch: upstream read
+/// builtin_interfaces/Time there, which no ROS 2 publisher writes).
+#[derive(Clone, Copy, Debug, serde::Serialize, serde::Deserialize)]
+struct RosgraphClock {
+  clock: builtin_interfaces::Time,
+}
+impl Message for RosgraphClock {}
+
+/// rclcpp's ClockQoS: best effort, keep last 1 (vendored patch: upstream used the default reliable
+/// subscription QoS, which a best-effort /clock writer such as `ros2 bag play --clock` never matches).
+fn clock_qos() -> QosProfile {
+  QosProfile::subscription_default()
+    .reliability_best_effort()
+    .history(History::KeepLast { depth: 1 })
 }
