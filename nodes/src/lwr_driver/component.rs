@@ -385,28 +385,6 @@ impl std::fmt::Display for CommandLag {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::CommandLag;
-
-    #[test]
-    fn a_command_is_counted_by_the_measurements_it_is_behind() {
-        let mut lag = CommandLag::default();
-        for k in 0..20 {
-            lag.measured(k as f64 * 1e-3);
-            match k {
-                0..5 => lag.applied(k as f64 * 1e-3),         // this measurement (composed)
-                5..15 => lag.applied((k - 1) as f64 * 1e-3),  // the one before
-                15..18 => lag.applied((k - 2) as f64 * 1e-3), // late
-                _ => lag.applied(-1.0),                       // long gone
-            }
-        }
-        assert_eq!(lag.behind, [5, 10, 3, 2]);
-        assert!((lag.period.quantile(0.5) - 1e-3).abs() < 2e-5);
-        assert!(lag.to_string().contains("25.00 / 50.00 / 15.00 / 10.00 %"), "{lag}");
-    }
-}
-
 /// Publishes the newest tool pose on /tf, at most `ros::TF_RATE` times a second, until `done`; returns
 /// the publish errors. A new pose only: a stalled loop publishes nothing new.
 fn spawn_tf(
@@ -427,4 +405,26 @@ fn spawn_tf(
         }
         errors
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::CommandLag;
+
+    #[test]
+    fn a_command_is_counted_by_the_measurements_it_is_behind() {
+        let mut lag = CommandLag::default();
+        for k in 0..20 {
+            lag.measured(k as f64 * 1e-3);
+            match k {
+                0..5 => lag.applied(k as f64 * 1e-3),         // this measurement (composed)
+                5..15 => lag.applied((k - 1) as f64 * 1e-3),  // the one before
+                15..18 => lag.applied((k - 2) as f64 * 1e-3), // late
+                _ => lag.applied(-1.0),                       // long gone
+            }
+        }
+        assert_eq!(lag.behind, [5, 10, 3, 2]);
+        assert!((lag.period.quantile(0.5) - 1e-3).abs() < 2e-5);
+        assert!(lag.to_string().contains("25.00 / 50.00 / 15.00 / 10.00 %"), "{lag}");
+    }
 }

@@ -18,7 +18,7 @@ use rustdds::*;
 use crate::{
   action::*,
   action_msgs, builtin_interfaces,
-  context::{Context, DEFAULT_SUBSCRIPTION_QOS},
+  context::Context,
   entities_info::{NodeEntitiesInfo, ParticipantEntitiesInfo},
   error::{CreateError, CreateResult},
   gid::Gid,
