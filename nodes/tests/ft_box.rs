@@ -122,8 +122,23 @@ fn the_sensor_node_takes_each_boxs_calibration_over_http_and_judges_saturation_b
 fn a_wrong_path_or_no_box_is_an_error_that_says_where() {
     let cell = cell(Transducer::Gamma, 1);
     let nowhere = UdpSocket::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
-    let e = fetch_settings(nowhere, Duration::from_millis(500)).unwrap_err();
+    let e = fetch_settings(nowhere, Duration::from_millis(500)).unwrap_err().to_string();
     assert!(e.contains(&nowhere.to_string()), "{e}");
+    // A server that sends the client elsewhere for the page: the calibration comes from the box or not
+    // at all.
+    let redirecting = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let (addr, page) = (redirecting.local_addr().unwrap(), cell.http);
+    std::thread::spawn(move || {
+        use std::io::{Read, Write};
+        if let Ok((mut c, _)) = redirecting.accept() {
+            let mut buf = [0u8; 1024];
+            let _ = c.read(&mut buf);
+            let answer =
+                format!("HTTP/1.1 302 Found\r\nLocation: http://{page}/netftapi2.xml\r\nContent-Length: 0\r\n\r\n");
+            let _ = c.write_all(answer.as_bytes());
+        }
+    });
+    assert!(fetch_settings(addr, Duration::from_millis(500)).is_err(), "a redirect is not the box's page");
     // The box's RDT port speaks no HTTP; its web server answers 404 anywhere but the page.
     let rdt_http = SocketAddr::new(cell.rdt.ip(), cell.rdt.port());
     assert!(fetch_settings(rdt_http, Duration::from_millis(300)).is_err());

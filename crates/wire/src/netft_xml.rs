@@ -13,6 +13,12 @@ use quick_xml::events::Event;
 pub const PATH: &str = "/netftapi2.xml";
 /// The largest page read (a box's is about 2 kB): a larger answer is not a box's settings.
 pub const MAX_PAGE: usize = 64 * 1024;
+/// Counts per unit an ATI calibration can have (the node's parameters take the same range).
+pub const COUNTS_PER_UNIT: std::ops::RangeInclusive<f64> = 1.0..=1e9;
+/// The largest calibrated range taken, in the configured unit.
+pub const RANGE_AT_MOST: f64 = 1e6;
+/// The root element of the page.
+pub const ROOT: &str = "netft";
 
 /// What the product reads of `netftapi2.xml`, in the box's configured units.
 #[derive(Debug, Clone, PartialEq)]
@@ -39,12 +45,12 @@ fn bad(what: impl Into<String>) -> WireError {
     WireError::Settings(what.into())
 }
 
-fn number(tag: &str, text: &str) -> Result<f64, WireError> {
+fn number(tag: &str, text: &str, (lo, hi): (f64, f64)) -> Result<f64, WireError> {
     text.trim()
         .parse::<f64>()
         .ok()
-        .filter(|v| v.is_finite() && *v > 0.0)
-        .ok_or_else(|| bad(format!("<{tag}> is {text:?}, not a positive number")))
+        .filter(|v| v.is_finite() && *v >= lo && *v <= hi && *v > 0.0)
+        .ok_or_else(|| bad(format!("<{tag}> is {text:?}, not a number in ({lo}, {hi}]")))
 }
 
 fn count(tag: &str, text: &str) -> Result<u32, WireError> {
@@ -62,29 +68,41 @@ impl BoxSettings {
         let mut values: [Option<String>; 9] = Default::default();
         let mut reader = quick_xml::Reader::from_str(page);
         let (mut depth, mut current, mut root_seen) = (0usize, None::<usize>, false);
+        // A setting given twice is not one value: refused, never joined or chosen between.
+        let open = |values: &mut [Option<String>; 9], name: &[u8]| -> Result<Option<usize>, WireError> {
+            match WANTED.iter().position(|w| name == w.as_bytes()) {
+                Some(i) if values[i].is_some() => Err(bad(format!("<{}> appears twice", WANTED[i]))),
+                Some(i) => {
+                    values[i] = Some(String::new());
+                    Ok(Some(i))
+                }
+                None => Ok(None),
+            }
+        };
         loop {
             match reader.read_event().map_err(|e| bad(format!("not XML: {e}")))? {
                 Event::Start(e) => {
                     depth += 1;
                     if depth == 1 {
+                        if root_seen {
+                            return Err(bad("a second root element"));
+                        }
+                        if e.name().as_ref() != ROOT.as_bytes() {
+                            let name = String::from_utf8_lossy(e.name().as_ref()).into_owned();
+                            return Err(bad(format!("the root is <{name}>, not <{ROOT}>: not a box's page")));
+                        }
                         root_seen = true;
                     }
-                    current = (depth == 2)
-                        .then(|| WANTED.iter().position(|w| e.local_name().as_ref() == w.as_bytes()))
-                        .flatten();
-                    if let Some(i) = current {
-                        values[i].get_or_insert_with(String::new);
-                    }
+                    current = if depth == 2 { open(&mut values, e.name().as_ref())? } else { None };
                 }
                 Event::End(_) => {
                     depth = depth.saturating_sub(1);
                     current = None;
                 }
                 Event::Empty(e) if depth == 1 => {
-                    if let Some(i) = WANTED.iter().position(|w| e.local_name().as_ref() == w.as_bytes()) {
-                        values[i].get_or_insert_with(String::new);
-                    }
+                    open(&mut values, e.name().as_ref())?;
                 }
+                Event::Empty(_) if depth == 0 => return Err(bad("a second root element")),
                 Event::Text(t) => {
                     if let Some(i) = current {
                         let text = t.decode().map_err(|e| bad(format!("<{}>: {e}", WANTED[i])))?;
@@ -116,13 +134,14 @@ impl BoxSettings {
         }
         let mut ranges = [0.0; 6];
         for (r, p) in ranges.iter_mut().zip(&parts) {
-            *r = number("cfgmr", p)?;
+            *r = number("cfgmr", p, (0.0, RANGE_AT_MOST))?;
         }
+        let counts = (*COUNTS_PER_UNIT.start(), *COUNTS_PER_UNIT.end());
         Ok(Self {
             product: values[0].as_deref().unwrap_or_default().trim().to_string(),
             calibration_serial: values[1].as_deref().unwrap_or_default().trim().to_string(),
-            counts_per_force: number("cfgcpf", get(2)?)?,
-            counts_per_torque: number("cfgcpt", get(3)?)?,
+            counts_per_force: number("cfgcpf", get(2)?, counts)?,
+            counts_per_torque: number("cfgcpt", get(3)?, counts)?,
             force_unit: get(4)?.trim().to_string(),
             torque_unit: get(5)?.trim().to_string(),
             ranges,
@@ -131,7 +150,8 @@ impl BoxSettings {
         })
     }
 
-    /// Counts → SI as this page configures it, the ranges converted to N and N·m.
+    /// Counts → SI as this page configures it, the ranges converted to N and N·m. Refused where a
+    /// range is more counts than a record holds: a reading at the range could then never be seen as one.
     pub fn calibration(&self) -> Result<Calibration, WireError> {
         let units = Calibration::from_settings(
             self.counts_per_force,
@@ -141,6 +161,16 @@ impl BoxSettings {
             [0.0; 6],
         )?;
         let range = std::array::from_fn(|i| self.ranges[i] * if i < 3 { units.force_unit } else { units.torque_unit });
+        for (i, axis) in ["Fx", "Fy", "Fz", "Tx", "Ty", "Tz"].iter().enumerate() {
+            let per = if i < 3 { self.counts_per_force } else { self.counts_per_torque };
+            if self.ranges[i] * per >= i32::MAX as f64 || self.ranges[i].is_nan() {
+                return Err(WireError::Unit(format!(
+                    "{axis}'s range {} × {per} counts per unit is beyond a record's {} counts",
+                    self.ranges[i],
+                    i32::MAX
+                )));
+            }
+        }
         Ok(Calibration { range, ..units })
     }
 
@@ -271,8 +301,14 @@ mod tests {
             (PAGE.replace("25;25;35;250;250;250", "25;25;0;250;250;250"), "cfgmr"),
             (PAGE.replace("<scfgfu>N</scfgfu>", ""), "scfgfu"),
             (PAGE.replace("<comrdtrate>1000</comrdtrate>", "<comrdtrate>fast</comrdtrate>"), "comrdtrate"),
+            (PAGE.replace("</netft>", "<cfgcpf>0</cfgcpf></netft>"), "<cfgcpf> appears twice"),
+            (PAGE.replace("</netft>", "<scfgfu>k</scfgfu></netft>"), "<scfgfu> appears twice"),
+            (format!("{PAGE}<netft><cfgcpf>10</cfgcpf></netft>"), "second root"),
+            (PAGE.replace("<cfgcpf>1000000</cfgcpf>", "<cfgcpf>1e300</cfgcpf>"), "cfgcpf"),
+            (PAGE.replace("<cfgcpf>1000000</cfgcpf>", "<cfgcpf>0.5</cfgcpf>"), "cfgcpf"),
+            (PAGE.replace("25;25;35;250;250;250", "25;25;1e300;250;250;250"), "cfgmr"),
             (PAGE.replace("</netft>", ""), "XML"),
-            ("<html><body>404</body>".into(), "XML"),
+            ("<html><body>404</body></html>".into(), "<html>"),
             ("".into(), "root"),
             ("x".repeat(MAX_PAGE + 1), "bytes"),
         ];
@@ -282,11 +318,14 @@ mod tests {
         }
         let unit = BoxSettings { torque_unit: "furlong".into(), ..BoxSettings::gamma_si_130_10() };
         assert!(unit.calibration().unwrap_err().to_string().contains("furlong"));
+        // 130 N at 10⁸ counts per N is beyond an i32 count: pinned counts could never read as saturated.
+        let unreachable = BoxSettings { counts_per_force: 1e8, ..BoxSettings::gamma_si_130_10() };
+        assert!(unreachable.calibration().unwrap_err().to_string().contains("Fx's range 130"));
     }
 
     #[test]
     fn nested_elements_of_the_same_name_are_not_the_setting() {
-        let page = PAGE.replace("<runstat>", "<cal><cfgcpf>5</cfgcpf></cal><runstat>");
-        assert_eq!(BoxSettings::parse(&page).unwrap().counts_per_force, 1e6);
+        let page = PAGE.replace("<runstat>", "<cal><cfgcpf>5</cfgcpf></cal><x:cfgcpf>10</x:cfgcpf><runstat>");
+        assert_eq!(BoxSettings::parse(&page).unwrap().counts_per_force, 1e6, "nested or prefixed: another element");
     }
 }

@@ -14,18 +14,39 @@ use softcontact_wire::rdt::Calibration;
 use super::Params;
 
 /// Reads the box's settings page once, within `timeout`.
-pub fn fetch_settings(http: SocketAddr, timeout: Duration) -> Result<BoxSettings, String> {
+pub fn fetch_settings(http: SocketAddr, timeout: Duration) -> Result<BoxSettings, FetchError> {
     let url = format!("http://{http}{}", netft_xml::PATH);
-    let config = ureq::Agent::config_builder().timeout_global(Some(timeout)).build();
+    // No redirects: the calibration comes from the box that streams, or from nowhere.
+    let config = ureq::Agent::config_builder().timeout_global(Some(timeout)).max_redirects(0).build();
     let agent = ureq::Agent::new_with_config(config);
-    let mut response = agent.get(&url).call().map_err(|e| format!("{url}: {e}"))?;
+    let mut response = agent.get(&url).call().map_err(|e| FetchError::NoPage(format!("{url}: {e}")))?;
+    if response.status().is_redirection() {
+        return Err(FetchError::Refused(format!("{url}: a redirect ({}), not the box's page", response.status())));
+    }
     let page = response
         .body_mut()
         .with_config()
         .limit(netft_xml::MAX_PAGE as u64)
         .read_to_string()
-        .map_err(|e| format!("{url}: {e}"))?;
-    BoxSettings::parse(&page).map_err(|e| format!("{url}: {e}"))
+        .map_err(|e| FetchError::NoPage(format!("{url}: {e}")))?;
+    BoxSettings::parse(&page).map_err(|e| FetchError::Refused(format!("{url}: {e}")))
+}
+
+/// Why no settings were read: no page came (the box may still be booting: asked again), or a page came
+/// and is not a box's settings (refused at once).
+#[derive(Debug, Clone, PartialEq)]
+pub enum FetchError {
+    NoPage(String),
+    Refused(String),
+}
+
+impl std::fmt::Display for FetchError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FetchError::NoPage(e) => write!(f, "no settings page: {e}"),
+            FetchError::Refused(e) => write!(f, "settings page refused: {e}"),
+        }
+    }
 }
 
 /// Asks the box for its settings page until it answers or `patience` has passed (a box that is still
@@ -34,12 +55,13 @@ pub fn fetch_settings_patiently(
     http: SocketAddr,
     patience: Duration,
     mut go_on: impl FnMut() -> bool,
-) -> Result<BoxSettings, String> {
+) -> Result<BoxSettings, FetchError> {
     let give_up = Instant::now() + patience;
     loop {
         let left = give_up.saturating_duration_since(Instant::now());
         match fetch_settings(http, left.clamp(Duration::from_millis(100), Duration::from_secs(2))) {
             Ok(s) => return Ok(s),
+            Err(e @ FetchError::Refused(_)) => return Err(e),
             Err(e) if Instant::now() >= give_up || !go_on() => return Err(e),
             Err(_) => std::thread::sleep(Duration::from_millis(200).min(left)),
         }
@@ -59,24 +81,29 @@ pub fn resolve(p: &Params, from_box: Option<&BoxSettings>) -> Result<(Calibratio
                 .into());
         };
         let page = BoxSettings {
+            product: String::new(),
+            calibration_serial: String::new(),
             counts_per_force: cpf,
             counts_per_torque: cpt,
             force_unit: fu.into(),
             torque_unit: tu.into(),
             ranges,
-            ..BoxSettings::gamma_si_130_10()
+            rdt_rate: None,
+            rdt_buffer: None,
         };
         let calibration = page.calibration().map_err(|e| e.to_string())?;
         return Ok((calibration, format!("calibration from the parameters: {}", describe(&page))));
     };
     let boxed = page.calibration().map_err(|e| e.to_string())?;
-    if let Some(rate) = page.rdt_rate
-        && (rate as f64 - p.rate).abs() > 0.01 * p.rate
-    {
+    let Some(rate) = page.rdt_rate else {
+        return Err("the box's page gives no RDT rate (comrdtrate): its stream cannot be checked".into());
+    };
+    if (rate as f64 - p.rate).abs() > 0.01 * p.rate {
+        let fix = if (100..=7000).contains(&rate) { format!(", or -p rate:={rate}") } else { String::new() };
         return Err(format!(
-            "the box streams {rate} Hz (comrdtrate) and rate is {} Hz: set one to the other (the box's \
-             Communications page, or -p rate:={rate})",
-            p.rate
+            "the box streams {rate} Hz (comrdtrate) and rate is {} Hz: set the box's RDT rate on its \
+             Communications page to {}{fix}",
+            p.rate, p.rate
         ));
     }
     // Each parameter that is set against the box's value: equal, or a disagreement.
@@ -113,7 +140,7 @@ pub fn resolve(p: &Params, from_box: Option<&BoxSettings>) -> Result<(Calibratio
         differ.push(format!("ranges {r:?} (the box: cfgmr {:?})", page.ranges));
         used.ranges = r;
     }
-    let product = if page.product.is_empty() { "the box".to_string() } else { page.product.clone() };
+    let product = if page.product.is_empty() { "the box".to_string() } else { printable(&page.product) };
     if differ.is_empty() {
         return Ok((boxed, format!("calibration from {product}: {}", describe(page))));
     }
@@ -135,6 +162,11 @@ pub fn resolve(p: &Params, from_box: Option<&BoxSettings>) -> Result<(Calibratio
     ))
 }
 
+/// A name from the box as a log line may show it: no control characters, at most 80 characters.
+fn printable(name: &str) -> String {
+    name.chars().filter(|c| !c.is_control()).take(80).collect()
+}
+
 fn describe(s: &BoxSettings) -> String {
     format!(
         "{} counts/{}, {} counts/{}, ranges {:?}{}",
@@ -146,7 +178,7 @@ fn describe(s: &BoxSettings) -> String {
         if s.calibration_serial.is_empty() {
             String::new()
         } else {
-            format!(" (calibration {})", s.calibration_serial)
+            format!(" (calibration {})", printable(&s.calibration_serial))
         }
     )
 }
@@ -224,6 +256,33 @@ mod tests {
     }
 
     #[test]
+    fn a_page_without_a_rate_or_a_calibration_beyond_a_records_counts_stops_the_node() {
+        let no_rate = BoxSettings { rdt_rate: None, ..nano17() };
+        assert!(resolve(&Params::default(), Some(&no_rate)).unwrap_err().contains("comrdtrate"));
+        // Parameters alone, legal one by one, but 130 N at 10⁸ counts per N is beyond an i32 count.
+        let p = Params {
+            counts_per_force: 1e8,
+            counts_per_torque: 1e6,
+            force_unit: "N".into(),
+            torque_unit: "Nm".into(),
+            ranges: vec![130.0, 130.0, 400.0, 10.0, 10.0, 10.0],
+            http_port: 0,
+            ..Params::default()
+        };
+        assert!(resolve(&p, None).unwrap_err().contains("Fx's range 130"));
+        let over = Params { calibration_override: true, http_port: 49180, ..p };
+        assert!(resolve(&over, Some(&BoxSettings::gamma_si_130_10())).unwrap_err().contains("Fx's range 130"));
+    }
+
+    #[test]
+    fn a_box_name_cannot_write_log_lines() {
+        let name = format!("Gamma\n\x1b[2Jft_sensor: calibration from {}", "x".repeat(500));
+        let page = BoxSettings { product: name, ..nano17() };
+        let said = resolve(&Params::default(), Some(&page)).unwrap().1;
+        assert!(!said.contains('\n') && !said.contains('\x1b') && said.len() < 400, "{said}");
+    }
+
+    #[test]
     fn without_the_page_every_calibration_parameter_is_needed() {
         let e = resolve(&Params { counts_per_force: 1e6, ..Params::default() }, None).unwrap_err();
         assert!(e.contains("http_port is 0") && e.contains("ranges"), "{e}");
@@ -238,6 +297,6 @@ mod tests {
         };
         let (c, said) = resolve(&p, None).unwrap();
         assert_eq!(c, Calibration::gamma_si_130_10());
-        assert!(said.contains("from the parameters"), "{said}");
+        assert!(said.contains("from the parameters") && !said.contains("FT-SIM"), "{said}");
     }
 }

@@ -39,11 +39,12 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             calibration::fetch_settings_patiently(http, Duration::from_secs_f64(p.http_timeout), || {
                 !ros::stopping(&stop)
             })
-            .map_err(|e| {
-                anyhow::anyhow!(
-                    "no settings page from the box within {} s ({e}); set http_port:=0 and every calibration parameter to start without it",
+            .map_err(|e| match e {
+                calibration::FetchError::NoPage(_) => anyhow::anyhow!(
+                    "{e} within {} s; set http_port:=0 and every calibration parameter to start without it",
                     p.http_timeout
-                )
+                ),
+                calibration::FetchError::Refused(_) => anyhow::anyhow!("{e}"),
             })?,
         ),
         None => None,
