@@ -39,8 +39,11 @@ pub struct SimArmConfig {
 /// How cycles follow each other.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Pacing {
-    /// One cycle per FRI period of wall time, as the KRC does.
-    RealTime,
+    /// One cycle per FRI period of wall time, as the KRC does. The KRC waits 0.9 of a cycle for the
+    /// remote's answer; `answer_wait`, if longer, is how long the simulated one waits instead, so that a
+    /// remote on a host without real-time scheduling pauses the simulated arm rather than ending command
+    /// mode (answers later than 0.9 of a cycle are counted as `late_answers`).
+    RealTime { answer_wait: Duration },
     /// The next cycle as soon as the remote has answered (or after `timeout`): faster than real time,
     /// with simulated time published on /clock by the caller.
     Lockstep { timeout: Duration },
@@ -54,6 +57,9 @@ pub struct SimArmStats {
     pub commands_dropped: u64,
     pub malformed: u64,
     pub overruns: u64,
+    /// Answers later than 0.9 of a cycle after their measurement (missed cycles on a real KRC), taken
+    /// because `answer_wait` allowed them.
+    pub late_answers: u64,
     pub records_sent: u64,
 }
 
@@ -167,14 +173,24 @@ impl SimArmServer {
             }
             // Take answers until one for this measurement arrives or 0.9 of a cycle has passed since it
             // was sent (measured from the send, so that one late cycle does not also cost the next).
-            let wait = match self.config.pacing {
-                Pacing::RealTime => cycle.mul_f64(0.9),
-                Pacing::Lockstep { timeout } => timeout,
+            let sent = Instant::now();
+            let on_time = sent + cycle.mul_f64(0.9);
+            let deadline = match self.config.pacing {
+                Pacing::RealTime { answer_wait } => on_time.max(sent + answer_wait),
+                Pacing::Lockstep { timeout } => sent + timeout,
             };
-            let deadline = Instant::now() + wait;
+            // Past the deadline, what already arrived is still read (a few datagrams at most): when this
+            // process, not the remote, was late, the answer is in the socket and counts as on time.
+            let mut read_after_deadline = 0;
             loop {
-                let now = Instant::now();
-                if now >= deadline || !crate::udp::wait_readable(&self.fri, deadline - now)? {
+                let left = deadline.saturating_duration_since(Instant::now());
+                if left.is_zero() {
+                    read_after_deadline += 1;
+                    if read_after_deadline > READ_AFTER_DEADLINE_AT_MOST {
+                        break;
+                    }
+                }
+                if !crate::udp::wait_readable(&self.fri, left)? {
                     break;
                 }
                 match self.fri.recv_from(&mut buf) {
@@ -187,6 +203,9 @@ impl SimArmServer {
                             let answered = cmd.header.refl_seq == m.header.send_seq;
                             self.sim.command(&cmd);
                             if answered {
+                                let late =
+                                    matches!(self.config.pacing, Pacing::RealTime { .. }) && Instant::now() > on_time;
+                                self.stats.late_answers += u64::from(late);
                                 break;
                             }
                         }
@@ -201,7 +220,7 @@ impl SimArmServer {
             // The box streams on its own clock: in real time by the wall clock (a late cycle costs no
             // records), in lockstep by the simulated time.
             let elapsed = match self.config.pacing {
-                Pacing::RealTime => {
+                Pacing::RealTime { .. } => {
                     let now = Instant::now();
                     let dt = now.duration_since(*box_clock.get_or_insert(now)).as_secs_f64();
                     box_clock = Some(now);
@@ -260,6 +279,8 @@ impl SimArmServer {
 
 /// Records the box sends at once after the cell stalled (a debugger, an overloaded machine): a stall's
 /// backlog beyond this is dropped, as a box's socket buffer would.
+/// Datagrams read after a cycle's answer deadline that were already waiting in the socket.
+const READ_AFTER_DEADLINE_AT_MOST: usize = 8;
 const RECORDS_DUE_AT_MOST: f64 = 50.0;
 
 /// Serves the box's settings page on its own thread for the server's life: `GET /netftapi2.xml` answers
@@ -369,6 +390,7 @@ pub struct Params {
     pub seed: u64,
     pub krl_program: KrlProgramKind,
     pub fri_cycle: f64,
+    pub answer_wait: f64,
 }
 
 /// The simulated box's web server port (a real box serves on 80, which needs privileges here).
@@ -392,6 +414,7 @@ impl Default for Params {
             seed: 1,
             krl_program: KrlProgramKind::Softcontact,
             fri_cycle: 0.001,
+            answer_wait: 0.02,
         }
     }
 }
@@ -463,6 +486,12 @@ impl crate::params::NodeParams for Params {
             cycle,
             "0.001 to 0.1 s in whole ms",
             "the FRI cycle the KRL program opens (friOpen(1): 0.001 s; ros_control.src's friOpen(2): 0.002 s); the driver applies torque at 1 to 10 ms [s]",
+        );
+        d.within(
+            "answer_wait",
+            self.answer_wait,
+            (0.0, 1.0),
+            "how long the simulated KRC waits for the driver's answer to a measurement before counting the cycle missed (a real KRC: 0.9 of its cycle, which any value below that gives); longer lets a host without real-time scheduling run the cell, a late answer pausing the simulated arm, counted as late_answers [s]",
         );
     }
 }

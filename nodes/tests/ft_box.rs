@@ -54,7 +54,7 @@ fn cell(transducer: Transducer, rdt_buffer: u32) -> Cell {
             measurement_loss: 0.0,
             command_loss: 0.0,
             rdt_rate: 1000.0,
-            pacing: Pacing::RealTime,
+            pacing: Pacing::RealTime { answer_wait: std::time::Duration::from_millis(20) },
             seed: 5,
         },
     )

@@ -32,11 +32,22 @@ struct Truth {
     applied: [f64; 7],
 }
 
-/// Starts the cell in a thread for `cycles`, sending the truth of every cycle.
+/// Starts the cell in a thread for `cycles`, sending the truth of every cycle; its KRC waits 20 ms for an
+/// answer (sim_arm's default).
 fn start_cell(
     config: SimConfig,
     driver: SocketAddr,
     loss_each_way: f64,
+    cycles: u64,
+) -> (SocketAddr, mpsc::Receiver<Truth>, std::thread::JoinHandle<SimArmStats>) {
+    start_cell_waiting(config, driver, loss_each_way, Duration::from_millis(20), cycles)
+}
+
+fn start_cell_waiting(
+    config: SimConfig,
+    driver: SocketAddr,
+    loss_each_way: f64,
+    answer_wait: Duration,
     cycles: u64,
 ) -> (SocketAddr, mpsc::Receiver<Truth>, std::thread::JoinHandle<SimArmStats>) {
     let sim = Simulator::new(config).unwrap();
@@ -51,7 +62,7 @@ fn start_cell(
             measurement_loss: loss_each_way,
             command_loss: loss_each_way,
             rdt_rate: 1000.0,
-            pacing: softcontact_nodes::sim_arm::Pacing::RealTime,
+            pacing: softcontact_nodes::sim_arm::Pacing::RealTime { answer_wait },
             seed: 3,
         },
     )
@@ -125,6 +136,41 @@ fn driver_and_sim_hold_the_arm_still_with_gravity_compensated() {
     assert_eq!(truth.last().unwrap().state, InterfaceState::Command);
     assert_eq!(client.driver.counters.malformed, 0);
     eprintln!("hold: driver {:?}, cell {stats:?}", client.driver.counters);
+}
+
+/// A remote that answers one measurement 12 ms late (a host without real-time scheduling): a KRC that
+/// waits 0.9 of its cycle misses 11 cycles in a row and leaves command mode, brakes on; one told to wait
+/// 20 ms pauses the arm for that answer, counts it late and keeps commanding.
+#[test]
+fn a_12_ms_late_answer_ends_command_mode_on_a_krc_waiting_0_9_ms_and_is_waited_for_with_answer_wait_20_ms() {
+    let _rt = one_at_a_time();
+    for (answer_wait, keeps_commanding) in [(Duration::ZERO, false), (Duration::from_millis(20), true)] {
+        let mut client =
+            FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+        let (_, truth, cell) = start_cell_waiting(free_arm(), client.local_addr().unwrap(), 0.0, answer_wait, 1500);
+        let mut commanding = 0;
+        let mut stalled = false;
+        while let Some(_out) = client
+            .cycle_with(Duration::from_millis(200), |driver, out| {
+                commanding += usize::from(out.state == InterfaceState::Command);
+                if commanding == 300 && !stalled {
+                    stalled = true;
+                    std::thread::sleep(Duration::from_millis(12));
+                }
+                driver.set_command(&gravity(&out.q)).unwrap();
+            })
+            .unwrap()
+        {}
+        let stats = cell.join().unwrap();
+        let truth: Vec<Truth> = truth.try_iter().collect();
+        let first = truth.iter().position(|t| t.state == InterfaceState::Command).expect("command mode reached");
+        let left = truth[first..].iter().any(|t| t.state != InterfaceState::Command);
+        assert!(stalled, "the remote stalled once");
+        assert_eq!(!left, keeps_commanding, "answer_wait {answer_wait:?}: {stats:?}");
+        if keeps_commanding {
+            assert!(stats.late_answers >= 1, "the late answer counted: {stats:?}");
+        }
+    }
 }
 
 /// A constant torque on the wrist, through the driver and the KRC, accelerates it as M⁻¹τ predicts.

@@ -61,7 +61,11 @@ fn main() -> anyhow::Result<()> {
             measurement_loss: p.drop_rate,
             command_loss: p.drop_rate,
             rdt_rate: p.rdt_rate,
-            pacing: if p.lockstep { Pacing::Lockstep { timeout: Duration::from_millis(50) } } else { Pacing::RealTime },
+            pacing: if p.lockstep {
+                Pacing::Lockstep { timeout: Duration::from_millis(50) }
+            } else {
+                Pacing::RealTime { answer_wait: Duration::from_secs_f64(p.answer_wait) }
+            },
             seed: p.seed,
         },
     )?;
