@@ -61,6 +61,17 @@ enum Command {
     /// The snake paper's climbing snake: a planar chain squeezed between two walls on rubber feet climbs by a
     /// gait of PD set points, each equilibrium checked stable and inside its friction cones.
     Climb(climb_cmd::ClimbArgs),
+    /// The parameters of a node as its shipped file `config/<node>.yaml` (every parameter at its default,
+    /// its description and range as a comment), or with --markdown the reference of every node
+    /// (docs/parameters.md); both generated from the nodes' declarations.
+    Params {
+        /// lwr_driver, ft_sensor, contact_estimator, deformation_controller or sim_arm.
+        #[arg(required_unless_present = "markdown")]
+        node: Option<String>,
+        /// The reference of every node, as docs/parameters.md.
+        #[arg(long, conflicts_with = "node")]
+        markdown: bool,
+    },
     /// Benchmarks of the product's hot paths.
     Bench {
         #[command(subcommand)]
@@ -79,6 +90,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Force(args) => force_cmd::run(&args),
         Command::LoadingPaths(args) => loading_paths_cmd::run(&args),
         Command::Climb(args) => climb_cmd::run(&args),
+        Command::Params { node, markdown } => {
+            use softcontact_nodes::params::reference;
+            if markdown {
+                print!("{}", reference::markdown_all());
+                return Ok(());
+            }
+            let node = node.expect("clap requires a node without --markdown");
+            let nodes = reference::nodes();
+            let Some(found) = nodes.iter().find(|n| n.node == node) else {
+                let names: Vec<&str> = nodes.iter().map(|n| n.node).collect();
+                anyhow::bail!("no node {node:?}: one of {}", names.join(", "));
+            };
+            print!("{}", (found.yaml)());
+            Ok(())
+        }
         Command::Bench { what } => bench::run(what),
     }
 }

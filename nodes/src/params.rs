@@ -3,6 +3,8 @@
 //! that rejects unknown names and checks its values before the node starts. The same values are
 //! declared on the node, so `ros2 param list/get/describe` show what the node runs with.
 
+pub mod reference;
+
 use std::path::{Path, PathBuf};
 
 use ros2_client::ParameterValue;
