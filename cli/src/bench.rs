@@ -456,7 +456,7 @@ fn run_controller(calls: usize, reps: usize) -> anyhow::Result<()> {
 /// Times `LwrDriver::handle` + reply encoding on measurements recorded from the simulator in command
 /// mode (moving arm, every field filled).
 fn run_driver(calls: usize, reps: usize) -> anyhow::Result<()> {
-    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
     use softcontact_sim::{SimConfig, Simulator};
     use softcontact_wire::fri::{self, Quality, flags};
     if calls == 0 || reps == 0 {
@@ -479,7 +479,7 @@ fn run_driver(calls: usize, reps: usize) -> anyhow::Result<()> {
             datagrams.push(m.encode());
         }
     }
-    let mut driver = LwrDriver::new(DriverConfig::default());
+    let mut driver = LwrDriver::new(DriverParams::default());
     let torque = [0.0, -40.0, 0.0, 12.0, 0.0, 1.0, 0.0];
     let ns = best_ns(calls, reps, |i| {
         if i % 2 == 0 {

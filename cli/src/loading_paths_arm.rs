@@ -22,7 +22,7 @@ use softcontact_contact::{ContactModel, LoadingPath};
 use softcontact_control::PositionStage;
 use softcontact_dynamics::{Data, FrameId, Model, lwr4};
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
-use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
 use softcontact_sim::{BenchRun, BenchSample, FtSensorConfig, SimConfig, Simulator, ZERO_THRESHOLD};
 use softcontact_wire::fri::InterfaceState;
 
@@ -101,7 +101,7 @@ impl Cell {
         let stage = PositionStage::new(lwr4::model(), tool, &config.initial_q, BANDWIDTH);
         Ok(Self {
             sim: Simulator::new(config)?,
-            driver: LwrDriver::new(DriverConfig::default()),
+            driver: LwrDriver::new(DriverParams::default()),
             ft,
             stage,
             normal_sensor: sensor_rotation.inverse() * normal,

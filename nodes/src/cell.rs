@@ -14,7 +14,7 @@ use crate::deformation_controller::{
     self, ControlError, ControllerNode, ControllerState, DeformationController, JointSample, Reply,
 };
 use crate::ft_sensor::{self, FtConfig, FtOutput, FtSensorNode, StartupTare};
-use crate::lwr_driver::{DriverConfig, DriverError, DriverOutput, LwrDriver, Measured};
+use crate::lwr_driver::{DriverError, DriverOutput, LwrDriver, Measured, Params as DriverParams};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
@@ -86,7 +86,7 @@ impl Cell {
         };
         Ok(Self {
             sim: Simulator::new(sim)?,
-            driver: LwrDriver::new(DriverConfig::default()),
+            driver: LwrDriver::new(DriverParams::default()),
             ft,
             controller: ControllerNode::new(&params, law)?,
             estimator,

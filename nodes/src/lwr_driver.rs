@@ -93,52 +93,6 @@ pub const ALL_DRIVES: u16 = 0x7F;
 /// More lost measurements in a row than this is no longer a gap but a broken counter.
 const MAX_LOST_IN_A_ROW: i32 = 100;
 
-#[derive(Debug, Clone, PartialEq)]
-pub struct DriverConfig {
-    /// A command older than this many cycles is stale: hold position.
-    pub watchdog_cycles: u64,
-    /// Joint stiffness [N·m/rad] and damping ratio of the hold.
-    pub hold_stiffness: [f64; 7],
-    pub hold_damping: f64,
-    /// Ask the KRL program to start command mode once the KRC grades the timing perfect.
-    pub request_command_mode: bool,
-    /// A joint beyond this fraction of its velocity limit is a fault: hold until a new KRC session.
-    pub velocity_margin: f64,
-    /// A joint heading within this much of its position limit [rad] (at its velocity, looking
-    /// [`LIMIT_LOOKAHEAD`] ahead) is a fault: hold until a new KRC session.
-    pub limit_margin: f64,
-    /// Cycles over which a hold for a stale command fades out what its spring's preload cannot carry.
-    pub hold_release_cycles: u64,
-    /// The largest offset of the hold's set point from the held position [rad]: how much of a stale
-    /// command's torque the hold's spring carries on.
-    pub hold_max_preload: f64,
-    /// The KRC's address; `None`: the first sender is pinned.
-    pub krc_address: Option<IpAddr>,
-    /// Measurements resuming after this much silence [s] start a new KRC session.
-    pub new_session_after: f64,
-    /// A command answering a joint state older than this [s] (by its stamp) is refused: a replayed or
-    /// long-delayed command. Commands that pass still age out after `watchdog_cycles`.
-    pub max_command_age: f64,
-}
-
-impl Default for DriverConfig {
-    fn default() -> Self {
-        Self {
-            watchdog_cycles: 5,
-            hold_stiffness: [3000.0, 3000.0, 1000.0, 1500.0, 300.0, 150.0, 150.0],
-            hold_damping: 0.7,
-            request_command_mode: true,
-            velocity_margin: 0.9,
-            limit_margin: 0.1,
-            hold_release_cycles: 500,
-            hold_max_preload: 0.05,
-            krc_address: None,
-            new_session_after: 0.1,
-            max_command_age: 0.02,
-        }
-    }
-}
-
 /// Why a command or datagram was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DriverError {
@@ -369,7 +323,7 @@ pub struct Measured {
 
 /// The driver: one instance per FRI connection.
 pub struct LwrDriver {
-    config: DriverConfig,
+    config: Params,
     model: Model,
     data: Data,
     tool: FrameId,
@@ -405,7 +359,7 @@ pub struct LwrDriver {
 }
 
 impl LwrDriver {
-    pub fn new(config: DriverConfig) -> Self {
+    pub fn new(config: Params) -> Self {
         let model = lwr4::model();
         let effort_limits = std::array::from_fn(|i| model.joints[i].limits.effort);
         let velocity_limits = std::array::from_fn(|i| model.joints[i].limits.velocity);
@@ -731,7 +685,7 @@ impl LwrDriver {
     /// fault stands no start is asked for; in monitor-only mode the KRC's state is left as it is.
     fn start_request(&self, m: &fri::Measurement) -> bool {
         let in_command = m.intf.state == InterfaceState::Command;
-        if !self.config.request_command_mode || self.krl_ignores_strategy() {
+        if self.config.monitor_only || self.krl_ignores_strategy() {
             return in_command;
         }
         if in_command && m.robot.control != ControlMode::JointImpedance {
@@ -853,7 +807,7 @@ struct Hold {
 }
 
 impl Hold {
-    fn new(q: [f64; 7], since: u64, torque: &[f32; 7], config: &DriverConfig) -> Self {
+    fn new(q: [f64; 7], since: u64, torque: &[f32; 7], config: &Params) -> Self {
         let limit = config.hold_max_preload;
         let preload = std::array::from_fn(|i| (torque[i] as f64 / config.hold_stiffness[i]).clamp(-limit, limit));
         let rest = std::array::from_fn(|i| torque[i] as f64 - config.hold_stiffness[i] * preload[i]);
@@ -861,7 +815,7 @@ impl Hold {
     }
 }
 
-/// The `lwr_driver` node's parameters (config/lwr_driver.yaml). What each means and the values it takes are
+/// The `lwr_driver` node's parameters (config/lwr_driver.yaml), which the driver core reads as they are. What each means and the values it takes are
 /// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -885,41 +839,22 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        let c = DriverConfig::default();
         Self {
             fri_bind: ([127, 0, 0, 1], 49938).into(),
             krc_address: None,
-            new_session_after: c.new_session_after,
-            max_command_age: c.max_command_age,
-            watchdog_cycles: c.watchdog_cycles,
-            hold_stiffness: c.hold_stiffness,
-            hold_damping: c.hold_damping,
-            velocity_margin: c.velocity_margin,
-            limit_margin: c.limit_margin,
-            hold_release_cycles: c.hold_release_cycles,
-            hold_max_preload: c.hold_max_preload,
+            new_session_after: 0.1,
+            max_command_age: 0.02,
+            watchdog_cycles: 5,
+            hold_stiffness: [3000.0, 3000.0, 1000.0, 1500.0, 300.0, 150.0, 150.0],
+            hold_damping: 0.7,
+            velocity_margin: 0.9,
+            limit_margin: 0.1,
+            hold_release_cycles: 500,
+            hold_max_preload: 0.05,
             monitor_only: false,
             exit_after_silence: 0.0,
             dead_after: 2.0,
             use_sim_time: false,
-        }
-    }
-}
-
-impl Params {
-    pub fn driver_config(&self) -> DriverConfig {
-        DriverConfig {
-            watchdog_cycles: self.watchdog_cycles,
-            hold_stiffness: self.hold_stiffness,
-            hold_damping: self.hold_damping,
-            request_command_mode: !self.monitor_only,
-            velocity_margin: self.velocity_margin,
-            limit_margin: self.limit_margin,
-            hold_release_cycles: self.hold_release_cycles,
-            hold_max_preload: self.hold_max_preload,
-            krc_address: self.krc_address,
-            new_session_after: self.new_session_after,
-            max_command_age: self.max_command_age,
         }
     }
 }

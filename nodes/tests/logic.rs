@@ -3,7 +3,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{Biquad, FtConfig, FtSensorNode};
-use softcontact_nodes::lwr_driver::{DriverConfig, DriverError, Fault, LwrDriver, Waiting};
+use softcontact_nodes::lwr_driver::{DriverError, Fault, LwrDriver, Params as DriverParams, Waiting};
 use softcontact_nodes::writer_pin::WriterRefused;
 use softcontact_wire::fri::{self, InterfaceState, Quality, flags};
 use softcontact_wire::rdt::{Calibration, Record, Status};
@@ -41,7 +41,7 @@ const G: [f32; 7] = [0.0, -30.0, 0.5, 10.0, -0.2, 0.9, 0.0];
 
 #[test]
 fn in_command_mode_the_krc_gravity_is_removed_from_the_total_torque() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     d.set_command(&[1.0, -28.0, 0.5, 12.0, -0.2, 1.0, 0.3]).unwrap();
     let (reply, out) = d.handle(&measurement(2, InterfaceState::Command, Q, G)).unwrap();
@@ -58,7 +58,7 @@ fn in_command_mode_the_krc_gravity_is_removed_from_the_total_torque() {
 
 #[test]
 fn out_of_command_mode_the_driver_mirrors_the_krc_and_asks_to_start() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     let (reply, _) = d.handle(&measurement(1, InterfaceState::Monitor, Q, G)).unwrap();
     assert!((reply.jnt_pos[0] - 0.001).abs() < 1e-7, "cmdJntPos + cmdJntPosFriOffset");
     assert_eq!(reply.add_jnt_trq, [0.0; 7]);
@@ -69,7 +69,7 @@ fn out_of_command_mode_the_driver_mirrors_the_krc_and_asks_to_start() {
 fn a_bad_command_is_refused_and_the_driver_holds_at_once() {
     // Safety class 1: a non-finite value anywhere means hold, never "repeat the last torque".
     for bad in [&[0.0; 6][..], &[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0], &[f64::INFINITY; 7], &[]] {
-        let mut d = LwrDriver::new(DriverConfig::default());
+        let mut d = LwrDriver::new(DriverParams::default());
         d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
         d.set_command(&[5.0; 7]).unwrap();
         assert!(d.set_command(bad).is_err());
@@ -80,7 +80,7 @@ fn a_bad_command_is_refused_and_the_driver_holds_at_once() {
         assert_eq!(d.counters.commands_refused, 1);
     }
     assert_eq!(
-        LwrDriver::new(DriverConfig::default()).set_command(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]),
+        LwrDriver::new(DriverParams::default()).set_command(&[0.0, 0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]),
         Err(DriverError::NonFiniteCommand(2))
     );
 }
@@ -89,7 +89,7 @@ fn a_bad_command_is_refused_and_the_driver_holds_at_once() {
 fn the_watchdog_counts_answers_not_sequence_numbers() {
     // Safety class 2: a counter that goes back (a spoofed datagram, or a KRC whose counter restarted)
     // used to freeze the watchdog, so that a 9 s old torque was applied after the controller died.
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.handle(&measurement(1000, InterfaceState::Command, Q, G)).unwrap();
     d.set_command(&[1.0, 50.0, 0.5, -40.0, -0.2, 1.0, 0.3]).unwrap();
     let mut holding_from = None;
@@ -107,7 +107,7 @@ fn the_watchdog_counts_answers_not_sequence_numbers() {
 fn strangers_are_refused_and_a_new_port_of_the_krc_is_a_new_session() {
     // Safety class 3: only the pinned KRC is answered; class 4: port 0 is no sender.
     let krc: std::net::SocketAddr = "192.168.0.1:49938".parse().unwrap();
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     assert_eq!(d.accept_sender(krc, f64::INFINITY), Some(true), "the first sender is pinned");
     assert_eq!(d.accept_sender(krc, 0.001), Some(false));
     for stranger in ["192.168.0.7:49938", "10.0.0.1:5000", "192.168.0.1:0", "[::1]:49938"] {
@@ -115,7 +115,7 @@ fn strangers_are_refused_and_a_new_port_of_the_krc_is_a_new_session() {
     }
     assert_eq!(d.counters.strangers, 4);
     // The configured KRC address refuses even the first sender if it is someone else.
-    let config = DriverConfig { krc_address: Some("192.168.0.1".parse().unwrap()), ..DriverConfig::default() };
+    let config = DriverParams { krc_address: Some("192.168.0.1".parse().unwrap()), ..DriverParams::default() };
     let mut pinned = LwrDriver::new(config);
     assert_eq!(pinned.accept_sender("192.168.0.9:49938".parse().unwrap(), f64::INFINITY), None);
     assert_eq!(pinned.accept_sender(krc, f64::INFINITY), Some(true));
@@ -150,7 +150,7 @@ fn strangers_are_refused_and_a_new_port_of_the_krc_is_a_new_session() {
 #[test]
 fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
     // Safety class 7: a replayed command 20 min old was applied.
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.accept_sender("127.0.0.1:40000".parse().unwrap(), f64::INFINITY);
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     let s = Some(d.session());
@@ -169,7 +169,7 @@ fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
 #[test]
 fn implausible_measurements_are_refused_unanswered() {
     // Safety class 8: sample time +inf disabled the overspeed guard; positions of 1e30 became the hold.
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     let tweak = |f: &dyn Fn(&mut fri::Measurement)| {
         let mut m = fri::Measurement::decode(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
         f(&mut m);
@@ -197,7 +197,7 @@ fn implausible_measurements_are_refused_unanswered() {
 fn torques_beyond_the_joint_limits_are_refused_and_the_driver_holds() {
     // Adversary, separate layout: 1e300 and 1e6 N·m were clipped to the limits and applied.
     for (joint, bad) in [(0, 176.01), (1, -1e6), (6, 1e300), (4, -100.5)] {
-        let mut d = LwrDriver::new(DriverConfig::default());
+        let mut d = LwrDriver::new(DriverParams::default());
         d.handle(&measurement(1, InterfaceState::Command, Q, [0.0; 7])).unwrap();
         d.set_command(&[5.0; 7]).unwrap();
         let mut tau = [0.0; 7];
@@ -207,7 +207,7 @@ fn torques_beyond_the_joint_limits_are_refused_and_the_driver_holds() {
         assert!(out.holding && reply.add_jnt_trq == [0.0; 7], "no torque of either command: {:?}", reply.add_jnt_trq);
     }
     // At the limit is a command.
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.handle(&measurement(1, InterfaceState::Command, Q, [0.0; 7])).unwrap();
     d.set_command(&[176.0, -176.0, 100.0, -100.0, 100.0, 38.0, -38.0]).unwrap();
     let (reply, _) = d.handle(&measurement(2, InterfaceState::Command, Q, [0.0; 7])).unwrap();
@@ -218,7 +218,7 @@ fn torques_beyond_the_joint_limits_are_refused_and_the_driver_holds() {
 fn only_the_pinned_writer_commands_for_the_session() {
     // Adversary, separate layout: a stranger's commands, with stamp and session copied from the live
     // joint states, were all accepted.
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.accept_sender("127.0.0.1:40000".parse().unwrap(), f64::INFINITY);
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     let s = Some(d.session());
@@ -246,7 +246,7 @@ fn only_the_pinned_writer_commands_for_the_session() {
 
 /// Measurements of joint `joint` moving from `from` at `speed` [rad/s] (1 ms apart), the driver applying
 /// `torque` (total) whenever it does not hold; the cycle of the first hold and the driver.
-fn drive(joint: usize, from: f32, speed: f32, cycles: u16, config: DriverConfig) -> (Option<u16>, LwrDriver) {
+fn drive(joint: usize, from: f32, speed: f32, cycles: u16, config: DriverParams) -> (Option<u16>, LwrDriver) {
     let mut d = LwrDriver::new(config);
     let mut first_hold = None;
     for k in 1..=cycles {
@@ -268,24 +268,24 @@ fn a_joint_heading_into_its_position_limit_holds_the_arm_until_the_operator_rest
     // Adversary, separate layout: +8 N·m on joint 5 carried it 0.1 rad past its limit while the driver
     // applied every command (it only stopped answering once the measurement was implausible).
     let upper = 2.0944; // joint 4, ±120°
-    let margin = DriverConfig::default().limit_margin;
+    let margin = DriverParams::default().limit_margin;
     // At 1 rad/s from 1.7 rad: the band begins at 1.9944 rad, seen 50 ms (0.05 rad) ahead, i.e. from
     // 1.9444 rad, reached after 244 ms.
-    let (first, d) = drive(3, 1.7, 1.0, 400, DriverConfig::default());
+    let (first, d) = drive(3, 1.7, 1.0, 400, DriverParams::default());
     let expected = ((upper - margin - 0.05 - 1.7) / 1e-3_f64).ceil() as u16;
     assert!(first.is_some_and(|k| k.abs_diff(expected) <= 1), "first hold {first:?}, expected {expected}");
     assert!(matches!(d.fault(), Some(Fault::PositionLimit { joint: 4, .. })), "{:?}", d.fault());
     assert!(d.counters.limit_cycles >= 150, "held on, fresh commands or not: {}", d.counters.limit_cycles);
     // Slowly, the band itself.
     // Slowly (0.1 rad/s, 5 mrad ahead) from 1.98 rad: at 1.9894 rad, after 94 ms.
-    let (first, _) = drive(3, 1.98, 0.1, 200, DriverConfig::default());
+    let (first, _) = drive(3, 1.98, 0.1, 200, DriverParams::default());
     assert!(first.is_some_and(|k| (93..=95).contains(&k)), "{first:?}");
     // Away from the limit: never.
-    let (first, d) = drive(3, 1.7, -1.0, 400, DriverConfig::default());
+    let (first, d) = drive(3, 1.7, -1.0, 400, DriverParams::default());
     assert_eq!((first, d.fault()), (None, None));
     // The fault stands through new sessions, silences and the KRC's own fallback to monitor mode, until
     // the operator restarts the KRL program.
-    let (_, mut d) = drive(3, 1.99, 0.0, 10, DriverConfig::default());
+    let (_, mut d) = drive(3, 1.99, 0.0, 10, DriverParams::default());
     d.set_command(&G.map(f64::from)).unwrap();
     assert!(d.handle(&measurement(11, InterfaceState::Command, Q, G)).unwrap().1.holding, "back inside, still held");
     d.begin_session();
@@ -327,7 +327,7 @@ fn a_joint_heading_into_its_position_limit_holds_the_arm_until_the_operator_rest
 
 #[test]
 fn no_fresh_command_means_holding_position() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     let (reply, out) = d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     assert!(out.holding, "no command yet");
     assert_eq!(reply.jnt_pos, Q);
@@ -344,7 +344,7 @@ fn no_fresh_command_means_holding_position() {
 
 #[test]
 fn a_hold_for_a_stale_command_hands_its_torque_to_the_spring_and_overspeed_drops_it() {
-    let config = DriverConfig { hold_release_cycles: 100, ..DriverConfig::default() };
+    let config = DriverParams { hold_release_cycles: 100, ..DriverParams::default() };
     let (k, limit) = (config.hold_stiffness, config.hold_max_preload);
     let mut d = LwrDriver::new(config.clone());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
@@ -408,7 +408,7 @@ fn a_hold_for_a_stale_command_hands_its_torque_to_the_spring_and_overspeed_drops
 
 #[test]
 fn a_joint_too_fast_makes_the_driver_hold() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     d.set_command(&[0.0; 7]).unwrap();
     let mut fast = Q;
@@ -431,7 +431,7 @@ fn a_joint_too_fast_makes_the_driver_hold() {
 
 #[test]
 fn lost_and_repeated_measurements_are_counted() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     for seq in [65534u16, 65535, 2, 2, 3] {
         d.handle(&measurement(seq, InterfaceState::Monitor, Q, G)).unwrap();
     }
@@ -495,7 +495,7 @@ fn the_ft_node_removes_bias_and_tool_weight() {
 
 #[test]
 fn datagrams_all_refused_are_told_apart_from_some_refused() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     let before = d.counters;
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
     let accepted = d.counters;
@@ -524,7 +524,7 @@ fn commanding_with(seq: u16, edit: impl FnOnce(&mut fri::Measurement)) -> Vec<u8
 
 #[test]
 fn a_krc_commanding_in_position_control_gets_the_measured_position_and_no_torque() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     for seq in 1..2000u16 {
         let (reply, out) = d
             .handle(&commanding_with(seq, |m| {
@@ -568,7 +568,7 @@ fn in_every_other_mode_the_answer_is_that_modes_safe_command_without_torque() {
         ),
     ];
     for (what, edit, expected) in cases {
-        let mut d = LwrDriver::new(DriverConfig::default());
+        let mut d = LwrDriver::new(DriverParams::default());
         // Torque mode first, a command applied: then the KRC changes.
         d.handle(&commanding_with(1, |_| {})).unwrap();
         d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();
@@ -583,7 +583,7 @@ fn in_every_other_mode_the_answer_is_that_modes_safe_command_without_torque() {
             assert_eq!(reply.cart_pos, std::array::from_fn(|i| 0.1 * i as f32), "{what}: the measured pose");
             assert_eq!(reply.flags, flags::JOINT_IMPEDANCE, "{what}: flags never change in command mode");
             for (i, (sent, measured)) in reply.jnt_pos.iter().zip(Q).enumerate() {
-                let preload = DriverConfig::default().hold_max_preload as f32;
+                let preload = DriverParams::default().hold_max_preload as f32;
                 assert!(
                     (sent - measured).abs() <= preload + 1e-6,
                     "{what}: joint {i} held at {sent}, is at {measured}"
@@ -595,7 +595,7 @@ fn in_every_other_mode_the_answer_is_that_modes_safe_command_without_torque() {
 
 #[test]
 fn torque_mode_beginning_again_is_a_new_session_and_no_earlier_command_is_applied() {
-    let mut d = LwrDriver::new(DriverConfig::default());
+    let mut d = LwrDriver::new(DriverParams::default());
     d.handle(&commanding_with(1, |_| {})).unwrap();
     let first = d.session();
     d.set_command(&[5.0, 60.0, 1.0, -20.0, 1.0, 2.0, 0.5]).unwrap();

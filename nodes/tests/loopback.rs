@@ -10,7 +10,7 @@ use std::time::Duration;
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::{Axes, lwr4};
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
-use softcontact_nodes::lwr_driver::{DriverConfig, DriverOutput, LwrDriver};
+use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params as DriverParams};
 use softcontact_nodes::sim_arm::{SimArmConfig, SimArmServer, SimArmStats};
 use softcontact_nodes::udp::{FriClient, RdtClient};
 use softcontact_sim::{FtSensorConfig, SimConfig, Simulator};
@@ -119,7 +119,7 @@ fn free_arm() -> SimConfig {
 #[test]
 fn driver_and_sim_hold_the_arm_still_with_gravity_compensated() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let (_, truth, cell) = start_cell(free_arm(), client.local_addr().unwrap(), 0.0, 1500);
     // The controller commands exactly the gravity torque: the arm must not move.
     let outputs = drive(&mut client, |out| Some(gravity(&out.q)));
@@ -146,7 +146,7 @@ fn a_12_ms_late_answer_ends_command_mode_on_a_krc_waiting_0_9_ms_and_is_waited_f
     let _rt = one_at_a_time();
     for (answer_wait, keeps_commanding) in [(Duration::ZERO, false), (Duration::from_millis(20), true)] {
         let mut client =
-            FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+            FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
         let (_, truth, cell) = start_cell_waiting(free_arm(), client.local_addr().unwrap(), 0.0, answer_wait, 1500);
         let mut commanding = 0;
         let mut stalled = false;
@@ -177,7 +177,7 @@ fn a_12_ms_late_answer_ends_command_mode_on_a_krc_waiting_0_9_ms_and_is_waited_f
 #[test]
 fn a_constant_torque_moves_the_arm_as_the_dynamics_predict() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let (_, truth, cell) = start_cell(free_arm(), client.local_addr().unwrap(), 0.0, 1200);
     let extra = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.004];
     let mut commanding = 0;
@@ -222,7 +222,7 @@ fn the_ft_node_reports_the_simulated_contact_force() {
     let _rt = one_at_a_time();
     let mut config = SimConfig::above_surface(softcontact_sim::dice(), 4);
     config.sensor = FtSensorConfig::gamma(); // noise σ_z = 0.05 N and a bias the node must tare away
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let (rdt, truth, cell) = start_cell(config, client.local_addr().unwrap(), 0.0, 4000);
     let ft_config = FtConfig {
         calibration: softcontact_wire::rdt::Calibration::gamma_si_130_10(),
@@ -289,7 +289,7 @@ fn the_ft_node_reports_the_simulated_contact_force() {
 #[test]
 fn five_percent_packet_loss_is_survived_and_counted() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     // 5 % of all FRI datagrams: 5 % of the measurements and 5 % of the commands.
     let (_, truth, cell) = start_cell(free_arm(), client.local_addr().unwrap(), 0.05, 2500);
     let outputs = drive(&mut client, |out| Some(gravity(&out.q)));
@@ -324,7 +324,7 @@ fn five_percent_packet_loss_is_survived_and_counted() {
 #[test]
 fn malformed_datagrams_are_refused_and_counted() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let target = client.local_addr().unwrap();
     let (_, truth, cell) = start_cell(free_arm(), target, 0.0, 1200);
     let rogue = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -349,7 +349,7 @@ fn malformed_datagrams_are_refused_and_counted() {
 #[test]
 fn a_stale_controller_makes_the_driver_hold_position() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let (_, truth, cell) = start_cell(free_arm(), client.local_addr().unwrap(), 0.0, 1500);
     let mut n = 0;
     // The controller commands a wrist torque, then goes silent after 500 cycles.
@@ -371,7 +371,7 @@ fn a_stale_controller_makes_the_driver_hold_position() {
 #[test]
 fn the_sim_arm_process_serves_fri_to_the_driver() {
     let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverConfig::default())).unwrap();
+    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim_arm"))
         .args(["-p", &format!("fri_remote:={}", client.local_addr().unwrap())])
         .args(["-p", "rdt_bind:=127.0.0.1:0", "-p", "surface:=none", "-p", "seconds:=1.2"])

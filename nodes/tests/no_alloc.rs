@@ -116,13 +116,13 @@ fn the_controller_tick_through_an_augmented_model_does_not_allocate() {
 /// torque for it is handed over, and the driver answers with it.
 #[test]
 fn the_driver_hand_over_does_not_allocate() {
-    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
     let mut sim =
         softcontact_sim::Simulator::new(softcontact_sim::SimConfig::above_surface(softcontact_sim::sponge(), 3))
             .unwrap();
     // The KRC's measurements of 50 commanding cycles, made beforehand (a driver answers the KRC into
     // command mode; encoding allocates).
-    let mut warm = LwrDriver::new(DriverConfig::default());
+    let mut warm = LwrDriver::new(DriverParams::default());
     let mut datagrams: Vec<[u8; 916]> = Vec::new();
     for _ in 0..10_000 {
         let m = sim.measurement();
@@ -138,7 +138,7 @@ fn the_driver_hand_over_does_not_allocate() {
         }
     }
     assert_eq!(datagrams.len(), 50, "the KRC reached command mode");
-    let mut driver = LwrDriver::new(DriverConfig::default());
+    let mut driver = LwrDriver::new(DriverParams::default());
     let tau = [0.5, 20.0, 0.1, -8.0, 0.2, 1.0, 0.0];
     let mut sequence = 0u64;
     for d in &datagrams[..5] {

@@ -307,7 +307,7 @@ fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload(
     }
     let held = *cell.sim.q();
     cell.sim.surface = None;
-    let preload = softcontact_nodes::lwr_driver::DriverConfig::default().hold_max_preload;
+    let preload = softcontact_nodes::lwr_driver::Params::default().hold_max_preload;
     let mut farthest: f64 = 0.0;
     for k in 0..3000 {
         stalled_cycle(&mut cell);
@@ -447,7 +447,7 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         let controller = DeformationController::new(cp.controller_config(), cp.initial_model.clone()).unwrap();
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
         let mut cell = Cell::new(config, controller, estimator).unwrap();
-        cell.driver = LwrDriver::new(dp.driver_config());
+        cell.driver = LwrDriver::new(dp.clone());
         let bound = 1.2 * cp.force_limit;
         let check = |cell: &mut Cell, cycles: usize, what: &str| {
             for k in 0..cycles {
@@ -502,9 +502,9 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
 /// a controller gone wrong) pushing one joint with `push` N·m beyond gravity, within the torque limits,
 /// until 0.5 s after the driver's fault (at most 6 s); the fault the driver held for.
 fn pushed(joint: usize, push: f64) -> Option<softcontact_nodes::lwr_driver::Fault> {
-    use softcontact_nodes::lwr_driver::{DriverConfig, LwrDriver};
+    use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
     let mut sim = Simulator::new(SimConfig::above_surface(softcontact_sim::sponge(), 3)).unwrap();
-    let mut driver = LwrDriver::new(DriverConfig::default());
+    let mut driver = LwrDriver::new(DriverParams::default());
     let model = lwr4::model();
     let mut data = model.data();
     let limit = model.joints[joint].limits.effort;

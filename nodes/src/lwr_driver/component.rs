@@ -110,7 +110,7 @@ pub struct Links {
 /// `lwr_control`.
 pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
     let Links { mut controller, poses } = links;
-    let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.driver_config()))?;
+    let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.clone()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;
     let joint_states = ros::publisher(&mut node, &topics::JOINT_STATES, ros::sensor_qos())?;
     // For a controller of its own; composed, the controller has the estimate in memory, and the FRI
