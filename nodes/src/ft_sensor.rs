@@ -126,6 +126,9 @@ pub struct FtCounters {
     pub saturated: u64,
     /// Fresh records with a device error bit.
     pub errors: u64,
+    /// Fresh records whose transducer sample counter (`ft_sequence`) did not advance from the last
+    /// record's: a stalled or restarted transducer behind a box still streaming. Not used for control.
+    pub device_stalled: u64,
     /// Socket errors (ICMP port or host unreachable: the box is not up, or rebooting; no route yet).
     pub network_errors: u64,
     /// Datagrams from another address than the sensor's: skipped.
@@ -236,6 +239,8 @@ pub struct FtSensorNode {
     bias: [f64; 6],
     filters: Option<[Biquad; 6]>,
     last_sequence: Option<u32>,
+    /// The last fresh record's transducer sample counter, in this stream.
+    last_device_sample: Option<u32>,
     last_unbiased: Option<[f64; 6]>,
     /// The next record may start a new stream (a start request went out, or the stream was silent).
     new_stream: bool,
@@ -262,6 +267,7 @@ impl FtSensorNode {
             bias: [0.0; 6],
             filters,
             last_sequence: None,
+            last_device_sample: None,
             last_unbiased: None,
             new_stream: true,
             behind: None,
@@ -461,6 +467,8 @@ impl FtSensorNode {
         let si = self.config.calibration.to_si(&record.counts);
         let range = &self.config.calibration.range;
         let saturated = record.status.is_saturated() || si.iter().zip(range).any(|(v, r)| v.abs() >= *r);
+        let restarts = self.counters.restarts;
+        let first = self.last_sequence.is_none();
         if !self.sequence_fresh(record.rdt_sequence) {
             let raw: [f64; 6] = std::array::from_fn(|i| si[i] - self.bias[i]);
             let compensated = orientation.map(|o| {
@@ -478,7 +486,14 @@ impl FtSensorNode {
             });
         }
         self.last_sequence = Some(record.rdt_sequence);
-        let invalid = saturated || record.status.is_error();
+        // The box numbers its transducer's samples: a new stream may start anywhere, within one the
+        // counter must advance (by more than one when the box streams slower than it samples).
+        let new_stream = first || self.counters.restarts != restarts;
+        let device_advanced =
+            new_stream || self.last_device_sample.is_none_or(|last| record.ft_sequence.wrapping_sub(last) as i32 > 0);
+        self.last_device_sample = Some(record.ft_sequence);
+        self.counters.device_stalled += u64::from(!device_advanced);
+        let invalid = saturated || record.status.is_error() || !device_advanced;
         self.counters.saturated += u64::from(saturated);
         self.counters.errors += u64::from(record.status.is_error());
         self.fresh_records += 1;
@@ -888,7 +903,7 @@ mod tests {
         // The pose stops coming: the node cannot tell motion.
         let mut s = Scene::new();
         s.hold(200);
-        let rec = |seq: u32| Record { rdt_sequence: seq, ..Default::default() }.encode();
+        let rec = |seq: u32| Record { rdt_sequence: seq, ft_sequence: seq, ..Default::default() }.encode();
         for i in 0..150 {
             s.node.handle(&rec(1000 + i), Some(&o)).unwrap();
         }
@@ -903,7 +918,11 @@ mod tests {
             let wobble = (2.0 * std::f64::consts::PI * 20.0 * f64::from(i) * 1e-3).sin();
             let f: [f64; 6] = std::array::from_fn(|k| weight[k] + if k == 2 { wobble } else { 0.0 });
             n.observe_tool_pose(&tool);
-            n.handle(&Record { rdt_sequence: i, counts: counts(f), ..Default::default() }.encode(), Some(&o)).unwrap();
+            n.handle(
+                &Record { rdt_sequence: i, ft_sequence: i, counts: counts(f), ..Default::default() }.encode(),
+                Some(&o),
+            )
+            .unwrap();
         }
         let e = n.checked_tare(Some(&o)).unwrap_err();
         assert!(e.contains("not steady"), "{e}");
@@ -911,7 +930,7 @@ mod tests {
         let mut s = Scene::new();
         s.hold(200);
         // (In the stream's sequence: the simulated sensor's own record 200 is then a duplicate.)
-        let sat = Record { rdt_sequence: 200, status: Status(0x8002_0000), ..Default::default() };
+        let sat = Record { rdt_sequence: 200, ft_sequence: 200, status: Status(0x8002_0000), ..Default::default() };
         s.node.handle(&sat.encode(), Some(&o)).unwrap();
         s.hold(20);
         assert!(s.node.checked_tare(Some(&o)).unwrap_err().contains("saturated"));
@@ -979,6 +998,40 @@ mod tests {
         assert!(n.handle(&record(4 + RESTART_RUN as u32, 1.0), None).unwrap().fresh);
     }
 
+    /// The box streams on while its transducer's sample counter stands still or runs backwards (a
+    /// stalled or restarted transducer): those records are not used for control, and counted; the
+    /// stream is usable again once the counter advances, by one or by more (a box streaming slower than
+    /// it samples), and a new stream may start its counter anywhere.
+    #[test]
+    fn records_whose_transducer_sample_counter_stands_still_or_runs_back_are_not_valid() {
+        let mut n = node();
+        let rec = |rdt: u32, ft: u32| {
+            let counts = Calibration::gamma_si_130_10().to_counts(&[0.0, 0.0, 5.0, 0.0, 0.0, 0.0]).0;
+            Record { rdt_sequence: rdt, ft_sequence: ft, status: Status(0), counts }.encode()
+        };
+        let valid = |n: &mut FtSensorNode, rdt: u32, ft: u32| {
+            let out = n.handle(&rec(rdt, ft), None).unwrap();
+            assert!(out.fresh, "record {rdt} is the stream's next");
+            !out.invalid
+        };
+        assert!(valid(&mut n, 1, 500));
+        assert!(valid(&mut n, 2, 501));
+        assert!(valid(&mut n, 3, 505), "advancing by more than one");
+        // Frozen for three records, then advancing again.
+        assert!(!valid(&mut n, 4, 505) && !valid(&mut n, 5, 505) && !valid(&mut n, 6, 505));
+        assert!(valid(&mut n, 7, 506));
+        // Backwards (the transducer restarted behind a streaming box): one record refused, then its new
+        // count advances.
+        assert!(!valid(&mut n, 8, 3));
+        assert!(valid(&mut n, 9, 4));
+        assert_eq!(n.counters.device_stalled, 4, "{:?}", n.counters);
+        // A new stream (a start request): its counter may start anywhere; it wraps forward.
+        n.new_stream();
+        assert!(valid(&mut n, 0, u32::MAX - 1));
+        assert!(valid(&mut n, 1, u32::MAX) && valid(&mut n, 2, 0) && valid(&mut n, 3, 1));
+        assert_eq!((n.counters.device_stalled, n.counters.saturated, n.counters.restarts), (4, 0, 1));
+    }
+
     #[test]
     fn readings_at_or_beyond_the_calibrated_range_are_not_valid() {
         let mut n = node();
@@ -989,8 +1042,7 @@ mod tests {
         };
         let out = |n: &mut FtSensorNode, seq: u32, fz: f64, status: u32| {
             n.handle(
-                &Record { rdt_sequence: seq, status: Status(status), counts: counts(fz), ..Default::default() }
-                    .encode(),
+                &Record { rdt_sequence: seq, ft_sequence: seq, status: Status(status), counts: counts(fz) }.encode(),
                 None,
             )
             .unwrap()
