@@ -643,13 +643,13 @@ impl crate::params::NodeParams for Params {
             "counts_per_force",
             counts(self.counts_per_force),
             "0 (the box's), or 1 to 1e9",
-            "counts per force unit (the box's cfgcpf); 0: the box's",
+            "counts per force unit (the box's cfgcpf)",
         );
         d.rule(
             "counts_per_torque",
             counts(self.counts_per_torque),
             "0 (the box's), or 1 to 1e9",
-            "counts per torque unit (cfgcpt); 0: the box's",
+            "counts per torque unit (cfgcpt)",
         );
         let unit = |force: &str, torque: &str| {
             Calibration::from_settings(1.0, 1.0, force, torque, [0.0; 6]).map(|_| ()).map_err(|e| e.to_string())
@@ -660,13 +660,13 @@ impl crate::params::NodeParams for Params {
             "force_unit",
             force_unit,
             "\"\" (the box's), or N, lbf, klbf, kN, kgf, gf",
-            "the force unit of the counts (scfgfu); \"\": the box's",
+            "the force unit of the counts (scfgfu)",
         );
         d.rule(
             "torque_unit",
             torque_unit,
             "\"\" (the box's), or Nm, N-m, Nmm, N-mm, lbf-in, lbf-ft, kgf-cm, kN-m",
-            "the torque unit of the counts (scfgtu); \"\": the box's",
+            "the torque unit of the counts (scfgtu)",
         );
         let ranges = if self.ranges.is_empty()
             || (self.ranges.len() == 6 && self.ranges.iter().all(|r| r.is_finite() && *r > 0.0 && *r <= 1e6))
@@ -679,7 +679,7 @@ impl crate::params::NodeParams for Params {
             "ranges",
             ranges,
             "[] (the box's), or six values in (0, 1e6]",
-            "the calibrated range of Fx Fy Fz Tx Ty Tz in the configured units (cfgmr): a reading at or beyond it is not used; []: the box's",
+            "the calibrated range of Fx Fy Fz Tx Ty Tz in the configured units (cfgmr): a reading at or beyond it is not used",
         );
         d.any(
             "calibration_override",
@@ -693,12 +693,12 @@ impl crate::params::NodeParams for Params {
             } else {
                 Err(format!("must be 0 or lie in [{LOWEST_LOW_PASS}, {}] Hz, not {}", 0.45 * self.rate, self.low_pass))
             };
-        let range = format!("0, or from {LOWEST_LOW_PASS} Hz to 0.45 × rate");
+        let range = format!("0 (none), or from {LOWEST_LOW_PASS} Hz to 0.45 × rate");
         d.rule(
             "low_pass",
             low_pass,
             &range,
-            "low-pass cut-off [Hz]; 0 for none (a lower cut-off delays the force the controller feeds forward)",
+            "low-pass cut-off [Hz] (a lower cut-off delays the force the controller feeds forward)",
         );
         d.within(
             "stale_after",

@@ -881,8 +881,8 @@ impl crate::params::NodeParams for Params {
         d.rule(
             "krc_address",
             krc,
-            "one machine's address, or empty",
-            "the KRC's IP address; empty: the first sender is pinned, every other address refused",
+            "one machine's address, or null",
+            "the KRC's IP address; null: the first sender is pinned, every other address refused",
         );
         d.within(
             "new_session_after",
@@ -910,7 +910,8 @@ impl crate::params::NodeParams for Params {
                     Err(format!("joint {}: {k} outside [{lo}, {hi}] N·m/rad", i + 1))
                 }
             });
-        let range = format!("per joint within {HOLD_STIFFNESS:?}");
+        let range = HOLD_STIFFNESS.iter().map(|(lo, hi)| format!("{lo} to {hi}")).collect::<Vec<_>>().join(", ");
+        let range = format!("per joint: {range}");
         d.rule("hold_stiffness", stiffness, &range, "joint stiffness of the hold [N·m/rad]");
         d.above("hold_damping", self.hold_damping, (0.0, 1.0), "damping ratio of the hold");
         d.above(

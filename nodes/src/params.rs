@@ -99,6 +99,21 @@ pub enum Range {
     Rule(String),
 }
 
+impl std::fmt::Display for Range {
+    /// As the errors, the parameter files and docs/parameters.md say it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Range::Number { lo, hi, above: false } if *hi == f64::MAX => write!(f, "≥ {lo}"),
+            Range::Number { lo, hi, above: true } if *hi == f64::MAX => write!(f, "> {lo}"),
+            Range::Number { lo, hi, above: false } => write!(f, "{lo} to {hi}"),
+            Range::Number { lo, hi, above: true } => write!(f, "> {lo}, ≤ {hi}"),
+            Range::Each { lo, hi } => write!(f, "{lo} to {hi}, each entry"),
+            Range::Integer { lo, hi } => write!(f, "a whole number {lo} to {hi}"),
+            Range::Rule(rule) => write!(f, "{rule}"),
+        }
+    }
+}
+
 impl Spec {
     /// The ROS parameter descriptor: description, read-only (nodes read their parameters at start-up),
     /// the numeric range where there is one, and in words what a ROS range cannot say.
@@ -155,28 +170,32 @@ impl Declarations {
     /// A finite number in (lo, hi].
     pub fn above(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
         let ok = value.is_finite() && value > lo && value <= hi;
-        let fault = (!ok).then(|| format!("{name} must lie in ({lo}, {hi}], not {value}"));
-        self.declare(name, description, Range::Number { lo, hi, above: true }, fault);
+        let range = Range::Number { lo, hi, above: true };
+        let fault = (!ok).then(|| format!("{name} must be {range}, not {value}"));
+        self.declare(name, description, range, fault);
     }
 
     /// A finite number in [lo, hi].
     pub fn within(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
         let ok = value.is_finite() && (lo..=hi).contains(&value);
-        let fault = (!ok).then(|| format!("{name} must lie in [{lo}, {hi}], not {value}"));
-        self.declare(name, description, Range::Number { lo, hi, above: false }, fault);
+        let range = Range::Number { lo, hi, above: false };
+        let fault = (!ok).then(|| format!("{name} must be {range}, not {value}"));
+        self.declare(name, description, range, fault);
     }
 
     /// Every entry in [lo, hi].
     pub fn each(&mut self, name: &str, values: &[f64], (lo, hi): (f64, f64), description: &str) {
         let ok = values.iter().all(|x| x.is_finite() && (lo..=hi).contains(x));
-        let fault = (!ok).then(|| format!("{name} must lie in [{lo}, {hi}] for every entry, not {values:?}"));
-        self.declare(name, description, Range::Each { lo, hi }, fault);
+        let range = Range::Each { lo, hi };
+        let fault = (!ok).then(|| format!("{name} must be {range}, not {values:?}"));
+        self.declare(name, description, range, fault);
     }
 
     /// A whole number in [lo, hi].
     pub fn integer(&mut self, name: &str, value: i64, (lo, hi): (i64, i64), description: &str) {
-        let fault = (!(lo..=hi).contains(&value)).then(|| format!("{name} must lie in {lo}..={hi}, not {value}"));
-        self.declare(name, description, Range::Integer { lo, hi }, fault);
+        let range = Range::Integer { lo, hi };
+        let fault = (!(lo..=hi).contains(&value)).then(|| format!("{name} must be {range}, not {value}"));
+        self.declare(name, description, range, fault);
     }
 
     /// A value the node checks itself: `check` says whether it holds (and why not), `rule` what it is.
@@ -652,7 +671,7 @@ mod tests {
         );
         // Out of its range, a value is refused with the declared range.
         let mut p = crate::deformation_controller::Params { force_limit: 600.0, ..Default::default() };
-        assert_eq!(p.validate().unwrap_err(), "force_limit must lie in (250, 500], not 600");
+        assert_eq!(p.validate().unwrap_err(), "force_limit must be > 250, ≤ 500, not 600");
         p.force_limit = f64::NAN;
         assert!(p.validate().is_err());
     }
@@ -680,7 +699,7 @@ mod tests {
         let e = load::<Demo>("demo", &args(&[&typo], &[])).unwrap_err().to_string();
         assert!(e.contains("rte"), "{e}");
         let e = load::<Demo>("demo", &args(&[], &["rate:=-1"])).unwrap_err().to_string();
-        assert!(e.contains("rate must lie in (0, 1000]"), "{e}");
+        assert!(e.contains("rate must be > 0, ≤ 1000"), "{e}");
         let e = load::<Demo>("demo", &args(&[], &["rate:=fast"])).unwrap_err().to_string();
         assert!(e.contains("rate"), "{e}");
         assert!(matches!(load::<Demo>("demo", &args(&[], &["rate=1"])), Err(ParamError::Override(_))));

@@ -445,7 +445,10 @@ impl crate::params::NodeParams for Params {
         d.any("http_bind", "where the simulated box serves its settings page, netftapi2.xml (port 0: no web server)");
         d.any("transducer", "the simulated box's transducer and calibration: gamma (SI-130-10, N, N·m), nano17 (SI-25-0.25, N, N·mm) or mini45 (US-60-80, lbf, lbf-in)");
         d.integer("rdt_buffer", self.rdt_buffer, (1, 40), "records a datagram in buffered mode (the box's comrdtbsiz)");
-        d.any("surface", "the simulated surface: its preset law, place and sensor (none: free space)");
+        d.any(
+            "surface",
+            "the simulated surface, its preset law, place and sensor: sponge, dice, lab_sponge or lab_dice (with relaxation, hysteresis and a drifting sensor), or none (free space)",
+        );
         d.any(
             "krl_program",
             "the KRL program the simulated KRC runs: softcontact (shipped), ros_control (position control on its first start) or position_only",
@@ -456,7 +459,7 @@ impl crate::params::NodeParams for Params {
             "seconds",
             self.seconds,
             (0.0, f64::MAX),
-            "stop after this many simulated seconds (0: run until stopped)",
+            "stop after this much simulated time (0: run until stopped) [s]",
         );
         let drop_rate = if (0.0..1.0).contains(&self.drop_rate) {
             Ok(())

@@ -5,7 +5,9 @@
 
 use serde_yaml_ng::Value;
 
-use super::{NodeParams, Range, Spec};
+#[cfg(test)]
+use super::Range;
+use super::{NodeParams, Spec};
 
 /// A node whose parameters are documented: its name, what it is, and its generated texts.
 pub struct NodeReference {
@@ -63,7 +65,8 @@ pub fn markdown_all() -> String {
          the parameter files of `config/` (`softcontact params <node>`) are what the declarations give. Every node reads \
          `--params-file FILE` (repeatable) and `-p name:=value` as `ros2 run … --ros-args` does, refuses unknown names \
          and values outside the ranges below before it starts, and declares each parameter read-only, so that `ros2 \
-         param describe` shows the same description and range.\n",
+         param describe` shows the same description and range. A range that follows another parameter (a description \
+         says which: above max_force, at most a quarter of it) is given here at the defaults.\n",
     );
     for node in nodes() {
         out.push('\n');
@@ -72,18 +75,11 @@ pub fn markdown_all() -> String {
     out
 }
 
-/// How a range reads in a comment or a table.
-fn range_text(range: &Range) -> String {
-    let num = |x: f64| if x == f64::MAX { "∞".to_string() } else { format!("{x}") };
-    match range {
-        Range::Number { lo, hi, above: false } if *hi == f64::MAX => format!("≥ {}", num(*lo)),
-        Range::Number { lo, hi, above: true } if *hi == f64::MAX => format!("> {}", num(*lo)),
-        Range::Number { lo, hi, above: false } => format!("{} to {}", num(*lo), num(*hi)),
-        Range::Number { lo, hi, above: true } => format!("> {}, ≤ {}", num(*lo), num(*hi)),
-        Range::Each { lo, hi } => format!("each {} to {}", num(*lo), num(*hi)),
-        Range::Integer { lo, hi } => format!("{lo} to {hi}"),
-        Range::Rule(rule) => rule.clone(),
-    }
+/// How a range reads in a comment or a table: as the node's error says it, left out where the
+/// description already says it.
+fn range_text(spec: &Spec) -> String {
+    let text = spec.range.to_string();
+    if spec.description.contains(&text) { String::new() } else { text }
 }
 
 /// The defaults' top-level entries, in the struct's order, each with its declaration.
@@ -154,9 +150,9 @@ pub fn yaml<P: NodeParams + Default>(node: &str, summary: &str) -> String {
     );
     out.push_str(&format!("{node}:\n  ros__parameters:\n"));
     for (name, value, spec) in entries::<P>(node) {
-        let range = match &spec.range {
-            Range::Rule(r) if r.is_empty() => String::new(),
-            r => format!(" ({})", range_text(r)),
+        let range = match range_text(&spec) {
+            r if r.is_empty() => r,
+            r => format!(" (takes {r})"),
         };
         out.push_str(&comment("    ", &format!("{}{range}", spec.description), 110));
         out.push_str(&format!("    {name}: {}\n", flow(&value)));
@@ -176,7 +172,7 @@ pub fn markdown<P: NodeParams + Default>(node: &str, summary: &str) -> String {
         out.push_str(&format!(
             "| `{name}` | `{}` | {} | {} |\n",
             cell(&flow(&value)),
-            cell(&range_text(&spec.range)),
+            cell(&range_text(&spec)),
             cell(&spec.description)
         ));
     }
@@ -215,10 +211,14 @@ mod tests {
     }
 
     #[test]
-    fn ranges_read_as_written() {
-        assert_eq!(range_text(&Range::Number { lo: 0.0, hi: f64::MAX, above: true }), "> 0");
-        assert_eq!(range_text(&Range::Number { lo: 0.1, hi: 60.0, above: false }), "0.1 to 60");
-        assert_eq!(range_text(&Range::Each { lo: 20.0, hi: 3000.0 }), "each 20 to 3000");
-        assert_eq!(range_text(&Range::Integer { lo: 1, hi: 40 }), "1 to 40");
+    fn ranges_read_as_written_and_not_twice() {
+        let spec = |range, description: &str| Spec { name: "x".into(), description: description.into(), range };
+        let text = |range| range_text(&spec(range, "a value"));
+        assert_eq!(text(Range::Number { lo: 0.0, hi: f64::MAX, above: true }), "> 0");
+        assert_eq!(text(Range::Number { lo: 0.0, hi: f64::MAX, above: false }), "≥ 0");
+        assert_eq!(text(Range::Number { lo: 0.1, hi: 60.0, above: false }), "0.1 to 60");
+        assert_eq!(text(Range::Each { lo: 20.0, hi: 3000.0 }), "20 to 3000, each entry");
+        assert_eq!(text(Range::Integer { lo: 1, hi: 40 }), "a whole number 1 to 40");
+        assert_eq!(range_text(&spec(Range::Rule("0: none".into()), "a cut-off; 0: none")), "");
     }
 }
