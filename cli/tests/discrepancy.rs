@@ -90,7 +90,7 @@ fn a_hidden_relaxation_is_named() {
     // The graph's overlay, read by the nodes' own loaders: the controller starts from the augmented model
     // with its surface placed, the estimator carries its effects with the surface held there (at 0.3 m).
     let overlay = report["overlay_file"].as_str().unwrap_or_else(|| panic!("overlay_file in {report}"));
-    let args = softcontact_nodes::params::ParamArgs { files: vec![overlay.into()], overrides: vec![], ros_args: false };
+    let args = softcontact_nodes::params::ParamArgs { files: vec![overlay.into()], ..Default::default() };
     let (controller, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
         "deformation_controller",
         &args,
@@ -430,7 +430,7 @@ fn the_arms_own_effects_are_named_from_a_recording() {
         assert!(out.status.success(), "{}", text(&out));
         // The compensation file is the controller's parameter overlay, read as the node reads it.
         let overlay = folder.join("arm_effects.yaml");
-        let args = softcontact_nodes::params::ParamArgs { files: vec![overlay], overrides: vec![], ros_args: false };
+        let args = softcontact_nodes::params::ParamArgs { files: vec![overlay], ..Default::default() };
         let (params, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
             "deformation_controller",
             &args,

@@ -83,9 +83,16 @@ pub mod std_msgs {
     #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
     pub struct Header {
         pub stamp: Time,
-        pub frame_id: String,
+        pub frame_id: std::string::String,
     }
     ros_type!("std_msgs", Header);
+
+    /// One text (`/robot_description`: the URDF).
+    #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+    pub struct String {
+        pub data: std::string::String,
+    }
+    ros_type!("std_msgs", String);
 }
 
 pub mod geometry_msgs {

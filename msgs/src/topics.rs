@@ -53,11 +53,16 @@ pub struct Described {
 }
 
 pub const JOINT_STATES: Topic<JointState> = Topic::new("/lwr/joint_states", Delivery::Sensor);
+/// The joint positions as robot_state_publisher reads them (reliable, at the /tf rate), when the driver's
+/// `publish_joint_states` is set.
+pub const ROBOT_JOINT_STATES: Topic<JointState> = Topic::new("/joint_states", Delivery::Reliable);
+/// The URDF the driver's kinematics and dynamics use, latched.
+pub const ROBOT_DESCRIPTION: Topic<crate::std_msgs::String> = Topic::new("/robot_description", Delivery::Latched);
 pub const JOINT_TORQUE_COMMAND: Topic<JointState> = Topic::new("/lwr/joint_torque_command", Delivery::Reliable);
 pub const EXTERNAL_TORQUE: Topic<JointState> = Topic::new("/lwr/external_torque", Delivery::Sensor);
 pub const EE_POSE: Topic<PoseStamped> = Topic::new("/lwr/ee_pose", Delivery::Sensor);
 pub const EE_TWIST: Topic<TwistStamped> = Topic::new("/lwr/ee_twist", Delivery::Sensor);
-pub const TF: Topic<TFMessage> = Topic::new("/tf", Delivery::Sensor);
+pub const TF: Topic<TFMessage> = Topic::new("/tf", Delivery::Reliable);
 pub const TF_STATIC: Topic<TFMessage> = Topic::new("/tf_static", Delivery::Latched);
 pub const WRENCH_RAW: Topic<WrenchStamped> = Topic::new("/ft_sensor/wrench_raw", Delivery::Sensor);
 pub const WRENCH: Topic<WrenchStamped> = Topic::new("/ft_sensor/wrench", Delivery::Sensor);
@@ -69,6 +74,13 @@ pub const CONTROLLER_STATE: Topic<ControllerState> = Topic::new("/deformation_co
 pub const DIAGNOSTICS: Topic<DiagnosticArray> = Topic::new("/diagnostics", Delivery::Reliable);
 pub const CONTACT_WRENCH: Topic<WrenchStamped> = Topic::new("/sim_arm/contact_wrench", Delivery::Sensor);
 pub const CLOCK: Topic<Clock> = Topic::new("/clock", Delivery::Reliable);
+
+/// The F/T node's software tare (std_srvs/Trigger).
+pub const FT_BIAS_SERVICE: &str = "/ft_sensor/bias";
+/// The controller's re-tare: lift off, tare, approach again (std_srvs/Trigger).
+pub const RETARE_SERVICE: &str = "/deformation_controller/retare";
+/// The controller's force goal (softcontact_msgs/action/PressForce).
+pub const PRESS_ACTION: &str = "/deformation_controller/press";
 
 /// The graph's topics that recordings carry and `softcontact record` subscribes to by default.
 pub fn recorded() -> [Described; 14] {

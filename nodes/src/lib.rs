@@ -14,6 +14,7 @@ pub mod identify;
 pub mod liveness;
 pub mod lwr_driver;
 pub mod messages;
+pub mod names;
 pub mod params;
 pub mod realtime;
 pub mod ros;

@@ -832,6 +832,7 @@ pub struct Params {
     pub hold_release_cycles: u64,
     pub hold_max_preload: f64,
     pub monitor_only: bool,
+    pub publish_joint_states: bool,
     pub exit_after_silence: f64,
     pub dead_after: f64,
     pub use_sim_time: bool,
@@ -852,6 +853,7 @@ impl Default for Params {
             hold_release_cycles: 500,
             hold_max_preload: 0.05,
             monitor_only: false,
+            publish_joint_states: false,
             exit_after_silence: 0.0,
             dead_after: 2.0,
             use_sim_time: false,
@@ -934,6 +936,10 @@ impl crate::params::NodeParams for Params {
         );
         d.within("hold_max_preload", self.hold_max_preload, (0.0, 0.1), "largest offset of the hold's set point from the held position, per joint: how much of a stale command's torque the hold carries on, and the farthest it moves a joint should the surface vanish [rad]");
         d.any("monitor_only", "do not ask the KRL program to start command mode (monitor only)");
+        d.any(
+            "publish_joint_states",
+            "also publish the joint positions on /joint_states as robot_state_publisher reads them (reliable, at the /tf rate)",
+        );
         d.within(
             "exit_after_silence",
             self.exit_after_silence,

@@ -137,6 +137,17 @@ impl DriverOutput {
     }
 }
 
+/// /joint_states for robot_state_publisher: the URDF's joint names and their measured positions.
+pub fn robot_joint_state(joint_names: &[String], q: &[f64; 7], stamp: Time) -> JointState {
+    JointState {
+        header: header("", stamp),
+        name: joint_names.to_vec(),
+        position: q.to_vec(),
+        velocity: vec![],
+        effort: vec![],
+    }
+}
+
 /// /ft_sensor/wrench and /ft_sensor/wrench_raw: a wrench in the sensing frame.
 pub fn wrench(w: &[f64; 6], stamp: Time) -> WrenchStamped {
     WrenchStamped {

@@ -21,6 +21,10 @@ pub struct ParamArgs {
     /// One parameter, `name:=value` (value in YAML syntax); wins over the files.
     #[arg(short = 'p', long = "param", value_name = "NAME:=VALUE")]
     pub overrides: Vec<String>,
+    /// A ROS 2 name remapping: `FROM:=TO` for a topic or service, `__node:=NAME`, `__ns:=/NS`; prefixed
+    /// `NODE:` for one node of a composed process (crate::names).
+    #[arg(short = 'r', long = "remap", value_name = "FROM:=TO")]
+    pub remaps: Vec<String>,
     /// Accepted for `ros2 run` compatibility; the options above follow it.
     #[arg(long = "ros-args", hide = true)]
     pub ros_args: bool,
@@ -43,7 +47,7 @@ impl ParamArgs {
                 }
             })
             .collect();
-        ParamArgs { files: self.files.clone(), overrides, ros_args: self.ros_args }
+        ParamArgs { files: self.files.clone(), overrides, remaps: self.remaps.clone(), ros_args: self.ros_args }
     }
 }
 
@@ -253,13 +257,17 @@ pub enum ParamError {
     Override(String),
     #[error("parameters of {node}: {reason}")]
     Invalid { node: String, reason: String },
+    #[error("{0}")]
+    Remap(String),
 }
 
-/// What a node declares on ROS: its parameters' values, flattened (`a.b` for nested ones), and their specs.
+/// What a node declares on ROS: its parameters' values, flattened (`a.b` for nested ones), their specs,
+/// and the names the command line gave it.
 #[derive(Debug, Clone, Default)]
 pub struct Declared {
     pub values: Vec<(String, ParameterValue)>,
     pub specs: Vec<Spec>,
+    pub remapping: crate::names::Remapping,
 }
 
 /// The largest parameter or model file read [bytes]: memory stays bounded whatever the path names.
@@ -325,6 +333,12 @@ pub fn check_nesting(text: &str) -> Result<(), String> {
 
 /// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
 pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
+    let remapping = crate::names::Remapping::parse(node, &args.remaps).map_err(ParamError::Remap)?;
+    let (params, declared) = load_parameters(node, args)?;
+    Ok((params, Declared { remapping, ..declared }))
+}
+
+fn load_parameters<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
     let mut merged = Mapping::new();
     for path in &args.files {
         let text = read_small(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
@@ -350,7 +364,7 @@ pub fn from_mapping<P: NodeParams>(node: &str, mapping: Mapping) -> Result<(P, D
     let mut values = Vec::new();
     flatten("", &value, &mut values);
     let specs = params.specs();
-    Ok((params, Declared { values, specs }))
+    Ok((params, Declared { values, specs, remapping: Default::default() }))
 }
 
 /// The `ros__parameters` of `node` in one file: the `/**` section, then the node's own (`node` or
@@ -547,7 +561,7 @@ mod tests {
         ParamArgs {
             files: files.iter().map(|f| f.0.clone()).collect(),
             overrides: overrides.iter().map(|s| s.to_string()).collect(),
-            ros_args: false,
+            ..Default::default()
         }
     }
 
@@ -567,7 +581,7 @@ mod tests {
 
     #[test]
     fn a_device_or_a_huge_file_is_refused_not_read() {
-        let args = |f: &str| ParamArgs { files: vec![f.into()], overrides: vec![], ros_args: false };
+        let args = |f: &str| ParamArgs { files: vec![f.into()], ..Default::default() };
         for path in ["/dev/zero", "/dev/urandom", "/"] {
             let err = load::<crate::deformation_controller::Params>("deformation_controller", &args(path));
             assert!(err.is_err(), "{path}");

@@ -45,7 +45,7 @@ pub fn node(name: &str) -> anyhow::Result<Node> {
 /// standard parameter services (list, get, get_types, describe; set answers that a node reads its
 /// parameters at start-up). The services run on a spinner thread of their own, never in a 1 kHz path.
 pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<Node> {
-    let Declared { values: parameters, specs } = declared;
+    let Declared { values: parameters, specs, remapping } = declared;
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?))?;
     let serve = !parameters.is_empty();
     // Declaring sets each value once through the validator: those are the only values it accepts.
@@ -78,7 +78,9 @@ pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<No
         }
         options = options.declare_parameter(&n, v);
     }
-    let mut node = context.new_node(NodeName::new("/", name)?, options)?;
+    let node_name = NodeName::new(remapping.namespace(), remapping.node_name(name))?;
+    let mut node = context.new_node(node_name, options)?;
+    REMAPPINGS.lock().unwrap_or_else(|e| e.into_inner()).push((node.fully_qualified_name(), remapping));
     if serve {
         let spinner = node.spinner()?;
         std::thread::Builder::new().name(format!("{name}-spinner")).spawn(move || {
@@ -159,14 +161,29 @@ pub fn latched_qos() -> QosProfile {
     reliable_qos().durability(Durability::TransientLocal).history(History::KeepLast { depth: 1 })
 }
 
+/// Each node's names as its command line set them (`-r`), by the node's fully qualified name.
+static REMAPPINGS: std::sync::Mutex<Vec<(String, crate::names::Remapping)>> = std::sync::Mutex::new(Vec::new());
+
+/// The graph name of the topic or service declared as `declared` (absolute, as in
+/// `softcontact_msgs::topics`) for `node`: its namespace and remapping rules applied (crate::names).
+pub fn resolve(node: &Node, declared: &str) -> anyhow::Result<Name> {
+    let fqn = node.fully_qualified_name();
+    let remappings = REMAPPINGS.lock().unwrap_or_else(|e| e.into_inner());
+    let resolved = match remappings.iter().rev().find(|(n, _)| *n == fqn) {
+        Some((_, remapping)) => remapping.resolve(RosoutRaw::base_name(node), declared),
+        None => declared.to_owned(),
+    };
+    let (ns, base) = resolved.rsplit_once('/').ok_or_else(|| anyhow::anyhow!("name `{resolved}` needs a /"))?;
+    Ok(Name::new(if ns.is_empty() { "/" } else { ns }, base)?)
+}
+
 fn topic<T: RosType>(
     node: &mut Node,
     path: &str,
     qos: &QosProfile,
 ) -> anyhow::Result<ros2_client::dds::rustdds::Topic> {
-    let (ns, base) = path.rsplit_once('/').ok_or_else(|| anyhow::anyhow!("topic `{path}` needs a /"))?;
-    let ns = if ns.is_empty() { "/" } else { ns };
-    Ok(node.create_topic(&Name::new(ns, base)?, T::type_name(), qos)?)
+    let name = resolve(node, path)?;
+    Ok(node.create_topic(&name, T::type_name(), qos)?)
 }
 
 /// A publisher of one of the graph's topics (`softcontact_msgs::topics`).

@@ -205,6 +205,79 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
     );
 }
 
+#[test]
+fn a_namespaced_driver_serves_its_urdf_latched_and_joint_states_as_robot_state_publisher_reads_them() {
+    use softcontact_msgs::std_msgs::String as Text;
+    if std::env::var(INNER).is_err() {
+        in_isolated_namespace(
+            "a_namespaced_driver_serves_its_urdf_latched_and_joint_states_as_robot_state_publisher_reads_them",
+        );
+        return;
+    }
+    let mut node = ros::node("tools_test").unwrap();
+    // robot_state_publisher's subscription: reliable, keep-last 10, volatile.
+    let rsp_qos = ros::reliable_qos().history(ros2_client::qos::History::KeepLast { depth: 10 });
+    let joint_states = ros::subscription_by_name::<JointState>(&mut node, "/cell2/joint_states", rsp_qos).unwrap();
+    let moved =
+        ros::subscription_by_name::<JointState>(&mut node, "/cell2/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let unmoved = ros::subscription_by_name::<JointState>(&mut node, "/lwr/joint_states", ros::sensor_qos()).unwrap();
+    let tf_qos = ros::reliable_qos().history(ros2_client::qos::History::KeepLast { depth: 100 });
+    let tf = ros::subscription_by_name::<TFMessage>(&mut node, "/tf", tf_qos).unwrap();
+    let args = [
+        "--ros-args",
+        "-r",
+        "__ns:=/cell2",
+        "-r",
+        "__node:=arm_driver",
+        "-p",
+        "publish_joint_states:=true",
+        "-p",
+        "exit_after_silence:=1",
+    ];
+    let _procs = Processes(vec![
+        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=none", "-p", "seconds:=6"]),
+        spawn(env!("CARGO_BIN_EXE_lwr_driver"), &args),
+    ]);
+    let (mut n_rsp, mut n_moved, mut n_unmoved, mut n_tf) = (0usize, 0usize, 0usize, 0usize);
+    let start = Instant::now();
+    let mut description: Option<String> = None;
+    // A late joiner, as robot_state_publisher started after the driver: transient local hands it the URDF.
+    let mut late: Option<ros2_client::Subscription<Text>> = None;
+    while start.elapsed() < Duration::from_secs(5) {
+        while let Ok(Some((js, _))) = joint_states.take() {
+            assert_eq!(js.name.len(), 7);
+            assert_eq!(js.position.len(), 7);
+            n_rsp += 1;
+        }
+        while let Ok(Some(_)) = moved.take() {
+            n_moved += 1;
+        }
+        while let Ok(Some(_)) = unmoved.take() {
+            n_unmoved += 1;
+        }
+        while let Ok(Some(_)) = tf.take() {
+            n_tf += 1;
+        }
+        if late.is_none() && start.elapsed() > Duration::from_secs(2) {
+            late = Some(ros::subscription_by_name(&mut node, "/cell2/robot_description", ros::latched_qos()).unwrap());
+        }
+        if let Some(sub) = &late {
+            while let Ok(Some((text, _))) = sub.take() {
+                description = Some(text.data);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    eprintln!(
+        "/cell2/joint_states {n_rsp}, /cell2/lwr/joint_states {n_moved}, /lwr/joint_states {n_unmoved}, /tf {n_tf}"
+    );
+    assert_eq!(description.as_deref(), Some(lwr4::URDF), "the URDF the driver uses, to a late joiner");
+    assert!((150..=520).contains(&n_rsp), "/joint_states at the /tf rate, reliable: {n_rsp} in 5 s");
+    assert!(n_moved > 1500, "the 1 kHz joint states under the namespace: {n_moved}");
+    assert_eq!(n_unmoved, 0, "nothing left under the name outside the namespace");
+    assert!(n_tf > 150, "/tf stays global: {n_tf}");
+}
+
 /// Calls a service until it answers (the server is discovered a little after the process starts).
 fn call<Req: ros2_client::Message + Clone + 'static, Resp: ros2_client::Message + 'static>(
     client: &ros2_client::Client<Req, Resp>,

@@ -24,7 +24,7 @@ use ros2_client::action::{
 };
 use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
 use ros2_client::service::{Client, Server};
-use ros2_client::{ActionTypeName, Name, Node, Publisher, RmwRequestId, ServiceTypeName, Subscription};
+use ros2_client::{ActionTypeName, Node, Publisher, RmwRequestId, ServiceTypeName, Subscription};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{
@@ -40,7 +40,7 @@ use crate::ros::{self, LogLevel};
 use crate::writer_pin::WriterPin;
 
 /// The action's name.
-pub const PRESS_ACTION: &str = "/deformation_controller/press";
+pub use softcontact_msgs::topics::PRESS_ACTION;
 /// Results kept for late result requests, and result requests kept waiting (the oldest go first).
 const KEPT_RESULTS: usize = 16;
 const WAITING_REQUESTS: usize = 16;
@@ -54,7 +54,7 @@ type PressServer = ActionServer<PressForceGoal, PressForceResult, PressForceFeed
 
 /// The action's server and types, with the QoS of ROS 2 actions (services reliable, status latched).
 pub fn press_server(node: &mut Node, mapping: &str) -> anyhow::Result<PressServer> {
-    let (ns, base) = PRESS_ACTION.rsplit_once('/').expect("a namespaced name");
+    let name = ros::resolve(node, PRESS_ACTION)?;
     let qos = ActionServerQosPolicies {
         goal_service: ros::reliable_qos(),
         result_service: ros::reliable_qos(),
@@ -64,7 +64,7 @@ pub fn press_server(node: &mut Node, mapping: &str) -> anyhow::Result<PressServe
     };
     Ok(node.create_action_server(
         ros::service_mapping(mapping)?,
-        &Name::new(ns, base)?,
+        &name,
         &ActionTypeName::new("softcontact_msgs", "PressForce"),
         qos,
     )?)
@@ -120,10 +120,10 @@ impl ControllerInterface {
         let mapping = ros::service_mapping(&p.service_mapping)?;
         let trigger = ServiceTypeName::new("std_srvs", "Trigger");
         let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
-        let retare_name = Name::new("/deformation_controller", "retare")?;
+        let retare_name = ros::resolve(&node, topics::RETARE_SERVICE)?;
         let retare_server =
             node.create_server::<TriggerRequest, TriggerResponse>(mapping, &retare_name, &trigger, q1, q2)?;
-        let bias_name = Name::new("/ft_sensor", "bias")?;
+        let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
         let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
         let bias_client =
             node.create_client::<TriggerRequest, TriggerResponse>(mapping, &bias_name, &trigger, q1, q2)?;

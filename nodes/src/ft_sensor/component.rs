@@ -7,7 +7,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use ros2_client::{Name, ServiceTypeName};
+use ros2_client::ServiceTypeName;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
@@ -80,7 +80,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
     let bias = node.create_server::<TriggerRequest, TriggerResponse>(
         ros::service_mapping(&p.service_mapping)?,
-        &Name::new("/ft_sensor", "bias")?,
+        &ros::resolve(&node, topics::FT_BIAS_SERVICE)?,
         &ServiceTypeName::new("std_srvs", "Trigger"),
         ros::reliable_qos(),
         ros::reliable_qos(),

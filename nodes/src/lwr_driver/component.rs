@@ -123,6 +123,11 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let ee_twist = ros::publisher(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
     let tf = ros::publisher(&mut node, &topics::TF, ros::tf_qos())?;
     let tf_static = ros::publisher(&mut node, &topics::TF_STATIC, ros::latched_qos())?;
+    let robot_description = ros::publisher(&mut node, &topics::ROBOT_DESCRIPTION, ros::latched_qos())?;
+    let robot_joint_states = match p.publish_joint_states {
+        true => Some(ros::publisher(&mut node, &topics::ROBOT_JOINT_STATES, ros::reliable_qos())?),
+        false => None,
+    };
     let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
     // Composed, the controller answers in process: nobody else may command the arm.
     let commands = match controller {
@@ -134,6 +139,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
     let model = lwr4::model();
     tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
+    robot_description.publish(softcontact_msgs::std_msgs::String { data: lwr4::URDF.to_owned() })?;
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     // This thread answers the KRC: it asks to run as soon as a measurement arrives.
     let scheduling = realtime::request_short_slice(realtime::FRI_SLICE).unwrap_or_else(|e| format!("unchanged ({e})"));
@@ -151,9 +157,10 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
     // /tf from its own thread at TF_RATE: a reliable write never runs on the 1 kHz loop.
-    let tool_in_world = Latest::<(Time, Isometry3<f64>)>::shared();
+    let arm_state = Latest::<ArmState>::shared();
     let tf_done = Arc::new(AtomicBool::new(false));
-    let tf_thread = spawn_tf(tf, tool_in_world.clone(), tf_done.clone())?;
+    let slow = SlowStreams { tf, joint_states: robot_joint_states.map(|p| (p, names.clone())) };
+    let tf_thread = spawn_slow_streams(slow, arm_state.clone(), tf_done.clone())?;
     let start = Instant::now();
     let mut command_watch = StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, p.dead_after);
     let mut commands_dead: Option<DeadStream> = None;
@@ -265,7 +272,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
                 ee_pose.publish(m.ee_pose).is_ok(),
                 ee_twist.publish(m.ee_twist).is_ok(),
             ];
-            tool_in_world.put((stamp, out.tool_pose));
+            arm_state.put(ArmState { stamp, tool_pose: out.tool_pose, q: out.q });
             publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
@@ -387,18 +394,37 @@ impl std::fmt::Display for CommandLag {
 
 /// Publishes the newest tool pose on /tf, at most `ros::TF_RATE` times a second, until `done`; returns
 /// the publish errors. A new pose only: a stalled loop publishes nothing new.
-fn spawn_tf(
+/// What the reliable streams of the slow thread are made of: the newest measurement's stamp, tool pose
+/// and joint positions.
+#[derive(Clone, Copy)]
+struct ArmState {
+    stamp: Time,
+    tool_pose: Isometry3<f64>,
+    q: [f64; 7],
+}
+
+/// The reliable streams for ROS 2's tools, written at TF_RATE: /tf, and /joint_states with its joint names.
+struct SlowStreams {
     tf: ros2_client::Publisher<softcontact_msgs::tf2_msgs::TFMessage>,
-    tool_in_world: Arc<Latest<(Time, Isometry3<f64>)>>,
+    joint_states: Option<(ros2_client::Publisher<softcontact_msgs::sensor_msgs::JointState>, Vec<String>)>,
+}
+
+fn spawn_slow_streams(
+    streams: SlowStreams,
+    arm: Arc<Latest<ArmState>>,
     done: Arc<AtomicBool>,
 ) -> std::io::Result<std::thread::JoinHandle<u64>> {
     std::thread::Builder::new().name("lwr_driver_tf".into()).spawn(move || {
         let period = Duration::from_secs_f64(1.0 / ros::TF_RATE);
         let (mut next, mut last, mut errors) = (Instant::now(), None, 0u64);
         while !done.load(Ordering::Relaxed) {
-            if let Some((stamp, pose)) = tool_in_world.get().filter(|(stamp, _)| Some(*stamp) != last) {
-                last = Some(stamp);
-                errors += u64::from(tf.publish(messages::tool_tf(&pose, stamp)).is_err());
+            if let Some(state) = arm.get().filter(|s| Some(s.stamp) != last) {
+                last = Some(state.stamp);
+                errors += u64::from(streams.tf.publish(messages::tool_tf(&state.tool_pose, state.stamp)).is_err());
+                if let Some((publisher, names)) = &streams.joint_states {
+                    let message = messages::robot_joint_state(names, &state.q, state.stamp);
+                    errors += u64::from(publisher.publish(message).is_err());
+                }
             }
             next += period;
             std::thread::sleep(next.saturating_duration_since(Instant::now()));
