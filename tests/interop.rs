@@ -1,0 +1,124 @@
+//! Other vendors' DDS as ROS 2 peers of the graph, each in its own graph run (`launch-scripts/sim.sh
+//! --isolated`: sim_arm, lwr_control, contact_estimator in a network namespace with only loopback), with the
+//! graph's `service_mapping` set for the peer's middleware. A peer built from that vendor's own tools
+//! (tests/peers/) subscribes to the 1 kHz streams and /tf as a sensor subscriber and tf2's listener do,
+//! lists and gets the controller's parameters and sends a force goal to the action, then prints what it
+//! saw; this test judges it. The peers are built by `tests/peers/<vendor>/build.sh` (its packages are
+//! installed by tools/test.sh).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use softcontact_msgs::softcontact_msgs::ControllerState;
+use softcontact_msgs::topics;
+use softcontact_nodes::ros;
+
+/// Set inside the namespace: the peer to run there.
+const PEER: &str = "SOFTCONTACT_INTEROP_PEER";
+/// The force goal the peers send [N] and its move's duration [s].
+const GOAL: (f64, f64) = (20.0, 1.0);
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+static ONE_GRAPH_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+#[test]
+fn a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal() {
+    if let Ok(peer) = std::env::var(PEER) {
+        return client(Path::new(&peer));
+    }
+    let test = "a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
+    let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer");
+    judge(&output);
+}
+
+/// Builds the vendor's peer, starts the graph with `mapping` and runs the peer inside; the peer's output.
+fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str) -> String {
+    let build = Command::new(root().join(format!("tests/peers/{vendor}/build.sh"))).output().expect("build.sh runs");
+    assert!(
+        build.status.success(),
+        "the {vendor} peer did not build (tools/test.sh installs its packages):\n{}",
+        String::from_utf8_lossy(&build.stderr)
+    );
+    let peer = root().join(format!("target/peers/{vendor}/{binary}"));
+    let _alone = ONE_GRAPH_AT_A_TIME.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let logs = std::env::temp_dir().join(format!("softcontact-interop-{vendor}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&logs);
+    std::fs::create_dir_all(&logs).unwrap();
+    let overlay = logs.join("service_mapping.yaml");
+    let section = |node: &str| format!("{node}:\n  ros__parameters:\n    service_mapping: {mapping}\n");
+    std::fs::write(&overlay, section("deformation_controller") + &section("ft_sensor")).unwrap();
+    let test = std::env::current_exe().unwrap();
+    let out = Command::new(root().join("launch-scripts/sim.sh"))
+        .args(["--isolated", "--params-file"])
+        .arg(&overlay)
+        .arg("--log-dir")
+        .arg(&logs)
+        .arg("--run")
+        .arg(&test)
+        .args(["--exact", test_name, "--nocapture", "--test-threads=1"])
+        .env(PEER, &peer)
+        .env("SOFTCONTACT_BIN", Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap())
+        .output()
+        .expect("sim.sh runs");
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    eprintln!("{text}");
+    assert!(out.status.success() && text.contains("1 passed"), "the graph run failed (logs in {})", logs.display());
+    let _ = std::fs::remove_dir_all(&logs);
+    text
+}
+
+/// Inside the namespace, with the graph up: once the hand touches the sponge, the peer runs.
+fn client(peer: &Path) {
+    let mut node = ros::node("interop_test").unwrap();
+    let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos()).unwrap();
+    let start = Instant::now();
+    let mut in_contact = false;
+    while !in_contact {
+        assert!(start.elapsed() < Duration::from_secs(30), "no contact after 30 s");
+        std::thread::sleep(Duration::from_millis(10));
+        while let Ok(Some((s, _))) = states.take() {
+            let s: ControllerState = s;
+            in_contact |= s.in_contact;
+        }
+    }
+    let out =
+        Command::new(peer).args([GOAL.0.to_string(), GOAL.1.to_string(), "3".into()]).output().expect("the peer runs");
+    // Between markers, for the outer test to judge.
+    println!("peer output >>>\n{}<<< peer output", String::from_utf8_lossy(&out.stdout));
+    eprintln!("{}", String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.success(), "the peer failed: {:?}", out.status);
+}
+
+/// The peer's `key value…` lines.
+fn judge(text: &str) {
+    let body = text.split("peer output >>>\n").nth(1).and_then(|t| t.split("<<< peer output").next()).unwrap_or("");
+    let line = |key: &str| -> Vec<String> {
+        let l =
+            body.lines().find(|l| l.starts_with(&format!("{key} "))).unwrap_or_else(|| panic!("no `{key}`: {body}"));
+        l.split_whitespace().skip(1).map(str::to_owned).collect()
+    };
+    let num = |v: &str| v.parse::<f64>().unwrap_or_else(|_| panic!("`{v}` is not a number: {body}"));
+    // 3 s of the 1 kHz streams, best effort; every sample decoded with the URDF's names and its frame.
+    let joints = line("joint_states");
+    assert!(num(&joints[0]) > 1500.0 && joints[0] == joints[1], "joint states: {joints:?}");
+    let wrenches = line("wrenches");
+    assert!(num(&wrenches[0]) > 1500.0 && wrenches[0] == wrenches[1], "wrenches: {wrenches:?}");
+    // /tf as tf2 reads it: reliable, 100 Hz, stamps rising, world → lwr_tool.
+    let tf = line("tf");
+    assert!((200.0..=330.0).contains(&num(&tf[0])) && tf[1..] == ["1", "world", "lwr_tool"], "/tf: {tf:?}");
+    // The controller's parameters: all of them listed; a double and a string got by name.
+    assert!(num(&line("parameters")[0]) >= 20.0, "parameters listed: {body}");
+    let get = line("get");
+    assert_eq!(get[..2], ["force_limit", "3"], "{get:?}");
+    assert!(num(&get[2]) > 0.0 && get[3..] == ["service_mapping", "4", "enhanced"], "{get:?}");
+    // The force goal: accepted, ended (status 4: succeeded), its result's error the force less the goal.
+    assert_eq!(line("goal"), ["accepted", "1"]);
+    let result = line("result");
+    let (status, force, error) = (num(&result[0]), num(&result[1]), num(&result[2]));
+    assert_eq!(status, 4.0, "result: {result:?}");
+    assert!(force > 1.0 && (error - (force - GOAL.0)).abs() < 2e-3, "result: {result:?}");
+}
