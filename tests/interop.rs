@@ -32,7 +32,17 @@ fn a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and
     }
     let test = "a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
     let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer");
-    judge(&output);
+    judge(&output, "enhanced");
+}
+
+#[test]
+fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal() {
+    if let Ok(peer) = std::env::var(PEER) {
+        return client(Path::new(&peer));
+    }
+    let test = "a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
+    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer");
+    judge(&output, "cyclone");
 }
 
 /// Builds the vendor's peer, starts the graph with `mapping` and runs the peer inside; the peer's output.
@@ -94,7 +104,7 @@ fn client(peer: &Path) {
 }
 
 /// The peer's `key value…` lines.
-fn judge(text: &str) {
+fn judge(text: &str, mapping: &str) {
     let body = text.split("peer output >>>\n").nth(1).and_then(|t| t.split("<<< peer output").next()).unwrap_or("");
     let line = |key: &str| -> Vec<String> {
         let l =
@@ -114,7 +124,7 @@ fn judge(text: &str) {
     assert!(num(&line("parameters")[0]) >= 20.0, "parameters listed: {body}");
     let get = line("get");
     assert_eq!(get[..2], ["force_limit", "3"], "{get:?}");
-    assert!(num(&get[2]) > 0.0 && get[3..] == ["service_mapping", "4", "enhanced"], "{get:?}");
+    assert!(num(&get[2]) > 0.0 && get[3..] == ["service_mapping", "4", mapping], "{get:?}");
     // The force goal: accepted, ended (status 4: succeeded), its result's error the force less the goal.
     assert_eq!(line("goal"), ["accepted", "1"]);
     let result = line("result");
