@@ -43,6 +43,18 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
     let test = "a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
     let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer");
     judge(&output, "cyclone");
+    // The type hash each writer announces (a Jazzy build): the REP-2016 hash of its type.
+    use softcontact_msgs::RosType;
+    for (topic, hash) in [
+        ("rt/lwr/joint_states", softcontact_msgs::sensor_msgs::JointState::type_hash()),
+        ("rt/tf", softcontact_msgs::tf2_msgs::TFMessage::type_hash()),
+        ("rt/ft_sensor/wrench", softcontact_msgs::geometry_msgs::WrenchStamped::type_hash()),
+    ] {
+        let announced = format!("user_data {topic} ");
+        let line =
+            output.lines().find(|l| l.starts_with(&announced)).unwrap_or_else(|| panic!("{topic}: no USER_DATA"));
+        assert!(line.ends_with(&format!("typehash={};", hash.unwrap())), "{line}");
+    }
 }
 
 /// Builds the vendor's peer, starts the graph with `mapping` and runs the peer inside; the peer's output.

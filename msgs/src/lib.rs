@@ -16,6 +16,11 @@ pub trait RosType {
     fn type_path() -> String {
         format!("{}/msg/{}", Self::PACKAGE, Self::NAME)
     }
+    /// The REP-2016 hash of this type (`RIHS01_…`), as ROS 2 Iron and later announce it; `None` for a
+    /// type without a .msg in msgs/std or msgs/msg.
+    fn type_hash() -> Option<String> {
+        type_hash::rihs01(&Self::type_path())
+    }
     /// The full definition text (`ros2msg`) recordings carry for this type.
     fn definition() -> &'static str {
         let path = Self::type_path();
@@ -24,6 +29,7 @@ pub trait RosType {
 }
 
 pub mod topics;
+pub mod type_hash;
 
 include!(concat!(env!("OUT_DIR"), "/definitions.rs"));
 

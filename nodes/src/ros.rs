@@ -211,7 +211,17 @@ pub fn publisher_by_name<T: RosType + Serialize>(
     qos: QosProfile,
 ) -> anyhow::Result<ros2_client::Publisher<T>> {
     let t = topic::<T>(node, path, &qos)?;
-    Ok(node.create_publisher(&t, Some(qos))?)
+    Ok(node.create_publisher(&t, Some(announced::<T>(qos)))?)
+}
+
+/// An endpoint's QoS with what ROS 2 Jazzy's rmw announces in its USER_DATA: `typehash=RIHS01_…;`, the
+/// type's REP-2016 hash, so that `ros2 topic info -v` shows it and a Jazzy peer checks it. The Humble
+/// build (feature `humble`) announces nothing, as Humble's rmw does.
+fn announced<T: RosType>(qos: QosProfile) -> QosProfile {
+    match T::type_hash() {
+        Some(hash) if cfg!(feature = "jazzy") => qos.user_data(format!("typehash={hash};")),
+        _ => qos,
+    }
 }
 
 /// A subscription to a topic named at run time (recording any topic).
@@ -221,7 +231,7 @@ pub fn subscription_by_name<T: RosType + DeserializeOwned + 'static>(
     qos: QosProfile,
 ) -> anyhow::Result<ros2_client::Subscription<T>> {
     let t = topic::<T>(node, path, &qos)?;
-    Ok(node.create_subscription(&t, Some(qos))?)
+    Ok(node.create_subscription(&t, Some(announced::<T>(qos)))?)
 }
 
 /// The service mapping of the peers' middleware: `cyclone` (rmw_cyclonedds), `enhanced` (Fast DDS,

@@ -150,6 +150,23 @@ int main(int argc, char **argv) {
     }
     dds_sleepfor(DDS_MSECS(1));
   }
+  /* What the graph's writers announce in discovery: the type hash in USER_DATA (ROS 2 Iron and later). */
+  dds_entity_t publications = dds_create_reader(pp, DDS_BUILTIN_TOPIC_DCPSPUBLICATION, NULL, NULL);
+  dds_sleepfor(DDS_MSECS(200));
+  void *announced[512] = {NULL};
+  dds_sample_info_t announced_info[512];
+  int n_announced = dds_read(publications, announced, announced_info, 512, 512);
+  for (int i = 0; i < n_announced; ++i) {
+    const dds_builtintopic_endpoint_t *e = announced[i];
+    if (!announced_info[i].valid_data || strcmp(e->type_name, "rcl_interfaces::msg::dds_::Log_") == 0) continue;
+    void *data = NULL;
+    size_t size = 0;
+    if (dds_qget_userdata(e->qos, &data, &size) && size > 0) {
+      printf("user_data %s %s %.*s\n", e->topic_name, e->type_name, (int)size, (const char *)data);
+    }
+    dds_free(data);
+  }
+  if (n_announced > 0) dds_return_loan(publications, announced, n_announced);
   printf("joint_states %ld %ld\n", n_joints, joints_named);
   printf("wrenches %ld %ld %.3f\n", n_wrenches, wrench_framed, last_fz);
   printf("tf %ld %d %s\n", n_tf, tf_rising ? 1 : 0, tf_frames);

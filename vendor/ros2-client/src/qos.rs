@@ -104,6 +104,9 @@ pub struct QosProfile {
   pub liveliness: Liveliness,
   /// Liveliness lease duration; `None` = infinite.
   pub liveliness_lease: Option<Duration>,
+  /// USER_DATA announced with the endpoint in discovery: ROS 2 Iron and later put the type's hash
+  /// there as `typehash=RIHS01_…;` (rmw_dds_common). `None`: none announced.
+  pub user_data: Option<String>,
 }
 
 impl QosProfile {
@@ -119,18 +122,23 @@ impl QosProfile {
       lifespan: None,
       liveliness: Liveliness::Automatic,
       liveliness_lease: None,
+      user_data: None,
     }
   }
 
   /// The default used for publishers: like [`Self::subscription_default`] but
   /// reliable, waiting 100 ms when the send window is full.
   pub const fn publisher_default() -> Self {
-    Self {
-      reliability: Reliability::Reliable {
-        when_full: WhenFull::DEFAULT,
-      },
-      ..Self::subscription_default()
-    }
+    Self::subscription_default().reliability(Reliability::Reliable {
+      when_full: WhenFull::DEFAULT,
+    })
+  }
+
+  /// Builder-style setter for the USER_DATA announced in discovery.
+  #[must_use]
+  pub fn user_data(mut self, user_data: impl Into<String>) -> Self {
+    self.user_data = Some(user_data.into());
+    self
   }
 
   /// Builder-style setter for reliability.
@@ -257,7 +265,7 @@ mod dds_conv {
 
   impl From<&QosProfile> for QosPolicies {
     fn from(p: &QosProfile) -> Self {
-      QosPolicyBuilder::new()
+      let policies = QosPolicyBuilder::new()
         .durability(match p.durability {
           Durability::Volatile => policy::Durability::Volatile,
           Durability::TransientLocal => policy::Durability::TransientLocal,
@@ -286,7 +294,11 @@ mod dds_conv {
         .lifespan(policy::Lifespan {
           duration: to_dds_duration(p.lifespan),
         })
-        .build()
+        .build();
+      match &p.user_data {
+        Some(data) => policies.with_user_data(data.as_bytes().to_vec()),
+        None => policies,
+      }
     }
   }
 
@@ -337,6 +349,7 @@ mod dds_conv {
         lifespan: q.lifespan().and_then(|ls| from_dds_duration(ls.duration)),
         liveliness,
         liveliness_lease,
+        user_data: q.user_data().and_then(|u| String::from_utf8(u.value).ok()),
       }
     }
   }
@@ -405,6 +418,7 @@ mod tests {
         lifespan: Some(Duration::from_secs(10)),
         liveliness: Liveliness::Automatic,
         liveliness_lease: Some(Duration::from_secs(2)),
+        user_data: Some("typehash=RIHS01_00;".into()),
       },
       QosProfile::publisher_default().reliability_reliable(WhenFull::Fail),
       QosProfile::publisher_default().reliability_reliable(WhenFull::Block),

@@ -210,6 +210,7 @@ impl QosPolicyBuilder {
       // (drop glue) which is incompatible with `const fn`, and the built-in QoS
       // policies never need it. Set it via `QosPolicies::with_data_representation`.
       data_representation: None,
+      user_data: None,
       #[cfg(feature = "security")]
       property: None,
     }
@@ -235,6 +236,7 @@ pub struct QosPolicies {
   pub(crate) resource_limits: Option<policy::ResourceLimits>,
   pub(crate) lifespan: Option<policy::Lifespan>,
   pub(crate) data_representation: Option<policy::DataRepresentation>,
+  pub(crate) user_data: Option<policy::UserData>,
   #[cfg(feature = "security")]
   pub(crate) property: Option<policy::Property>,
 }
@@ -333,6 +335,19 @@ impl QosPolicies {
     self
   }
 
+  pub fn user_data(&self) -> Option<policy::UserData> {
+    self.user_data.clone()
+  }
+
+  /// Set the USER_DATA QoS policy (DDS 2.2.3.1): bytes a DataWriter or DataReader announces in
+  /// discovery (ROS 2 Iron and later put `typehash=RIHS01_…;` there). Not part of
+  /// [`QosPolicyBuilder`] for the same reason as DATA_REPRESENTATION.
+  #[must_use]
+  pub fn with_user_data(mut self, value: Vec<u8>) -> Self {
+    self.user_data = Some(policy::UserData { value });
+    self
+  }
+
   #[cfg(feature = "security")]
   pub fn property(&self) -> Option<policy::Property> {
     self.property.clone()
@@ -362,6 +377,7 @@ impl QosPolicies {
         .data_representation
         .clone()
         .or(self.data_representation.clone()),
+      user_data: other.user_data.clone().or(self.user_data.clone()),
       #[cfg(feature = "security")]
       property: other.property.clone().or(self.property.clone()),
     }
@@ -566,6 +582,7 @@ impl QosPolicies {
       resource_limits,
       lifespan,
       data_representation,
+      user_data,
       #[cfg(feature = "security")]
         property: _, // TODO: properties to parameter list?
     } = self;
@@ -652,6 +669,7 @@ impl QosPolicies {
       data_representation,
       policy::DataRepresentation
     );
+    emit_option!(PID_USER_DATA, user_data, policy::UserData);
 
     Ok(pl)
   }
@@ -718,6 +736,7 @@ impl QosPolicies {
     let lifespan: Option<policy::Lifespan> = get_option!(PID_LIFESPAN);
     let data_representation: Option<policy::DataRepresentation> =
       get_option!(PID_DATA_REPRESENTATION);
+    let user_data: Option<policy::UserData> = get_option!(PID_USER_DATA);
 
     #[cfg(feature = "security")]
     let property: Option<policy::Property> = None; // TODO: Should also properties be read?
@@ -738,6 +757,7 @@ impl QosPolicies {
       resource_limits,
       lifespan,
       data_representation,
+      user_data,
       #[cfg(feature = "security")]
       property,
     })
@@ -971,6 +991,12 @@ pub mod policy {
         _ => vec![XCDR_DATA_REPRESENTATION],
       }
     }
+  }
+
+  /// DDS 2.2.3.1 USER_DATA: on the wire `PID_USER_DATA` (0x002c), a CDR `sequence<octet>`.
+  #[derive(Clone, Debug, PartialEq, Eq, Hash, Readable, Writable, Serialize, Deserialize)]
+  pub struct UserData {
+    pub value: Vec<u8>,
   }
 
   /// DDS 2.2.3.11 LIVELINESS
