@@ -49,6 +49,22 @@ impl ParamArgs {
             .collect();
         ParamArgs { files: self.files.clone(), overrides, remaps: self.remaps.clone(), ros_args: self.ros_args }
     }
+
+    /// Refuses a `NODE:` prefix, in `-p NODE:name:=value` or `-r NODE:FROM:=TO`, that names none of the
+    /// `nodes` a composed process hosts: a misspelt node would silently get nothing.
+    pub fn check_node_prefixes(&self, nodes: &[&str]) -> Result<(), ParamError> {
+        let prefix =
+            |arg: &str| arg.split_once(":=").and_then(|(left, _)| left.split_once(':')).map(|(n, _)| n.to_owned());
+        for (arg, what) in self.overrides.iter().map(|o| (o, "-p")).chain(self.remaps.iter().map(|r| (r, "-r"))) {
+            if let Some(node) = prefix(arg).filter(|n| !nodes.contains(&n.as_str())) {
+                let known = nodes.join(", ");
+                return Err(ParamError::Remap(format!(
+                    "{what} `{arg}`: no node `{node}` here (this process hosts {known})"
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A node's parameter struct: its defaults come from serde; each parameter is declared once, in
@@ -465,6 +481,24 @@ fn parameter_value(v: &Value) -> ParameterValue {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_node_prefix_naming_no_hosted_node_is_refused() {
+        let args = |o: &[&str], r: &[&str]| super::ParamArgs {
+            overrides: o.iter().map(|s| s.to_string()).collect(),
+            remaps: r.iter().map(|s| s.to_string()).collect(),
+            ..Default::default()
+        };
+        let hosted = ["lwr_driver", "ft_sensor"];
+        assert!(
+            args(&["ft_sensor:tare_after:=1", "dead_after:=1"], &["lwr_driver:__ns:=/a", "a:=b"])
+                .check_node_prefixes(&hosted)
+                .is_ok()
+        );
+        let e = args(&["ft_sensr:tare_after:=1"], &[]).check_node_prefixes(&hosted).unwrap_err().to_string();
+        assert!(e.contains("ft_sensr") && e.contains("lwr_driver, ft_sensor"), "{e}");
+        assert!(args(&[], &["driver:__ns:=/a"]).check_node_prefixes(&hosted).is_err());
+    }
+
     use super::*;
     use serde::Deserialize;
 

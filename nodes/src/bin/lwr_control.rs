@@ -31,6 +31,7 @@ struct Args {
 fn main() -> anyhow::Result<()> {
     ros::init_logging("lwr_control");
     let args = Args::parse().params;
+    args.check_node_prefixes(&["lwr_driver", "ft_sensor", "deformation_controller"])?;
     let (driver_params, driver_declared) =
         params::load::<lwr_driver::Params>("lwr_driver", &args.for_node("lwr_driver"))?;
     let (ft_params, ft_declared) = params::load::<ft_sensor::Params>("ft_sensor", &args.for_node("ft_sensor"))?;
