@@ -5,8 +5,8 @@
 use softcontact_msgs::topics;
 use std::time::{Duration, Instant};
 
+use ros2_client::ActionTypeName;
 use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalId, GoalStatusEnum};
-use ros2_client::{ActionTypeName, Name};
 use softcontact_msgs::softcontact_msgs::{PressForceFeedback, PressForceGoal, PressForceResult};
 use softcontact_nodes::deformation_controller::PRESS_ACTION;
 use softcontact_nodes::ros;
@@ -31,12 +31,16 @@ pub struct ForceArgs {
     /// Service mapping of the controller's middleware: cyclone, enhanced (Fast DDS) or basic.
     #[arg(long, default_value = "cyclone")]
     pub service_mapping: String,
+    /// The namespace the graph runs in (its nodes started with `-r __ns:=/NS`).
+    #[arg(long, default_value = "/")]
+    pub namespace: String,
 }
 
 pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.force.is_finite() && args.force >= 0.0, "the force must be a number ≥ 0");
     anyhow::ensure!(args.duration.is_finite() && args.duration > 0.0, "the duration must be positive");
-    let mut node = ros::node("softcontact_force")?;
+    let mut node = ros::node_in_namespace("softcontact_force", &args.namespace)?;
+    let action = ros::resolve(&node, PRESS_ACTION)?.to_string();
     let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
     let press = press_client(&mut node, &args.service_mapping)?;
     // The controller publishes its state while it commands the arm; without it (no contact yet, the KRC
@@ -63,10 +67,11 @@ pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
         }
     }
     let (accepted, goal_id) = sent.ok_or_else(|| match alive {
-        true => anyhow::anyhow!("no answer from {PRESS_ACTION} (--service-mapping of the controller?)"),
+        true => anyhow::anyhow!("no answer from {action} (--service-mapping of the controller?)"),
         false => anyhow::anyhow!(
-            "no answer from {PRESS_ACTION} and no /deformation_controller/state: is the controller running (ROS_DOMAIN_ID {})?",
-            node.domain_id()
+            "no answer from {action} and no controller state: is the controller running (ROS_DOMAIN_ID {}, --namespace {})?",
+            node.domain_id(),
+            args.namespace
         ),
     })?;
     if !accepted {
@@ -125,7 +130,7 @@ fn result(
 
 /// The client of the controller's force action, with the QoS of ROS 2 actions.
 fn press_client(node: &mut ros2_client::Node, mapping: &str) -> anyhow::Result<Press> {
-    let (ns, base) = PRESS_ACTION.rsplit_once('/').expect("a namespaced name");
+    let name = ros::resolve(node, PRESS_ACTION)?;
     let qos = ActionClientQosPolicies {
         goal_service: ros::reliable_qos(),
         result_service: ros::reliable_qos(),
@@ -135,7 +140,7 @@ fn press_client(node: &mut ros2_client::Node, mapping: &str) -> anyhow::Result<P
     };
     Ok(node.create_action_client(
         ros::service_mapping(mapping)?,
-        &Name::new(ns, base)?,
+        &name,
         &ActionTypeName::new("softcontact_msgs", "PressForce"),
         qos,
     )?)

@@ -833,6 +833,7 @@ pub struct Params {
     pub hold_max_preload: f64,
     pub monitor_only: bool,
     pub publish_joint_states: bool,
+    pub publish_tf: bool,
     pub exit_after_silence: f64,
     pub dead_after: f64,
     pub use_sim_time: bool,
@@ -854,6 +855,7 @@ impl Default for Params {
             hold_max_preload: 0.05,
             monitor_only: false,
             publish_joint_states: false,
+            publish_tf: true,
             exit_after_silence: 0.0,
             dead_after: 2.0,
             use_sim_time: false,
@@ -939,6 +941,10 @@ impl crate::params::NodeParams for Params {
         d.any(
             "publish_joint_states",
             "also publish the joint positions on /joint_states as robot_state_publisher reads them (reliable, at the /tf rate)",
+        );
+        d.any(
+            "publish_tf",
+            "publish world → lwr_tool on /tf and lwr_tool → ft_sensor on /tf_static; false when robot_state_publisher publishes the URDF's tree from /joint_states (both would give lwr_tool two parents)",
         );
         d.within(
             "exit_after_silence",

@@ -22,7 +22,7 @@ pub struct ParamArgs {
     #[arg(short = 'p', long = "param", value_name = "NAME:=VALUE")]
     pub overrides: Vec<String>,
     /// A ROS 2 name remapping: `FROM:=TO` for a topic or service, `__node:=NAME`, `__ns:=/NS`; prefixed
-    /// `NODE:` for one node of a composed process (crate::names).
+    /// `NODE:` for one node of lwr_control (docs/architecture.md, "Names").
     #[arg(short = 'r', long = "remap", value_name = "FROM:=TO")]
     pub remaps: Vec<String>,
     /// Accepted for `ros2 run` compatibility; the options above follow it.
@@ -55,6 +55,13 @@ impl ParamArgs {
     pub fn check_node_prefixes(&self, nodes: &[&str]) -> Result<(), ParamError> {
         let prefix =
             |arg: &str| arg.split_once(":=").and_then(|(left, _)| left.split_once(':')).map(|(n, _)| n.to_owned());
+        if let Some(arg) = self.remaps.iter().find(|r| r.starts_with("__node:=") || r.starts_with("__name:=")) {
+            let known = nodes.join(", ");
+            return Err(ParamError::Remap(format!(
+                "-r `{arg}` would give all of {known} one name: prefix it with the node, e.g. `{}:{arg}`",
+                nodes[0]
+            )));
+        }
         for (arg, what) in self.overrides.iter().map(|o| (o, "-p")).chain(self.remaps.iter().map(|r| (r, "-r"))) {
             if let Some(node) = prefix(arg).filter(|n| !nodes.contains(&n.as_str())) {
                 let known = nodes.join(", ");
@@ -350,15 +357,20 @@ pub fn check_nesting(text: &str) -> Result<(), String> {
 /// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
 pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
     let remapping = crate::names::Remapping::parse(node, &args.remaps).map_err(ParamError::Remap)?;
-    let (params, declared) = load_parameters(node, args)?;
-    Ok((params, Declared { remapping, ..declared }))
-}
-
-fn load_parameters<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
+    // A file's section for this node: `/**`, then its own name, then the name and the fully qualified
+    // name `-r __node` and `-r __ns` gave it (later ones win), as ROS 2 reads them.
+    let name = remapping.node_name(node);
+    let qualified = format!("{}/{name}", remapping.namespace().trim_end_matches('/'));
+    let mut keys = vec!["/**".to_string(), node.to_string(), format!("/{node}")];
+    for key in [name.to_string(), qualified] {
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
     let mut merged = Mapping::new();
     for path in &args.files {
         let text = read_small(path).map_err(|source| ParamError::Io { path: path.clone(), source })?;
-        merge(&mut merged, node_section(node, path, &text)?);
+        merge(&mut merged, node_section(&keys, path, &text)?);
     }
     for o in &args.overrides {
         let (name, value) = o.split_once(":=").ok_or_else(|| ParamError::Override(o.clone()))?;
@@ -366,7 +378,8 @@ fn load_parameters<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, De
         let value: Value = serde_yaml_ng::from_str(value).map_err(|_| ParamError::Override(o.clone()))?;
         set_path(&mut merged, name.trim(), value);
     }
-    from_mapping(node, merged)
+    let (params, declared) = from_mapping(node, merged)?;
+    Ok((params, Declared { remapping, ..declared }))
 }
 
 /// The typed parameters from a merged mapping, checked, with their flat list.
@@ -385,7 +398,7 @@ pub fn from_mapping<P: NodeParams>(node: &str, mapping: Mapping) -> Result<(P, D
 
 /// The `ros__parameters` of `node` in one file: the `/**` section, then the node's own (`node` or
 /// `/node`).
-fn node_section(node: &str, path: &Path, text: &str) -> Result<Mapping, ParamError> {
+fn node_section(keys: &[String], path: &Path, text: &str) -> Result<Mapping, ParamError> {
     let format = |reason: String| ParamError::Format { path: path.to_owned(), reason };
     let doc: Value = serde_yaml_ng::from_str(text).map_err(|e| format(e.to_string()))?;
     let top = match doc {
@@ -397,7 +410,7 @@ fn node_section(node: &str, path: &Path, text: &str) -> Result<Mapping, ParamErr
         return Err(format(format!("`{}` has no `ros__parameters` mapping", key.as_str().unwrap_or("?"))));
     }
     let mut out = Mapping::new();
-    for key in ["/**".to_string(), node.to_string(), format!("/{node}")] {
+    for key in keys {
         let Some(section) = top.get(key.as_str()) else { continue };
         match section.get("ros__parameters") {
             Some(Value::Mapping(m)) => merge(&mut out, m.clone()),
@@ -497,6 +510,8 @@ mod tests {
         let e = args(&["ft_sensr:tare_after:=1"], &[]).check_node_prefixes(&hosted).unwrap_err().to_string();
         assert!(e.contains("ft_sensr") && e.contains("lwr_driver, ft_sensor"), "{e}");
         assert!(args(&[], &["driver:__ns:=/a"]).check_node_prefixes(&hosted).is_err());
+        let e = args(&[], &["__node:=ctl"]).check_node_prefixes(&hosted).unwrap_err().to_string();
+        assert!(e.contains("lwr_driver:__node:=ctl"), "{e}");
     }
 
     use super::*;
@@ -562,6 +577,21 @@ mod tests {
             d.each("gains", &[self.gains.kp, self.gains.kd], (0.0, 10.0), "PD gains");
             d.any("joints", "positions");
         }
+    }
+
+    #[test]
+    fn a_renamed_or_namespaced_node_reads_the_sections_of_its_new_names_after_its_own() {
+        let f = file(
+            "/**:\n  ros__parameters: {rate: 1.0}\ndemo:\n  ros__parameters: {rate: 2.0, name: own}\n\
+             d2:\n  ros__parameters: {rate: 3.0}\n/cell2/d2:\n  ros__parameters: {name: qualified}\n",
+        );
+        let with =
+            |remaps: &[&str]| ParamArgs { remaps: remaps.iter().map(|r| r.to_string()).collect(), ..args(&[&f], &[]) };
+        let (p, _): (Demo, _) = load("demo", &with(&[])).unwrap();
+        assert_eq!((p.rate, p.name.as_str()), (2.0, "own"));
+        let (p, d): (Demo, _) = load("demo", &with(&["__node:=d2", "__ns:=/cell2"])).unwrap();
+        assert_eq!((p.rate, p.name.as_str()), (3.0, "qualified"));
+        assert_eq!((d.remapping.node_name("demo"), d.remapping.namespace()), ("d2", "/cell2"));
     }
 
     fn file(text: &str) -> tempfile_path::TempPath {

@@ -18,12 +18,12 @@ use softcontact_msgs::RosType;
 use crate::params::Declared;
 
 /// Sends the `log` records of the middleware (RustDDS, ros2-client) and of our crates to stderr, each
-/// line prefixed with `node`: warnings and errors by default, `RUST_LOG` (e.g. `info`, `rustdds=debug`)
-/// overrides. Without it a middleware failure is silent. Call it first in `main`; a second call is a no-op.
+/// line prefixed with `node`: warnings and errors by default (RustDDS's errors only: its warnings are
+/// routine discovery chatter), `RUST_LOG` (e.g. `info`, `rustdds=debug`) overrides. Without it a middleware failure is silent. Call it first in `main`; a second call is a no-op.
 pub fn init_logging(node: &str) {
     use std::io::Write;
     let node = node.to_owned();
-    let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn"))
+    let _ = env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn,rustdds=error"))
         .format(move |f, r| writeln!(f, "{node}: [{} {}] {}", r.level(), r.target(), r.args()))
         .try_init();
 }
@@ -39,6 +39,13 @@ fn domain_id() -> anyhow::Result<u16> {
 /// A node on the domain of `ROS_DOMAIN_ID` (0 if unset), logging to /rosout, without parameters.
 pub fn node(name: &str) -> anyhow::Result<Node> {
     node_with_parameters(name, Declared::default())
+}
+
+/// A tool's node whose topics and services are those of a graph started in `namespace` (`-r __ns:=/NS`).
+pub fn node_in_namespace(name: &str, namespace: &str) -> anyhow::Result<Node> {
+    let remapping =
+        crate::names::Remapping::parse(name, &[format!("__ns:={namespace}")]).map_err(anyhow::Error::msg)?;
+    node_with_parameters(name, Declared { remapping, ..Default::default() })
 }
 
 /// A node on the domain of `ROS_DOMAIN_ID` that declares `parameters` and serves them through the

@@ -32,13 +32,17 @@ fn main() -> anyhow::Result<()> {
     ros::init_logging("lwr_control");
     let args = Args::parse().params;
     args.check_node_prefixes(&["lwr_driver", "ft_sensor", "deformation_controller"])?;
+    // A parameter of one node given to all three is refused by the other two: say how to aim it.
+    const AIM: &str = "lwr_control hosts lwr_driver, ft_sensor and deformation_controller: a parameter of one of them is given as -p NODE:name:=value (docs/running.md)";
     let (driver_params, driver_declared) =
-        params::load::<lwr_driver::Params>("lwr_driver", &args.for_node("lwr_driver"))?;
-    let (ft_params, ft_declared) = params::load::<ft_sensor::Params>("ft_sensor", &args.for_node("ft_sensor"))?;
+        params::load::<lwr_driver::Params>("lwr_driver", &args.for_node("lwr_driver")).context(AIM)?;
+    let (ft_params, ft_declared) =
+        params::load::<ft_sensor::Params>("ft_sensor", &args.for_node("ft_sensor")).context(AIM)?;
     let (controller_params, controller_declared) = params::load::<deformation_controller::Params>(
         "deformation_controller",
         &args.for_node("deformation_controller"),
-    )?;
+    )
+    .context(AIM)?;
     let stop = ros::shutdown_flag()?;
 
     let forces = Latest::shared();

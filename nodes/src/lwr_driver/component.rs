@@ -138,7 +138,9 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
     let model = lwr4::model();
-    tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
+    if p.publish_tf {
+        tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
+    }
     robot_description.publish(softcontact_msgs::std_msgs::String { data: lwr4::URDF.to_owned() })?;
     let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     // This thread answers the KRC: it asks to run as soon as a measurement arrives.
@@ -159,7 +161,10 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     // /tf from its own thread at TF_RATE: a reliable write never runs on the 1 kHz loop.
     let arm_state = Latest::<ArmState>::shared();
     let tf_done = Arc::new(AtomicBool::new(false));
-    let slow = SlowStreams { tf, joint_states: robot_joint_states.map(|p| (p, names.clone())) };
+    let slow = SlowStreams {
+        tf: if p.publish_tf { Some(tf) } else { None },
+        joint_states: robot_joint_states.map(|p| (p, names.clone())),
+    };
     let tf_thread = spawn_slow_streams(slow, arm_state.clone(), tf_done.clone())?;
     let start = Instant::now();
     let mut command_watch = StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, p.dead_after);
@@ -403,9 +408,10 @@ struct ArmState {
     q: [f64; 7],
 }
 
-/// The reliable streams for ROS 2's tools, written at TF_RATE: /tf, and /joint_states with its joint names.
+/// The reliable streams for ROS 2's tools, written at TF_RATE: /tf (unless robot_state_publisher
+/// publishes the tree), and /joint_states with its joint names.
 struct SlowStreams {
-    tf: ros2_client::Publisher<softcontact_msgs::tf2_msgs::TFMessage>,
+    tf: Option<ros2_client::Publisher<softcontact_msgs::tf2_msgs::TFMessage>>,
     joint_states: Option<(ros2_client::Publisher<softcontact_msgs::sensor_msgs::JointState>, Vec<String>)>,
 }
 
@@ -420,7 +426,9 @@ fn spawn_slow_streams(
         while !done.load(Ordering::Relaxed) {
             if let Some(state) = arm.get().filter(|s| Some(s.stamp) != last) {
                 last = Some(state.stamp);
-                errors += u64::from(streams.tf.publish(messages::tool_tf(&state.tool_pose, state.stamp)).is_err());
+                if let Some(tf) = &streams.tf {
+                    errors += u64::from(tf.publish(messages::tool_tf(&state.tool_pose, state.stamp)).is_err());
+                }
                 if let Some((publisher, names)) = &streams.joint_states {
                     let message = messages::robot_joint_state(names, &state.q, state.stamp);
                     errors += u64::from(publisher.publish(message).is_err());
