@@ -43,12 +43,24 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
     let test = "a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
     let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer");
     judge(&output, "cyclone");
-    // The type hash each writer announces (a Jazzy build): the REP-2016 hash of its type.
-    use softcontact_msgs::RosType;
+    // The type hash each writer announces (a Jazzy build): the REP-2016 hash of its type — topics,
+    // services' replies (rmw_cyclonedds' `rr/…Reply`), the action's and ros2-client's own endpoints.
+    use softcontact_msgs::{RosType, topics, type_hash};
+    let action = type_hash::press_force().unwrap();
+    let builtin = |dds: &str| ros2_client::type_hashes::builtin(dds).map(str::to_owned);
+    let reply = |service: &str| format!("rr{service}Reply");
     for (topic, hash) in [
-        ("rt/lwr/joint_states", softcontact_msgs::sensor_msgs::JointState::type_hash()),
-        ("rt/tf", softcontact_msgs::tf2_msgs::TFMessage::type_hash()),
-        ("rt/ft_sensor/wrench", softcontact_msgs::geometry_msgs::WrenchStamped::type_hash()),
+        ("rt/lwr/joint_states".to_owned(), softcontact_msgs::sensor_msgs::JointState::type_hash()),
+        ("rt/tf".to_owned(), softcontact_msgs::tf2_msgs::TFMessage::type_hash()),
+        ("rt/ft_sensor/wrench".to_owned(), softcontact_msgs::geometry_msgs::WrenchStamped::type_hash()),
+        (reply(topics::RETARE_SERVICE), type_hash::trigger()),
+        (reply(topics::FT_BIAS_SERVICE), type_hash::trigger()),
+        (reply(&format!("{}/_action/send_goal", topics::PRESS_ACTION)), Some(action.send_goal)),
+        (reply(&format!("{}/_action/get_result", topics::PRESS_ACTION)), Some(action.get_result)),
+        (format!("rt{}/_action/feedback", topics::PRESS_ACTION), Some(action.feedback_message)),
+        (format!("rt{}/_action/status", topics::PRESS_ACTION), builtin("action_msgs::msg::dds_::GoalStatusArray_")),
+        (reply("/deformation_controller/get_parameters"), builtin("rcl_interfaces::srv::dds_::GetParameters_")),
+        ("ros_discovery_info".to_owned(), builtin("rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_")),
     ] {
         let announced = format!("user_data {topic} ");
         let line =

@@ -14,7 +14,7 @@ use softcontact_nodes::ros;
 #[derive(Debug, clap::Args)]
 pub struct ForceArgs {
     /// The normal force to reach [N] (a negative one is refused with a reason, not taken for an option).
-    #[arg(allow_negative_numbers = true, value_parser = crate::ranges::real(f64::MIN, f64::MAX, " N"))]
+    #[arg(allow_hyphen_values = true, value_parser = crate::ranges::real(-1e6, 1e6, " N"))]
     pub force: f64,
     /// Duration of the quintic move [s].
     #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = crate::ranges::real(-1e6, 1e6, " s"))]
@@ -131,12 +131,14 @@ fn result(
 /// The client of the controller's force action, with the QoS of ROS 2 actions.
 fn press_client(node: &mut ros2_client::Node, mapping: &str) -> anyhow::Result<Press> {
     let name = ros::resolve(node, PRESS_ACTION)?;
+    let [goal_service, result_service, cancel_service, feedback_subscription, status_subscription] =
+        ros::press_action_qos();
     let qos = ActionClientQosPolicies {
-        goal_service: ros::reliable_qos(),
-        result_service: ros::reliable_qos(),
-        cancel_service: ros::reliable_qos(),
-        feedback_subscription: ros::reliable_qos(),
-        status_subscription: ros::latched_qos(),
+        goal_service,
+        result_service,
+        cancel_service,
+        feedback_subscription,
+        status_subscription,
     };
     Ok(node.create_action_client(
         ros::service_mapping(mapping)?,

@@ -1,6 +1,8 @@
 //! The range of every numeric command-line argument, checked as clap parses it: a value that is not a
 //! finite number within its range is refused with the range in the error, before anything runs.
 
+use softcontact_nodes::params::Shown;
+
 /// A real number within [low, high] (`unit` is printed after the range).
 pub fn real(low: f64, high: f64, unit: &'static str) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
     move |s: &str| {
@@ -8,6 +10,7 @@ pub fn real(low: f64, high: f64, unit: &'static str) -> impl Fn(&str) -> Result<
         if v.is_finite() && v >= low && v <= high {
             Ok(v)
         } else {
+            let (low, high) = (Shown(low), Shown(high));
             Err(format!("must be a finite number within [{low}, {high}]{unit}"))
         }
     }
@@ -98,10 +101,13 @@ mod tests {
             "softcontact record --duration nan",
             "softcontact identify f.mcap --onset 1e-300",
             "softcontact force nan",
+            "softcontact force 1e300",
+            "softcontact force -inf",
         ] {
             let parsed = crate::Cli::try_parse_from(argv.split(' '));
             let error = parsed.err().unwrap_or_else(|| panic!("{argv} was taken")).to_string();
             assert!(error.contains("within") || error.contains("not a"), "{argv}: {error}");
+            assert!(error.len() < 400, "{argv}: the range printed in full: {error}");
         }
     }
 }

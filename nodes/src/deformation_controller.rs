@@ -121,6 +121,11 @@ pub enum ControlError {
     Dynamics(#[from] softcontact_dynamics::Error),
     #[error("no contact yet: force commands wait for the onset")]
     NoContact,
+    #[error(
+        "the driver applies no torque: the KRC is not commanding in joint impedance (the driver's \
+         /diagnostics names the mode it sees and what it waits for)"
+    )]
+    NoTorqueMode,
     #[error("retreating to re-tare the sensor: commands are refused until the hand is back on the surface")]
     Retaring,
     #[error("the LWR driver holds for a fault: {0}")]
@@ -152,8 +157,12 @@ pub enum ControlError {
 pub struct ControllerState {
     pub in_contact: bool,
     pub contact_lost: bool,
-    /// The measured force passed `force_limit`: the controller backed off and waits for a command.
+    /// The measured force passed `force_limit`, or the standing force command's bound
+    /// ([`OVER_COMMAND`]): the controller backed off and waits for a command.
     pub force_limited: bool,
+    /// The back-off was for the command's bound: the contact model in use asks for more deformation than
+    /// this surface takes at the commanded force.
+    pub over_command: bool,
     pub f_cmd: f64,
     pub z_cmd: f64,
     pub zdot_cmd: f64,
@@ -172,6 +181,19 @@ pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
 /// of the command, and at least [N]) before it backs off, whatever the model says of the surface.
 pub const MODEL_FORCE_EXCESS: f64 = 0.05;
 pub const MODEL_FORCE_EXCESS_MIN: f64 = 2.0;
+/// The least force [N] a contact model must give at `max_deformation` for the controller to take it.
+pub const MIN_MODEL_FORCE: f64 = 1.0;
+
+/// How far above a force command the measured force may go, whatever the model and its plan, before
+/// the controller backs off as it does from `force_limit` (a share of the command, and at least [N]).
+/// While the command's move runs, the bound is taken from the larger of the command and the force
+/// measured when it was given, so a step down is not a trip. A model that misplaces or softens the
+/// surface (a stranger's, or one identified on another material) would otherwise press on to the force
+/// limit. Above the transients of a fitting model's moves; the augmented model's hold keeps its own,
+/// tighter bound ([`MODEL_FORCE_EXCESS`]).
+pub const OVER_COMMAND: f64 = 0.25;
+pub const OVER_COMMAND_MIN: f64 = 5.0;
+
 /// The time constant over which the arm's normal force is smoothed before it confirms a sensor
 /// correction [s].
 pub const ARM_FORCE_SMOOTHING: f64 = 0.05;
@@ -301,6 +323,32 @@ struct ForceHold {
     z: Option<f64>,
 }
 
+/// The standing force command's bound ([`OVER_COMMAND`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct CommandBound {
+    /// The command [N], and the larger of it and the force measured when it was given.
+    force: f64,
+    during_move: f64,
+    /// When the command's move ends [s, controller time].
+    move_end: f64,
+}
+
+impl CommandBound {
+    fn at(&self, time: f64) -> f64 {
+        let force = if time < self.move_end { self.during_move } else { self.force };
+        force * (1.0 + OVER_COMMAND) + OVER_COMMAND_MIN
+    }
+}
+
+/// Why the guard backed off: it backs off again if the force is still `above` when the back-off ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Trip {
+    above: f64,
+    /// The force the back-off aims for, if the surface's force grew linearly with the deformation.
+    towards: f64,
+    over_command: bool,
+}
+
 /// What the controller takes as a contact model under `config`: a plausible one
 /// ([`ContactModel::plausible`]) with exponents in [`EXPONENT_RANGE`] and a named sensor bias within
 /// [`MAX_SENSOR_CORRECTION`] of `max_force`.
@@ -312,6 +360,15 @@ fn plausible_for(model: &ContactModel, config: &ControllerConfig) -> Result<(), 
     let e = model.exponents;
     if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
         return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
+    }
+    // A surface the law cannot press measurably within max_deformation: its inverse asks for depths
+    // the limits refuse, or for a deformation the hand cannot hold against the sensor's noise.
+    let deepest = model.force(config.limits.max_deformation, 0.0).unwrap_or(f64::NAN);
+    if !(deepest >= MIN_MODEL_FORCE) {
+        return implausible(format!(
+            "{deepest} N at max_deformation ({} m): softer than a surface pressed with {MIN_MODEL_FORCE} N",
+            config.limits.max_deformation
+        ));
     }
     let bias: f64 =
         model.effects.iter().map(|e| if let Effect::SensorBias { offset } = *e { offset } else { 0.0 }).sum();
@@ -348,6 +405,9 @@ pub struct DeformationController {
     f_cmd: f64,
     contact_lost: bool,
     force_limited: bool,
+    /// The force command's bound, while one stands; what the last back-off was for.
+    command_bound: Option<CommandBound>,
+    trip: Option<Trip>,
     /// When the back-off in progress began [s]: the guard waits for it to end before it looks again.
     /// Any new plan ends that wait (a command right after a back-off once pushed on, unguarded).
     back_off_since: Option<f64>,
@@ -397,6 +457,8 @@ impl DeformationController {
             f_cmd: 0.0,
             contact_lost: false,
             force_limited: false,
+            command_bound: None,
+            trip: None,
             back_off_since: None,
             force_trend: None,
             session: None,
@@ -464,7 +526,14 @@ impl DeformationController {
         }
         self.set_contact_model(model, offset)?;
         match retarget {
-            Some(duration) if self.f_cmd > 0.0 && !self.contact_lost => self.command_force(self.f_cmd, duration),
+            Some(duration) if self.f_cmd > 0.0 && !self.contact_lost => {
+                // A re-plan is no new command: the bound stays the standing command's (measured anew
+                // at each re-plan, a stream of ever softer models would raise it step by step).
+                let standing = self.command_bound;
+                self.command_force(self.f_cmd, duration)?;
+                self.command_bound = standing.or(self.command_bound);
+                Ok(())
+            }
             _ => Ok(()),
         }
     }
@@ -562,6 +631,8 @@ impl DeformationController {
         self.f_cmd = 0.0;
         self.contact_lost = false;
         self.force_limited = false;
+        self.command_bound = None;
+        self.trip = None;
         self.back_off_since = None;
         self.force_trend = None;
         self.limiter.reset();
@@ -583,6 +654,7 @@ impl DeformationController {
         self.plan = Some((Trajectory::new(segments).ok_or(ControlError::Duration)?, self.time));
         self.back_off_since = None;
         self.force_hold = None;
+        self.command_bound = None;
         Ok(())
     }
 
@@ -614,6 +686,23 @@ impl DeformationController {
         };
         let z = limits.check_deformation(z).unwrap_or(last);
         self.force_hold = Some(ForceHold { z: Some(z), ..hold });
+    }
+
+    /// Whether the force `guarded` (rising at `rate` [N/s]) trips the guard now: past `force_limit`
+    /// (looking `FORCE_LOOKAHEAD` ahead), past the standing command's bound, or — when a back-off has
+    /// ended — still past what tripped it. Nothing while a back-off runs.
+    fn over_force(&self, guarded: f64, rate: f64) -> Option<Trip> {
+        let ahead = guarded + rate.max(0.0) * FORCE_LOOKAHEAD;
+        if self.force_limited {
+            let backing_off = self.back_off_since.is_some_and(|t| self.time - t < BACK_OFF_DURATION);
+            return self.trip.filter(|t| !backing_off && if t.over_command { guarded } else { ahead } > t.above);
+        }
+        let max_force = self.config.limits.max_force;
+        if ahead > self.config.limits.force_limit {
+            return Some(Trip { above: max_force, towards: max_force, over_command: false });
+        }
+        let bound = self.command_bound?.at(self.time);
+        (guarded > bound).then_some(Trip { above: bound, towards: self.f_cmd, over_command: true })
     }
 
     /// Holds deformation z from now on.
@@ -685,9 +774,13 @@ impl DeformationController {
         if self.inverse.is_some() {
             self.force_hold = Some(ForceHold { since: self.time + duration, z: None });
         }
+        let measured = self.force_trend.map_or(0.0, |(f, _)| f);
+        self.command_bound =
+            Some(CommandBound { force, during_move: force.max(measured), move_end: self.time + duration });
         self.f_cmd = force;
         self.contact_lost = false;
         self.force_limited = false;
+        self.trip = None;
         Ok(())
     }
 
@@ -883,23 +976,21 @@ impl DeformationController {
                     self.hold(state.z)?;
                     self.f_cmd = 0.0;
                 }
-                // Too much force, whatever the plan: back off from where the hand is, at once, to the
-                // deformation that gives `max_force` if the force grew linearly (less on a stiffening
+                // Too much force, whatever the plan — past `force_limit`, or past the standing force
+                // command's bound: back off from where the hand is, at once, to the deformation that
+                // gives `max_force` (or the command) if the force grew linearly (less on a stiffening
                 // surface), and wait there for a new command.
                 // The deformation is taken from the measured onset, not the model's surface: a model
                 // that misplaces the surface must not make the back-off too short. If the force is still
-                // above max_force when the back-off ends, back off again.
-                let limits = &self.config.limits;
-                let backing_off =
-                    self.force_limited && self.back_off_since.is_some_and(|t| self.time - t < BACK_OFF_DURATION);
-                let too_much = if self.force_limited { limits.max_force } else { limits.force_limit };
+                // above what tripped the guard when the back-off ends, back off again.
                 // (The reading as it is and without a named sensor bias or drift: whichever is larger.)
                 let guarded = normal_force.max(surface_force);
-                if guarded + force_rate.max(0.0) * FORCE_LOOKAHEAD > too_much && !backing_off {
+                if let Some(trip) = self.over_force(guarded, force_rate) {
                     self.force_limited = true;
+                    self.trip = Some(trip);
                     self.f_cmd = 0.0;
                     let from_onset = along - level;
-                    let lift = from_onset.max(0.0) * (1.0 - limits.max_force / guarded);
+                    let lift = from_onset.max(0.0) * (1.0 - trip.towards / guarded);
                     let from = Reference { position: state.z, ..Default::default() };
                     let to = Reference { position: state.z - lift.max(BACK_OFF_MIN_STEP), ..Default::default() };
                     let back_off = Quintic::new(from, to, BACK_OFF_DURATION).ok_or(ControlError::Duration)?;
@@ -918,6 +1009,7 @@ impl DeformationController {
         state.f_cmd = self.f_cmd;
         state.contact_lost = self.contact_lost;
         state.force_limited = self.force_limited;
+        state.over_command = self.force_limited && self.trip.is_some_and(|t| t.over_command);
 
         // Across the surface and in orientation: hold the start, moved by `command_across` (its reference
         // is ⊥ n; velocity and acceleration feed forward, so a move does not lag).
@@ -1106,10 +1198,10 @@ impl crate::params::NodeParams for Params {
             self.normal,
             "contact direction n in the world (the hand compresses the surface along it)",
         );
-        d.above(
+        d.within(
             "deformation_frequency",
             self.deformation_frequency,
-            (0.0, 200.0),
+            (5.0, 200.0),
             "natural frequency of the critically damped deformation law (k_z = ω², k_ż = 2ω) [rad/s]",
         );
         d.each("lateral_gains", &self.lateral_gains, (0.0, 1e4), "PD gains across the surface [1/s², 1/s]");
@@ -1541,6 +1633,89 @@ mod tests {
     }
 
     #[test]
+    fn a_stranger_model_a_quarter_as_stiff_as_the_surface_is_stopped_at_the_commands_bound_not_the_force_limit() {
+        // Through this model 80 N lies where the sponge pushes 320 N, past the 300 N force limit.
+        let mut model = softcontact_sim::sponge();
+        model.stiffness *= 0.25;
+        let mut cell = surface_cell(softcontact_sim::sponge(), model);
+        cell.controller.law.command_force(80.0, 2.0).unwrap();
+        let bound = 80.0 * (1.0 + OVER_COMMAND) + OVER_COMMAND_MIN;
+        let (mut peak, mut tripped): (f64, bool) = (0.0, false);
+        for _ in 0..4000 {
+            let tick = cell.cycle().unwrap().unwrap();
+            assert!(tick.refused.is_none(), "{tick:?}");
+            tripped |= tick.controller.over_command;
+            assert!(!tick.controller.force_limited || tick.controller.over_command, "{tick:?}");
+            peak = peak.max(cell.sim.contact().normal_force);
+        }
+        let end = cell.sim.contact().normal_force;
+        eprintln!("a model 4× too soft: peak {peak:.1} N, {end:.1} N after the back-off (bound {bound} N)");
+        assert!(tripped, "the command's bound never tripped");
+        assert!(peak < bound + 10.0, "peak {peak} N over the bound of {bound} N");
+        // Backed off to about the command (less: the sponge stiffens), and waits there.
+        assert!(end < 80.0 && end > 20.0, "{end} N after the back-off");
+        assert_eq!(cell.controller.law.f_cmd, 0.0);
+    }
+
+    #[test]
+    fn re_planned_through_ever_softer_models_the_standing_commands_bound_holds() {
+        // The continuous update policy: each model re-plans the standing 80 N command. A stream of
+        // models 8 % softer each (a stranger's, or an estimator gone wrong) once ratcheted the force up
+        // to the force limit, each re-plan taking the bound from the force measured then.
+        let mut cell = surface_cell(softcontact_sim::sponge(), softcontact_sim::sponge());
+        let (end, _, _) = press_and_hold(&mut cell, 80.0, 0.5);
+        assert!((end - 80.0).abs() < 5.0, "{end} N");
+        let surface = SimConfig::above_surface(softcontact_sim::sponge(), 43).surface.unwrap().point;
+        let bound = 80.0 * (1.0 + OVER_COMMAND) + OVER_COMMAND_MIN;
+        let (mut model, mut peak, mut tripped) = (softcontact_sim::sponge(), 0.0f64, false);
+        // Models at 20 Hz, 8 % softer every 0.7 s: each re-plan starts before the last one ends.
+        for _ in 0..20 {
+            model.stiffness *= 0.92;
+            for _ in 0..14 {
+                if cell.controller.law.f_cmd > 0.0 {
+                    cell.controller.law.adopt_estimate(model.clone(), &surface, Some(0.5)).unwrap();
+                }
+                for _ in 0..50 {
+                    let tick = cell.cycle().unwrap().unwrap();
+                    tripped |= tick.controller.over_command;
+                    peak = peak.max(cell.sim.contact().normal_force);
+                }
+            }
+        }
+        eprintln!("80 N re-planned at 20 Hz through models 8 % softer every 0.7 s: peak {peak:.1} N (bound {bound} N)");
+        assert!(tripped && peak < bound + 5.0, "peak {peak} N, bound {bound} N, tripped {tripped}");
+    }
+
+    #[test]
+    fn re_planned_through_a_model_a_quarter_as_stiff_the_standing_commands_bound_holds() {
+        let mut cell = surface_cell(softcontact_sim::sponge(), softcontact_sim::sponge());
+        press_and_hold(&mut cell, 80.0, 0.5);
+        let surface = SimConfig::above_surface(softcontact_sim::sponge(), 43).surface.unwrap().point;
+        let mut soft = softcontact_sim::sponge();
+        soft.stiffness *= 0.25;
+        cell.controller.law.adopt_estimate(soft, &surface, Some(0.5)).unwrap();
+        let bound = 80.0 * (1.0 + OVER_COMMAND) + OVER_COMMAND_MIN;
+        let mut peak: f64 = 0.0;
+        for _ in 0..2000 {
+            cell.cycle().unwrap().unwrap();
+            peak = peak.max(cell.sim.contact().normal_force);
+        }
+        eprintln!("80 N re-planned through a model ¼ as stiff in 0.5 s: peak {peak:.1} N (bound {bound} N)");
+        assert!(peak < bound + 10.0, "peak {peak} N, bound {bound} N");
+    }
+
+    #[test]
+    fn a_step_down_from_a_press_with_a_fitting_model_is_not_taken_for_an_excess() {
+        let mut cell = surface_cell(softcontact_sim::sponge(), softcontact_sim::sponge());
+        let (end, low, high) = press_and_hold(&mut cell, 150.0, 1.0);
+        assert!((end - 150.0).abs() < 15.0 && low > 135.0 && high < 165.0, "{end} N, {low}–{high} N");
+        // The move down starts at 150 N, far above 1.25 × 20 + 5 N.
+        let (end, low, high) = press_and_hold(&mut cell, 20.0, 1.0);
+        eprintln!("150 → 20 N: {end:.1} N at the end of the move, {low:.1}–{high:.1} N over the hold");
+        assert!((end - 20.0).abs() < 5.0 && (low - 20.0).abs() < 5.0 && (high - 20.0).abs() < 5.0);
+    }
+
+    #[test]
     fn through_the_augmented_model_the_force_is_reached_and_kept_on_a_relaxing_surface() {
         // The surface's own model, effects and all: the move ends at the force and the hold keeps it
         // while the 0.15 s and 5 s branches fade.
@@ -1602,6 +1777,8 @@ mod tests {
             with(Effect::SensorDrift { rate: 10.0 }),
             with(Effect::ViscoelasticRelaxation { stiffness: 1e300, time_constant: 0.15 }),
             ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 1e300, 0.0).unwrap(),
+            // Too soft to press: 6e-302 N at max_deformation.
+            ContactModel::new(softcontact_contact::Kind::KelvinVoigt, 1e-300, 0.0).unwrap(),
             with(Effect::ViscoelasticRelaxation { stiffness: 1e3, time_constant: 1e-300 }),
             with(Effect::Hysteresis { fraction: 0.999999, velocity_scale: 0.05 }),
             with(Effect::Hysteresis { fraction: 0.5, velocity_scale: 1e-300 }),

@@ -35,8 +35,9 @@
 //! Who and when (the safety contract, docs/safety.md):
 //! - One KRC: the first sender (or the configured `krc_address`) is pinned by IP address; datagrams
 //!   from any other address, or from port 0, are refused and counted as strangers, unanswered. A new
-//!   source port of the pinned address, or measurements resuming after `new_session_after` of silence,
-//!   start a new KRC session: the command, the hold and the velocity history are forgotten (a latched
+//!   source port of the pinned address once the old one has been silent for `new_session_after` (while
+//!   the KRC talks, another port is a stranger), or measurements resuming after that silence, start a
+//!   new KRC session: the command, the hold and the velocity history are forgotten (a latched
 //!   fault is not), and only a command answering a joint state of the new session is applied.
 //! - The watchdog counts answered measurements (each one sample time), whatever their sequence
 //!   numbers say: an out-of-order counter is counted, never a way to keep an old command alive.

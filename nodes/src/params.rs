@@ -126,6 +126,20 @@ pub enum Range {
     Rule(String),
 }
 
+/// A number as errors show it: in exponent form when very large or small (1e300, not 301 digits).
+pub struct Shown(pub f64);
+
+impl std::fmt::Display for Shown {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let size = self.0.abs();
+        if size.is_finite() && (size >= 1e9 || (size > 0.0 && size < 1e-6)) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
+}
+
 impl std::fmt::Display for Range {
     /// As the errors, the parameter files and docs/parameters.md say it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -198,7 +212,7 @@ impl Declarations {
     pub fn above(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
         let ok = value.is_finite() && value > lo && value <= hi;
         let range = Range::Number { lo, hi, above: true };
-        let fault = (!ok).then(|| format!("{name} must be {range}, not {value}"));
+        let fault = (!ok).then(|| format!("{name} must be {range}, not {}", Shown(value)));
         self.declare(name, description, range, fault);
     }
 
@@ -206,7 +220,7 @@ impl Declarations {
     pub fn within(&mut self, name: &str, value: f64, (lo, hi): (f64, f64), description: &str) {
         let ok = value.is_finite() && (lo..=hi).contains(&value);
         let range = Range::Number { lo, hi, above: false };
-        let fault = (!ok).then(|| format!("{name} must be {range}, not {value}"));
+        let fault = (!ok).then(|| format!("{name} must be {range}, not {}", Shown(value)));
         self.declare(name, description, range, fault);
     }
 
@@ -214,7 +228,8 @@ impl Declarations {
     pub fn each(&mut self, name: &str, values: &[f64], (lo, hi): (f64, f64), description: &str) {
         let ok = values.iter().all(|x| x.is_finite() && (lo..=hi).contains(x));
         let range = Range::Each { lo, hi };
-        let fault = (!ok).then(|| format!("{name} must be {range}, not {values:?}"));
+        let shown: Vec<String> = values.iter().map(|v| Shown(*v).to_string()).collect();
+        let fault = (!ok).then(|| format!("{name} must be {range}, not [{}]", shown.join(", ")));
         self.declare(name, description, range, fault);
     }
 
@@ -750,6 +765,8 @@ mod tests {
         // Out of its range, a value is refused with the declared range.
         let mut p = crate::deformation_controller::Params { force_limit: 600.0, ..Default::default() };
         assert_eq!(p.validate().unwrap_err(), "force_limit must be > 250, ≤ 500, not 600");
+        p.force_limit = 1e300;
+        assert_eq!(p.validate().unwrap_err(), "force_limit must be > 250, ≤ 500, not 1e300");
         p.force_limit = f64::NAN;
         assert!(p.validate().is_err());
     }

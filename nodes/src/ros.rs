@@ -10,10 +10,12 @@ use ros2_client::qos::{Durability, History, WhenFull};
 pub use ros2_client::ros2::LogLevel;
 use ros2_client::{
     Context, ContextOptions, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile, RosoutRaw, ServiceMapping,
+    ServiceTypeName,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use softcontact_msgs::RosType;
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
 use crate::params::Declared;
 
@@ -225,10 +227,50 @@ pub fn publisher_by_name<T: RosType + Serialize>(
 /// type's REP-2016 hash, so that `ros2 topic info -v` shows it and a Jazzy peer checks it. The Humble
 /// build (feature `humble`) announces nothing, as Humble's rmw does.
 fn announced<T: RosType>(qos: QosProfile) -> QosProfile {
-    match T::type_hash() {
+    with_type_hash(qos, T::type_hash())
+}
+
+fn with_type_hash(qos: QosProfile, hash: Option<String>) -> QosProfile {
+    match hash {
         Some(hash) if cfg!(feature = "jazzy") => qos.user_data(format!("typehash={hash};")),
         _ => qos,
     }
+}
+
+/// A std_srvs/Trigger server at `name` (reliable, its type hash announced on both endpoints).
+pub fn trigger_server(
+    node: &mut Node,
+    mapping: ServiceMapping,
+    name: &Name,
+) -> anyhow::Result<ros2_client::service::Server<TriggerRequest, TriggerResponse>> {
+    let qos = with_type_hash(reliable_qos(), softcontact_msgs::type_hash::trigger());
+    Ok(node.create_server(mapping, name, &ServiceTypeName::new("std_srvs", "Trigger"), qos.clone(), qos)?)
+}
+
+/// A std_srvs/Trigger client of `name` (reliable, its type hash announced on both endpoints).
+pub fn trigger_client(
+    node: &mut Node,
+    mapping: ServiceMapping,
+    name: &Name,
+) -> anyhow::Result<ros2_client::service::Client<TriggerRequest, TriggerResponse>> {
+    let qos = with_type_hash(reliable_qos(), softcontact_msgs::type_hash::trigger());
+    Ok(node.create_client(mapping, name, &ServiceTypeName::new("std_srvs", "Trigger"), qos.clone(), qos)?)
+}
+
+/// The QoS of ROS 2 actions (services reliable, status latched) for the force action's endpoints, each
+/// announcing its type hash: `(goal, result, cancel, feedback, status)`. (The cancel service's and
+/// the status topic's action_msgs hashes ros2-client adds itself.)
+pub fn press_action_qos() -> [QosProfile; 5] {
+    let hashes = softcontact_msgs::type_hash::press_force();
+    let hash =
+        |pick: fn(&softcontact_msgs::type_hash::ActionHashes) -> &String| hashes.as_ref().map(|h| pick(h).clone());
+    [
+        with_type_hash(reliable_qos(), hash(|h| &h.send_goal)),
+        with_type_hash(reliable_qos(), hash(|h| &h.get_result)),
+        reliable_qos(),
+        with_type_hash(reliable_qos(), hash(|h| &h.feedback_message)),
+        latched_qos(),
+    ]
 }
 
 /// A subscription to a topic named at run time (recording any topic).

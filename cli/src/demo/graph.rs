@@ -19,10 +19,9 @@ use std::collections::VecDeque;
 
 use anyhow::Context;
 use nalgebra::Vector3;
-use ros2_client::{Name, ServiceTypeName};
 use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
-use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use softcontact_msgs::std_srvs::TriggerRequest;
 use softcontact_nodes::geometry::ContactGeometry;
 use softcontact_nodes::{deformation_controller, ros};
 
@@ -294,13 +293,8 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
     let mut recorder =
         Recorder(Some(Command::new(&exe).arg("record").arg("-o").arg(&recording).stdout(Stdio::null()).spawn()?));
     let mut c = Client::new()?;
-    let retare = c.node.create_client::<TriggerRequest, TriggerResponse>(
-        ros::service_mapping("cyclone")?,
-        &Name::new("/deformation_controller", "retare")?,
-        &ServiceTypeName::new("std_srvs", "Trigger"),
-        ros::reliable_qos(),
-        ros::reliable_qos(),
-    )?;
+    let retare_name = ros::resolve(&c.node, softcontact_msgs::topics::RETARE_SERVICE)?;
+    let retare = ros::trigger_client(&mut c.node, ros::service_mapping("cyclone")?, &retare_name)?;
     c.wait_for_contact(spec.name)?;
     eprintln!("{}: identification pushes at 1 Hz", spec.name);
     let (high, low) = spec.push_forces;

@@ -24,7 +24,7 @@ use ros2_client::action::{
 };
 use ros2_client::action_msgs::{CancelGoalResponseEnum, GoalStatus, GoalStatusArray};
 use ros2_client::service::{Client, Server};
-use ros2_client::{ActionTypeName, Node, Publisher, RmwRequestId, ServiceTypeName, Subscription};
+use ros2_client::{ActionTypeName, Node, Publisher, RmwRequestId, Subscription};
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{
@@ -55,13 +55,9 @@ type PressServer = ActionServer<PressForceGoal, PressForceResult, PressForceFeed
 /// The action's server and types, with the QoS of ROS 2 actions (services reliable, status latched).
 pub fn press_server(node: &mut Node, mapping: &str) -> anyhow::Result<PressServer> {
     let name = ros::resolve(node, PRESS_ACTION)?;
-    let qos = ActionServerQosPolicies {
-        goal_service: ros::reliable_qos(),
-        result_service: ros::reliable_qos(),
-        cancel_service: ros::reliable_qos(),
-        feedback_publisher: ros::reliable_qos(),
-        status_publisher: ros::latched_qos(),
-    };
+    let [goal_service, result_service, cancel_service, feedback_publisher, status_publisher] = ros::press_action_qos();
+    let qos =
+        ActionServerQosPolicies { goal_service, result_service, cancel_service, feedback_publisher, status_publisher };
     Ok(node.create_action_server(
         ros::service_mapping(mapping)?,
         &name,
@@ -118,15 +114,10 @@ impl ControllerInterface {
         let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
         let server = press_server(&mut node, &p.service_mapping)?;
         let mapping = ros::service_mapping(&p.service_mapping)?;
-        let trigger = ServiceTypeName::new("std_srvs", "Trigger");
-        let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
         let retare_name = ros::resolve(&node, topics::RETARE_SERVICE)?;
-        let retare_server =
-            node.create_server::<TriggerRequest, TriggerResponse>(mapping, &retare_name, &trigger, q1, q2)?;
+        let retare_server = ros::trigger_server(&mut node, mapping, &retare_name)?;
         let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
-        let (q1, q2) = (ros::reliable_qos(), ros::reliable_qos());
-        let bias_client =
-            node.create_client::<TriggerRequest, TriggerResponse>(mapping, &bias_name, &trigger, q1, q2)?;
+        let bias_client = ros::trigger_client(&mut node, mapping, &bias_name)?;
         let torque_pub = ros::publisher(&mut node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?;
         let state_pub = ros::publisher(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
         Ok(Self {
@@ -160,6 +151,9 @@ impl ControllerInterface {
         while let Ok(Some((m, info))) = self.models.take() {
             let writers = || self.models.get_publisher_count(&self.node);
             if let Err(e) = self.model_writer.admit(info.publisher_gid().to_bytes16(), writers) {
+                // Counted with the implausible ones: the exit line's "models refused" is every model not
+                // adopted.
+                control.counters.models_refused += 1;
                 if self.model_writer.refused.is_power_of_two() {
                     self.log(LogLevel::Warn, &format!("model refused {} times so far: {e}", self.model_writer.refused));
                 }

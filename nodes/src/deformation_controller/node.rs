@@ -27,7 +27,9 @@ use nalgebra::{Matrix3, Matrix6xX, Vector3};
 use softcontact_contact::ContactModel;
 use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 
-use super::{ControlError, ControllerState, DeformationController, ModelUpdate, Params};
+use super::{
+    ControlError, ControllerState, DeformationController, ModelUpdate, OVER_COMMAND, OVER_COMMAND_MIN, Params,
+};
 use crate::geometry::ContactGeometry;
 use crate::ros::LogLevel;
 
@@ -220,6 +222,9 @@ pub struct ControllerNode {
     jacobian: Matrix6xX<f64>,
     /// The session of the newest joint state.
     last_session: Option<u32>,
+    /// Whether the newest joint state said the driver applies torques (the KRC commanding in joint
+    /// impedance).
+    torque_mode: bool,
     ticks_in_session: u64,
     pending_model: Option<(ContactModel, Vector3<f64>)>,
     retare: Option<Retare>,
@@ -257,6 +262,7 @@ impl ControllerNode {
             ),
             jacobian,
             last_session: None,
+            torque_mode: false,
             ticks_in_session: 0,
             pending_model: None,
             retare: None,
@@ -337,6 +343,9 @@ impl ControllerNode {
         }
         if self.retare.is_some() {
             return (None, Err(ControlError::Retaring));
+        }
+        if !self.torque_mode {
+            return (None, Err(ControlError::NoTorqueMode));
         }
         // Out of contact a model waits: its surface is placed relative to the onset, not yet found.
         let waiting = if self.law.contact_level().is_some() { self.pending_model.take() } else { None };
@@ -425,6 +434,7 @@ impl ControllerNode {
             self.retare = None;
         }
         self.last_session = js.session;
+        self.torque_mode = js.commanding;
         if !self.law.follow_session(js.session, js.commanding, silence) {
             return Step { restarted, ..nothing(Silence::NotCommanding, ControllerState::default()) };
         }
@@ -563,6 +573,14 @@ impl Press {
             Reply::Torque(_) => {
                 if step.state.contact_lost {
                     return PressProgress::Aborted("contact lost during the move".into());
+                }
+                if step.state.over_command {
+                    return PressProgress::Aborted(format!(
+                        "the measured force passed the command's bound ({} % over it, {} N at least): the contact \
+                         model in use asks for more deformation than this surface takes; the controller backed off",
+                        OVER_COMMAND * 100.0,
+                        OVER_COMMAND_MIN
+                    ));
                 }
                 if step.state.force_limited {
                     return PressProgress::Aborted("the force limit was passed: the controller backed off".into());
@@ -1289,5 +1307,17 @@ mod tests {
         let step = node.on_joint_state(&sample(t + 3e-3, 2), t + 3e-3);
         assert!(!step.restarted && matches!(step.reply, Reply::Torque(_)), "{step:?}");
         assert_eq!(node.counters.restarts, 2);
+    }
+
+    #[test]
+    fn a_force_command_while_the_krc_is_not_in_torque_mode_is_refused_saying_so() {
+        let mut node = node();
+        let t = run_free(&mut node, 1.0, 1);
+        let position_control = JointSample { commanding: false, ..sample(t + 1e-3, 1) };
+        node.on_joint_state(&position_control, t + 1e-3);
+        assert_eq!(node.on_force_command(20.0, 1.0).1, Err(ControlError::NoTorqueMode));
+        feed(&mut node, t + 2e-3, Vector3::zeros(), t + 2e-3);
+        node.on_joint_state(&sample(t + 2e-3, 1), t + 2e-3);
+        assert_eq!(node.on_force_command(20.0, 1.0).1, Err(ControlError::NoContact));
     }
 }

@@ -7,10 +7,9 @@ use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use ros2_client::ServiceTypeName;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
-use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
+use softcontact_msgs::std_srvs::TriggerResponse;
 
 use super::{FtConfig, FtSensorNode, Params, StartupTare, calibration};
 use crate::contact_estimator::ForcePairing;
@@ -78,13 +77,8 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         Some(_) => None,
     };
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
-    let bias = node.create_server::<TriggerRequest, TriggerResponse>(
-        ros::service_mapping(&p.service_mapping)?,
-        &ros::resolve(&node, topics::FT_BIAS_SERVICE)?,
-        &ServiceTypeName::new("std_srvs", "Trigger"),
-        ros::reliable_qos(),
-        ros::reliable_qos(),
-    )?;
+    let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
+    let bias = ros::trigger_server(&mut node, ros::service_mapping(&p.service_mapping)?, &bias_name)?;
 
     let tool_to_sensor = ForcePairing::urdf_tool_to_sensor()?;
 

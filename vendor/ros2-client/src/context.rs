@@ -246,7 +246,7 @@ impl Context {
   where
     M: Serialize,
   {
-    let dds_qos = qos.map(QosPolicies::from);
+    let dds_qos = crate::type_hashes::announced(topic.get_type().name(), qos.map(QosPolicies::from));
     let datawriter = self
       .get_ros_default_publisher()
       .create_datawriter_no_key(topic, dds_qos)?;
@@ -262,7 +262,7 @@ impl Context {
   where
     M: 'static,
   {
-    let dds_qos = qos.map(QosPolicies::from);
+    let dds_qos = crate::type_hashes::announced(topic.get_type().name(), qos.map(QosPolicies::from));
     let datareader = self
       .get_ros_default_subscriber()
       .create_simple_datareader_no_key(topic, dds_qos)?;
@@ -277,7 +277,7 @@ impl Context {
   where
     SA: SerializerAdapter<M>,
   {
-    let dds_qos = qos.map(QosPolicies::from);
+    let dds_qos = crate::type_hashes::announced(topic.get_type().name(), qos.map(QosPolicies::from));
     Ok(
       self
         .get_ros_default_publisher()
@@ -294,7 +294,7 @@ impl Context {
     M: 'static,
     DA: 'static + DeserializerAdapter<M>,
   {
-    let dds_qos = qos.map(QosPolicies::from);
+    let dds_qos = crate::type_hashes::announced(topic.get_type().name(), qos.map(QosPolicies::from));
     Ok(
       self
         .get_ros_default_subscriber()
@@ -376,7 +376,10 @@ impl ContextInner {
     )?;
 
     let node_writer =
-      Publisher::new(ros_default_publisher.create_datawriter_no_key(&ros_discovery_topic, None)?);
+      Publisher::new(ros_default_publisher.create_datawriter_no_key(
+        &ros_discovery_topic,
+        crate::type_hashes::announced(ros_discovery_topic.get_type().name(), None),
+      )?);
 
     Ok(ContextInner {
       local_nodes: HashMap::new(),

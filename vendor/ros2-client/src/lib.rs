@@ -156,6 +156,9 @@ pub mod rosout;
 pub mod service;
 
 pub mod steady_time;
+
+/// REP-2016 type hashes of ros2-client's own endpoints
+pub mod type_hashes;
 mod wide_string;
 
 #[doc(hidden)]
