@@ -176,7 +176,13 @@ fn print_report(report: &Report, name: &str) {
         }
     }
     for a in &report.ambiguous {
-        println!("ambiguous between {} and {}: {}", a.between[0], a.between[1], a.would_separate);
+        match &a.named {
+            Some(named) => println!(
+                "{named} named over {}, which this record fits nearly as well: {}",
+                a.between[1], a.would_separate
+            ),
+            None => println!("ambiguous between {} and {}: {}", a.between[0], a.between[1], a.would_separate),
+        }
     }
     println!("\n{:<12}{:>12}{:>12}", "phase", "RMS before", "RMS after");
     for (phase, rms) in &report.phases {

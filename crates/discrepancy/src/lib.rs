@@ -84,8 +84,9 @@ pub struct Series {
 /// Relaxation branches (time constants) the workflow names at most.
 pub const MAX_RELAXATION_BRANCHES: usize = 2;
 
-/// The time constants a relaxation branch may have, in samples (from five sample periods)...
-pub const RELAXATION_MIN_SAMPLES: f64 = 5.0;
+/// The time constants a relaxation branch may have, in samples (from two sample periods: over one, a
+/// branch is a step, not a decay)...
+pub const RELAXATION_MIN_SAMPLES: f64 = 2.0;
 /// ...and as a share of the record's duration (a slower branch is a drift within the record).
 pub const RELAXATION_MAX_SHARE: f64 = 0.5;
 
@@ -690,6 +691,10 @@ pub struct NamedEffect {
 pub struct Ambiguity {
     pub between: [String; 2],
     pub would_separate: String,
+    /// Where both are forms of the surface's own dissipation (a loop that a relaxation and a hysteresis
+    /// both close), the loop is a finding and its form is not: the one that predicts held-out data best
+    /// is named and carried in the model, the other reported here. `None`: nothing of the two is named.
+    pub named: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -906,8 +911,13 @@ impl Family {
         }
     }
 
+    /// A form of the surface's own dissipation: what closes a loading–unloading loop.
+    fn dissipative(self) -> bool {
+        matches!(self, Family::Relaxation | Family::QuasiLinear | Family::Hysteresis)
+    }
+
     /// Whether the series can show this family at all: crosstalk needs tangential force, the tool's
-    /// weight a change of orientation.
+    /// weight a change of orientation, a moving surface zero contact that recurs or lasts.
     fn observable(self, d: &Data) -> bool {
         let varies = |x: &[f64]| x.iter().any(|v| *v != x[0]);
         let spread = |keep: &dyn Fn(usize) -> bool| {
@@ -934,6 +944,18 @@ impl Family {
             Family::Adhesion => {
                 let first = d.s.z.iter().position(|&z| z > 0.0);
                 first.is_some_and(|i| d.s.z[i..].iter().any(|&z| z <= 0.0))
+            }
+            // A surface zero moving linearly in time: within one short contact its only trace is an offset
+            // between loading and unloading, which the surface's own loop makes too. A candidate where
+            // contact recurs (two contacts or more) or lasts (half the record), so that the zero is seen
+            // moving across contact.
+            Family::OffsetDrift => {
+                let contacts =
+                    d.s.z
+                        .chunk_by(|a, b| (*a > 0.0) == (*b > 0.0))
+                        .filter(|run| run[0] > 0.0 && run.len() >= MIN_CONTACT_SAMPLES);
+                let in_contact = d.s.z.iter().filter(|&&z| z > 0.0).count();
+                contacts.count() >= 2 || 2 * in_contact >= d.s.z.len()
             }
             _ => true,
         }
@@ -1737,6 +1759,8 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     let mut stages: Vec<(f64, f64)> = vec![]; // (rms_before, rms_after) per accepted family
     let mut rate_se = 0.0;
     let mut ambiguous = vec![];
+    let mut forms: Vec<Ambiguity> = vec![];
+    let mut form_rivals: Vec<Ambiguity> = vec![];
     // At the floor in contact and out of it: a linear law's refitted surface absorbs a sensor offset in
     // contact, and only free space shows it.
     let at_floor = |g: &Gap, sigma: f64| g.rms.max(g.free_rms) <= o.floor_margin * sigma && g.lag1 <= o.max_white_rho;
@@ -1821,6 +1845,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
             let gain = |c: &Cand| cur.cv_mse - c.fit.cv_mse;
             let contribution =
                 |c: &Cand| -> Vec<f64> { c.fit.pred.iter().zip(&cur.pred).map(|(a, b)| a - b).collect() };
+            let mut found = vec![];
             for &(f, _) in &best.fams {
                 let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
                 let cm = contribution(mine);
@@ -1829,14 +1854,21 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
                         && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
                         && gain(rival) * o.rival_ratio >= gain(mine)
                     {
-                        let r = rival.fams[0].0;
-                        if !ambiguous.iter().any(|a: &Ambiguity| a.between.contains(&r.id().to_string())) {
-                            ambiguous.push(Ambiguity {
-                                between: [f.id().to_string(), r.id().to_string()],
-                                would_separate: would_separate(f, r),
-                            });
-                        }
+                        found.push((f, rival.fams[0].0));
                     }
+                }
+            }
+            // Rivals that are both forms of the surface's dissipation: the best is named, the other reported.
+            let forms_only = found.iter().all(|&(f, r)| f.dissipative() && r.dissipative());
+            for &(f, r) in &found {
+                let known = |a: &Ambiguity| a.between.contains(&r.id().to_string());
+                if !ambiguous.iter().any(known) && !forms.iter().any(known) {
+                    let entry = Ambiguity {
+                        between: [f.id().to_string(), r.id().to_string()],
+                        would_separate: would_separate(f, r),
+                        named: forms_only.then(|| f.id().to_string()),
+                    };
+                    if forms_only { forms.push(entry) } else { ambiguous.push(entry) }
                 }
             }
             if !ambiguous.is_empty() {
@@ -2030,6 +2062,18 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         shift_se = 0.0;
         cur_gap = base_gap.clone();
     }
+    // A form named over its rival is reported while the model still carries it (in either relaxation form).
+    for mut a in forms {
+        let named = order.iter().map(|x| x.0).find(|&f| {
+            a.named.as_deref() == Some(f.id())
+                || (f == Family::QuasiLinear && a.named.as_deref() == Some(Family::Relaxation.id()))
+        });
+        if let Some(f) = named {
+            a.named = Some(f.id().to_string());
+            a.between[0] = f.id().to_string();
+            form_rivals.push(a);
+        }
+    }
     let remaining = if !ambiguous.is_empty() {
         Remaining::Ambiguous
     } else if at_floor(&cur_gap, sigma) {
@@ -2075,7 +2119,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         noise_source: noise.source,
         level_noise: noise.level_sigma,
         effects,
-        ambiguous,
+        ambiguous: ambiguous.into_iter().chain(form_rivals).collect(),
         phases: phases_out,
         final_rms: cur_gap.rms,
         locate: {

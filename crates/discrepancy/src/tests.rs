@@ -744,3 +744,58 @@ fn a_quasi_linear_relaxation_written_by_hand_is_named_in_its_own_form() {
     within("fraction", param(&r, "quasi_linear_relaxation", "fraction"), g, 0.05);
     within("τ", param(&r, "quasi_linear_relaxation", "time_constant_s"), tau, 0.05);
 }
+
+/// One indentation as an AFM makes it: a slow approach from free space, a faster retract back to it, no
+/// hold. The surface's own loop, a Maxwell branch written here (exact for a deformation changing linearly
+/// over each step), under coloured (AR(1)) noise. Within one short contact a moving surface zero leaves
+/// the same offset between loading and unloading; it is no candidate there, and the loop is named as
+/// the surface's dissipation, not reported ambiguous with it.
+#[test]
+fn the_loop_of_a_single_indentation_is_named_as_dissipation_not_a_moving_surface_zero() {
+    let (fs, k_branch, tau) = (400.0, 1.5e3, 0.05);
+    let m = af();
+    let dt = 1.0 / fs;
+    let (mut t, mut z) = (vec![], vec![]);
+    let mut push = |to: f64, speed: f64| {
+        let from = z.last().copied().unwrap_or(-2e-3);
+        let n = ((to - from) / speed).abs().max(1.0) * fs;
+        for i in 1..=n.round() as usize {
+            t.push(t.len() as f64 * dt);
+            z.push(from + (to - from) * i as f64 / n.round());
+        }
+    };
+    push(-2e-3, 1e-3); // one second in free space
+    push(4e-3, 2e-3);
+    push(-2e-3, 6e-3);
+    push(-2e-3 - 1e-9, 1e-9);
+    let zd: Vec<f64> =
+        (0..z.len()).map(|i| (z[(i + 1).min(z.len() - 1)] - z[i.saturating_sub(1)]) / (2.0 * dt)).collect();
+    let mut rng = SmallRng::seed_from_u64(71);
+    let white = Normal::new(0.0, 0.02 * (1.0 - 0.8f64 * 0.8).sqrt()).unwrap();
+    let (mut branch, mut coloured) = (0.0, 0.0);
+    let decay = (-dt / tau).exp();
+    let f: Vec<f64> = (0..z.len())
+        .map(|i| {
+            branch = if z[i] > 0.0 && i > 0 {
+                branch * decay + k_branch * (z[i] - z[i - 1]) / dt * tau * (1.0 - decay)
+            } else {
+                0.0
+            };
+            coloured = 0.8 * coloured + white.sample(&mut rng);
+            let surface = if z[i] > 0.0 { (m.force(z[i], zd[i]).unwrap() + branch).max(0.0) } else { 0.0 };
+            surface + coloured
+        })
+        .collect();
+    let s = Series::new(t, z, zd, f).unwrap();
+    let folds = Options::default().folds;
+    assert!(!crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&s, folds, &m)));
+    let pushes = record(&m, Exc::new(200.0), 0.02, 72, &|_, _, _| 0.0);
+    assert!(crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&pushes, folds, &m)));
+    let r = analyse(&s, &m, &Options::default()).unwrap();
+    show("one indentation with a loop", &r);
+    let dissipation = ["hysteresis", "quasi_linear_relaxation", "viscoelastic_relaxation"];
+    assert!(!r.effects.is_empty() && ids(&r).iter().all(|id| dissipation.contains(id)), "named {:?}", ids(&r));
+    assert_ne!(r.remaining, Remaining::Ambiguous, "{:?}", r.ambiguous);
+    assert!(r.ambiguous.iter().all(|a| a.named.is_some()), "{:?}", r.ambiguous);
+    assert!(shrink_ratio(&r) >= 0.6, "shrink {} of the ideal", shrink_ratio(&r));
+}
