@@ -230,6 +230,9 @@ fn print_report(report: &Report, name: &str) {
         );
     }
     println!("\nfinal RMS {}; remaining: {remaining}", n(report.final_rms));
+    if let Some(left) = what_is_left(report) {
+        println!("what is left is mostly in {left}");
+    }
 }
 
 /// What the workflow found in one recording, with what it was found from.
@@ -458,4 +461,24 @@ pub fn print_path_report(r: &PathReport) {
         r.creep_mean * 1e6,
         r.creep_sd * 1e6
     );
+}
+
+/// Where an unexplained residual is and its shape there ("unloading, around t = 32.7 s (60 % of it): an
+/// offset: …"); `None` unless `remaining` is unexplained.
+pub fn what_is_left(report: &Report) -> Option<String> {
+    let w = report.locate.largest.filter(|_| report.remaining == softcontact_discrepancy::Remaining::Unexplained)?;
+    let shape = if w.mean.abs() >= 0.7 * w.rms {
+        format!(
+            "an offset: the measured force {} the model by {} on average",
+            if w.mean > 0.0 { "above" } else { "below" },
+            si(w.mean.abs(), "N")
+        )
+    } else {
+        format!("a wave about the model (mean {}, RMS {})", si(w.mean, "N"), si(w.rms, "N"))
+    };
+    let phase = match w.phase {
+        softcontact_discrepancy::Phase::Free => "free space".to_string(),
+        p => format!("{p:?}").to_lowercase(),
+    };
+    Some(format!("{phase}, around t = {:.3} s ({:.0} % of it): {shape}", w.around_s, 100.0 * w.share))
 }

@@ -61,6 +61,8 @@ pub struct Outcome {
     pub beyond_expected: Vec<String>,
     /// The gap's shrink as a share of what the noise allows, (baseline − final) / (baseline − noise σ).
     pub shrink_of_ideal: f64,
+    /// Where an unexplained residual is and its shape there.
+    pub what_is_left: Option<String>,
 }
 
 /// Runs every curve of `dir/expected.json`.
@@ -118,6 +120,7 @@ pub fn run(dir: &Path) -> anyhow::Result<Vec<Outcome>> {
                         .cloned()
                         .collect(),
                     shrink_of_ideal: (r.baseline.rms - r.final_rms) / (r.baseline.rms - r.noise_floor),
+                    what_is_left: discrepancy_cmd::what_is_left(r),
                     answer: Ok(names.into_iter().collect()),
                     remaining: Some(remaining.into()),
                     baseline_rms: r.baseline.rms,
@@ -135,6 +138,7 @@ pub fn run(dir: &Path) -> anyhow::Result<Vec<Outcome>> {
                 not_worse: true,
                 beyond_expected: vec![],
                 shrink_of_ideal: f64::NAN,
+                what_is_left: None,
                 answer: Err(format!("{e:#}")),
                 remaining: None,
                 baseline_rms: f64::NAN,
@@ -155,6 +159,7 @@ pub fn print(outcomes: &[Outcome]) {
         "| curve | expected | named | beyond the expected | remaining | RMS baseline → final | noise σ | shrink of the ideal | as expected |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
+    let mut left = vec![];
     for o in outcomes {
         let answer = match &o.answer {
             Ok(names) if names.is_empty() => "—".to_string(),
@@ -188,6 +193,9 @@ pub fn print(outcomes: &[Outcome]) {
         } else {
             ("—".into(), "—".into(), "—".into())
         };
+        if let Some(l) = &o.what_is_left {
+            left.push(format!("- {}: {l}", o.file));
+        }
         let beyond = if o.beyond_expected.is_empty() { "—".to_string() } else { o.beyond_expected.join(", ") };
         println!(
             "| {} | {} | {answer} | {beyond} | {}{} | {rms} | {noise} | {shrink} | {verdict} |",
@@ -199,6 +207,8 @@ pub fn print(outcomes: &[Outcome]) {
     }
     let count = |f: &dyn Fn(&Outcome) -> bool| outcomes.iter().filter(|o| f(o)).count();
     let with_effect = outcomes.iter().filter(|o| !o.expected.starts_with("nothing")).count();
+    println!("\nWhat is left where the answer is `unexplained` (the phase with most of the remaining residual):\n");
+    println!("{}", left.join("\n"));
     let named: Vec<f64> = outcomes
         .iter()
         .filter(|o| !o.expected.starts_with("nothing") && o.named_as_expected)

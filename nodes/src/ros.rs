@@ -237,24 +237,32 @@ fn with_type_hash(qos: QosProfile, hash: Option<String>) -> QosProfile {
     }
 }
 
-/// A std_srvs/Trigger server at `name` (reliable, its type hash announced on both endpoints).
+/// std_srvs/Trigger's type name and its endpoints' QoS (reliable, the type hash announced).
+fn trigger_endpoint() -> (ServiceTypeName, QosProfile) {
+    (
+        ServiceTypeName::new("std_srvs", "Trigger"),
+        with_type_hash(reliable_qos(), softcontact_msgs::type_hash::trigger()),
+    )
+}
+
+/// A std_srvs/Trigger server at `name`.
 pub fn trigger_server(
     node: &mut Node,
     mapping: ServiceMapping,
     name: &Name,
 ) -> anyhow::Result<ros2_client::service::Server<TriggerRequest, TriggerResponse>> {
-    let qos = with_type_hash(reliable_qos(), softcontact_msgs::type_hash::trigger());
-    Ok(node.create_server(mapping, name, &ServiceTypeName::new("std_srvs", "Trigger"), qos.clone(), qos)?)
+    let (service, qos) = trigger_endpoint();
+    Ok(node.create_server(mapping, name, &service, qos.clone(), qos)?)
 }
 
-/// A std_srvs/Trigger client of `name` (reliable, its type hash announced on both endpoints).
+/// A std_srvs/Trigger client of `name`.
 pub fn trigger_client(
     node: &mut Node,
     mapping: ServiceMapping,
     name: &Name,
 ) -> anyhow::Result<ros2_client::service::Client<TriggerRequest, TriggerResponse>> {
-    let qos = with_type_hash(reliable_qos(), softcontact_msgs::type_hash::trigger());
-    Ok(node.create_client(mapping, name, &ServiceTypeName::new("std_srvs", "Trigger"), qos.clone(), qos)?)
+    let (service, qos) = trigger_endpoint();
+    Ok(node.create_client(mapping, name, &service, qos.clone(), qos)?)
 }
 
 /// The QoS of ROS 2 actions (services reliable, status latched) for the force action's endpoints, each

@@ -729,6 +729,23 @@ pub struct Locate {
     pub lag_correlation: f64,
     /// The residual of every wrench channel, when the series carries the wrench ([`Series::with_wrench`]).
     pub channels: Vec<Channel>,
+    /// The phase holding the largest share of what is left (the augmented model's squared residual over
+    /// every sample, free ones included: a pull past the surface shows there).
+    pub largest: Option<Largest>,
+}
+
+/// Where most of the remaining residual (measured − model) is, and its shape there.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Largest {
+    pub phase: Phase,
+    /// This phase's share of the whole record's squared residual.
+    pub share: f64,
+    pub rms: f64,
+    /// The mean: near ±rms an offset (the measured force above or below the model throughout the phase),
+    /// near 0 a wave about the model.
+    pub mean: f64,
+    /// The time [s, the record's clock] by which half of this phase's squared residual has passed.
+    pub around_s: f64,
 }
 
 /// Quartile bins of `key` over the in-contact samples.
@@ -805,6 +822,27 @@ fn locate(series: &Series, phases: &[Phase], given: &[f64], before: &[f64], afte
         .collect();
     let best = (0..corr.len()).max_by(|&a, &b| corr[a].total_cmp(&corr[b])).unwrap_or(reach);
     let (lag_s, lag_correlation) = ((best as f64 - reach as f64) * dt, corr[best]);
+    let total: f64 = after.iter().map(|r| r * r).sum();
+    let largest = Phase::ALL
+        .into_iter()
+        .filter_map(|phase| {
+            let inside: Vec<usize> = (0..after.len()).filter(|&i| phases[i] == phase).collect();
+            let ss: f64 = inside.iter().map(|&i| after[i] * after[i]).sum();
+            let n = inside.len() as f64;
+            let mut passed = 0.0;
+            let half = inside.iter().find(|&&i| {
+                passed += after[i] * after[i];
+                passed >= 0.5 * ss
+            });
+            (n > 0.0 && total > 0.0).then(|| Largest {
+                phase,
+                share: ss / total,
+                rms: (ss / n).sqrt(),
+                mean: inside.iter().map(|&i| after[i]).sum::<f64>() / n,
+                around_s: half.map_or(series.t[0], |&i| series.t[i]),
+            })
+        })
+        .max_by(|a, b| a.share.total_cmp(&b.share));
     Locate {
         by_speed: bins(&speed, contact, before, after),
         by_force: bins(&series.f, contact, before, after),
@@ -813,6 +851,7 @@ fn locate(series: &Series, phases: &[Phase], given: &[f64], before: &[f64], afte
         lag_s,
         lag_correlation,
         channels: Vec::new(),
+        largest,
     }
 }
 
