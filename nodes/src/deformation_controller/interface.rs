@@ -95,6 +95,8 @@ pub struct ControllerInterface {
     server: PressServer,
     goal: Option<Goal>,
     ended: VecDeque<(GoalId, GoalStatusEnum, PressForceResult)>,
+    /// The goals refused when they came (the latest [`KEPT_RESULTS`]): a repeat is answered as they were.
+    refused_goals: VecDeque<GoalId>,
     waiting: VecDeque<(RmwRequestId, GoalId)>,
     torque_pub: Publisher<JointState>,
     state_pub: Publisher<StateMsg>,
@@ -131,6 +133,7 @@ impl ControllerInterface {
             server,
             goal: None,
             ended: VecDeque::new(),
+            refused_goals: VecDeque::new(),
             waiting: VecDeque::new(),
             torque_pub,
             state_pub,
@@ -182,6 +185,18 @@ impl ControllerInterface {
             }
         }
         while let Ok(Some((id, request))) = self.server.receive_goal() {
+            // A goal id already seen is never a new press: a client that resends while its reply is late
+            // (as the Fast DDS and Cyclone DDS peers do), or a replay, gets the answer the id first got.
+            let seen = self.goal.as_ref().filter(|g| g.info.goal_id == request.goal_id).map(|g| (true, g.info.stamp));
+            let seen = seen.or_else(|| {
+                let refused = self.refused_goals.contains(&request.goal_id);
+                let ended = self.ended.iter().any(|(g, _, _)| *g == request.goal_id);
+                (refused || ended).then(|| (!refused, ros2_client::builtin_interfaces::Time::now()))
+            });
+            if let Some((accepted, stamp)) = seen {
+                let _ = self.server.send_goal_response(id, SendGoalResponse { accepted, stamp });
+                continue;
+            }
             let (force, duration) = (request.goal.force, request.goal.duration);
             let commanded = self.command(control, force, duration);
             let accepted = commanded.is_ok();
@@ -190,6 +205,10 @@ impl ControllerInterface {
                 // The reason waits as the goal's result, for the client that asks.
                 let result = PressForceResult { force: f64::NAN, error: f64::NAN, message: why };
                 self.remember(request.goal_id, GoalStatusEnum::Aborted, result);
+                if self.refused_goals.len() == KEPT_RESULTS {
+                    self.refused_goals.pop_front();
+                }
+                self.refused_goals.push_back(request.goal_id);
             } else {
                 self.end_goal(GoalStatusEnum::Aborted, f64::NAN, "superseded by a newer goal");
                 let press = Press::new(force, duration, control.law.time());
