@@ -91,7 +91,7 @@ pub(crate) fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: 
 /// refined nor tested: it cannot pass.
 pub(crate) fn screen(d: &Data, cur: &Structure, fam: Family, scales: &Scales, cv_now: f64) -> Cand {
     let grid = fam.grid(scales, cur);
-    let scores: Vec<f64> = grid.iter().map(|&sh| fit::fit(d, &fam.apply(cur, sh)).cv_mse).collect();
+    let scores: Vec<f64> = grid.iter().map(|&sh| fit::held_out_mse(d, &fam.apply(cur, sh))).collect();
     let best = (0..grid.len()).min_by(|&i, &j| scores[i].total_cmp(&scores[j])).unwrap_or(0);
     let mut shape = grid[best];
     if scores[best] >= cv_now {

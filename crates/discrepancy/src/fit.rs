@@ -3,6 +3,8 @@
 //! Gram matrices, AICc, and standard errors inflated for residual autocorrelation.
 
 use nalgebra::{DMatrix, DVector};
+use std::collections::HashMap;
+use std::hash::{DefaultHasher, Hash, Hasher};
 use std::ops::Range;
 
 use softcontact_contact::{ContactModel, adhesion_share, maxwell_step, maxwell_step_with_decay, next_adhesion_peak};
@@ -100,6 +102,8 @@ pub(crate) struct Data<'a> {
     pub since_tare: Vec<f64>,
     pub dt: Vec<f64>,
     pub folds: Vec<Range<usize>>,
+    /// Σ f² over each fold.
+    pub force_squares: Vec<f64>,
     /// Where the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0): the first structure's mask.
     pub clamped: Vec<bool>,
     /// The unit axis of the tangential force (its principal direction) and the force along it, when the
@@ -108,6 +112,8 @@ pub(crate) struct Data<'a> {
     pub lateral: Vec<f64>,
     /// Columns already computed (see [`ColumnCache`]).
     pub cache: std::cell::RefCell<ColumnCache>,
+    /// Their products (see [`ProductCache`]).
+    pub products: std::cell::RefCell<ProductCache>,
 }
 
 /// The principal direction u of the tangential forces (largest Σ(F_t·u)²): the leading eigenvector of
@@ -155,7 +161,8 @@ impl<'a> Data<'a> {
             i if contact.len() >= folds => contact[i * contact.len() / folds],
             i => i * n / folds,
         };
-        let folds = (0..folds).map(|i| bound(i)..bound(i + 1)).collect();
+        let folds: Vec<Range<usize>> = (0..folds).map(|i| bound(i)..bound(i + 1)).collect();
+        let force_squares = folds.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
         let lateral_axis = principal_axis(&s.tangential);
@@ -163,7 +170,19 @@ impl<'a> Data<'a> {
             Some(u) => s.tangential.iter().map(|f| f[0] * u[0] + f[1] * u[1] + f[2] * u[2]).collect(),
             None => Vec::new(),
         };
-        Data { s, time, since_tare, dt, folds, clamped, lateral_axis, lateral, cache: Default::default() }
+        Data {
+            s,
+            time,
+            since_tare,
+            dt,
+            folds,
+            force_squares,
+            clamped,
+            lateral_axis,
+            lateral,
+            cache: Default::default(),
+            products: Default::default(),
+        }
     }
 }
 
@@ -208,6 +227,56 @@ enum Column {
 #[derive(Default)]
 pub(crate) struct ColumnCache {
     columns: Vec<(Column, [f64; 5], Vec<f64>)>,
+    /// The columns as the design has them (masked and delayed), by [`ColumnId`], most recently used last.
+    designed: Vec<(ColumnId, Vec<f64>)>,
+}
+
+/// Designed columns a [`ColumnCache`] keeps (12 MB at 60 000 samples).
+const DESIGNED_COLUMNS: usize = 24;
+
+/// Dot products of the design's columns, by each column's identity ([`ColumnId`]): a screen fits a dozen
+/// shapes of one term beside columns that stay the same, and only the new column's products are new.
+/// Each product is the same sum, in the same order, as computed afresh.
+#[derive(Default)]
+pub(crate) struct ProductCache {
+    /// Σ c² over all samples.
+    norms: HashMap<ColumnId, f64>,
+    /// Per fold: Σ cⱼ·cₖ (the pair ordered by id) and Σ cⱼ·f.
+    products: HashMap<(ColumnId, ColumnId), Vec<f64>>,
+    with_force: HashMap<ColumnId, Vec<f64>>,
+}
+
+/// Products a [`ProductCache`] keeps before it starts afresh (a few MB).
+const CACHED_PRODUCTS: usize = 20_000;
+
+/// What a design column is: what it is of (its [`Column`] and the key its content depends on, as
+/// [`ColumnCache`] keys it), the mask it was zeroed with and the delay it is read with, hashed.
+type ColumnId = u64;
+
+fn column_id(id: Column, key: &[f64; 5], mask: u64, delay: f64) -> ColumnId {
+    let mut h = DefaultHasher::new();
+    match id {
+        Column::Elastic => 0u8.hash(&mut h),
+        Column::Rate => 1u8.hash(&mut h),
+        Column::Term(t) => {
+            2u8.hash(&mut h);
+            format!("{t:?}").hash(&mut h);
+        }
+    }
+    key.map(f64::to_bits).hash(&mut h);
+    mask.hash(&mut h);
+    delay.to_bits().hash(&mut h);
+    h.finish()
+}
+
+/// A hash of a mask, packed 64 samples a word.
+fn mask_hash(mask: &[bool]) -> u64 {
+    let mut h = DefaultHasher::new();
+    mask.len().hash(&mut h);
+    for chunk in mask.chunks(64) {
+        chunk.iter().enumerate().fold(0u64, |w, (i, &b)| w | (u64::from(b) << i)).hash(&mut h);
+    }
+    h.finish()
 }
 
 /// Columns a [`ColumnCache`] keeps (19 MB at 60 000 samples).
@@ -215,56 +284,89 @@ const CACHED_COLUMNS: usize = 40;
 
 /// [`columns`] with the given samples masked where the law clamps (instead of the structure's).
 fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
-    let mut cache = d.cache.borrow_mut();
-    let cache = &mut cache.columns;
+    columns_with_ids(d, st, clamped).0
+}
+
+/// [`columns_masked`], and each column's identity.
+fn columns_with_ids(d: &Data, st: &Structure, clamped: &[bool]) -> (Vec<Vec<f64>>, Vec<ColumnId>) {
+    let design = design_of(st, clamped);
+    let mut zeff = None;
+    let cols = design.iter().map(|&(id, key, column_id)| design_column(d, st, clamped, id, key, column_id, &mut zeff));
+    (cols.collect(), design.iter().map(|x| x.2).collect())
+}
+
+/// The columns of a structure's design: each with the key its content depends on and its identity.
+fn design_of(st: &Structure, clamped: &[bool]) -> Vec<(Column, [f64; 5], ColumnId)> {
+    let mask = mask_hash(clamped);
     let wanted = [Column::Elastic, Column::Rate].into_iter().chain(st.terms.iter().map(|&t| Column::Term(t)));
-    let mut zeff: Option<Vec<f64>> = None;
-    let mut cols = Vec::with_capacity(2 + st.terms.len());
-    for id in wanted {
-        // What the column depends on: the surface (not the sensor's columns), and the exponent its
-        // power of z has (the branches have none).
-        let key = match id {
-            Column::Term(t) if t.of_sensor() => [0.0; 5],
-            Column::Term(Term::Relax(_) | Term::Adhesion(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
-            Column::Term(Term::QuasiRelax(_)) => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
-            Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
-            _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
-        };
-        let mut col = match cache.iter().position(|(c, k, _)| *c == id && *k == key) {
-            Some(i) => {
-                let hit = cache.remove(i);
-                let col = hit.2.clone();
-                cache.push(hit);
-                col
-            }
-            None => {
-                let zeff = zeff.get_or_insert_with(|| {
-                    (0..d.s.len()).map(|i| d.s.z[i] - st.shift - st.offset_rate * d.time[i]).collect()
-                });
-                let col = column(d, st, zeff, id);
-                if cache.len() >= CACHED_COLUMNS {
-                    cache.remove(0);
-                }
-                cache.push((id, key, col.clone()));
-                col
-            }
-        };
-        if !matches!(id, Column::Term(t) if t.unclamped()) {
-            for (v, &c) in col.iter_mut().zip(clamped) {
-                if c {
-                    *v = 0.0;
-                }
-            }
-        }
-        cols.push(col);
+    wanted
+        .map(|id| {
+            // What the column depends on: the surface (not the sensor's columns), and the exponent its
+            // power of z has (the branches have none).
+            let key = match id {
+                Column::Term(t) if t.of_sensor() => [0.0; 5],
+                Column::Term(Term::Relax(_) | Term::Adhesion(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
+                Column::Term(Term::QuasiRelax(_)) => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
+                Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
+                _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
+            };
+            (id, key, column_id(id, &key, mask, st.delay))
+        })
+        .collect()
+}
+
+/// One column of the design, masked where the law clamps (but a sensor's or an adhesion's) and delayed,
+/// from the caches where it is there; `zeff` the effective deformation, computed once where needed.
+fn design_column(
+    d: &Data,
+    st: &Structure,
+    clamped: &[bool],
+    id: Column,
+    key: [f64; 5],
+    column_id: ColumnId,
+    zeff: &mut Option<Vec<f64>>,
+) -> Vec<f64> {
+    let mut caches = d.cache.borrow_mut();
+    let ColumnCache { columns: cache, designed } = &mut *caches;
+    if let Some(i) = designed.iter().position(|(c, _)| *c == column_id) {
+        let hit = designed.remove(i);
+        let col = hit.1.clone();
+        designed.push(hit);
+        return col;
     }
+    let index = match cache.iter().position(|(c, k, _)| *c == id && *k == key) {
+        Some(i) => {
+            let hit = cache.remove(i);
+            cache.push(hit);
+            cache.len() - 1
+        }
+        None => {
+            let zeff = zeff.get_or_insert_with(|| {
+                (0..d.s.len()).map(|i| d.s.z[i] - st.shift - st.offset_rate * d.time[i]).collect()
+            });
+            if cache.len() >= CACHED_COLUMNS {
+                cache.remove(0);
+            }
+            cache.push((id, key, column(d, st, zeff, id)));
+            cache.len() - 1
+        }
+    };
+    let unmasked = &cache[index].2;
+    debug_assert_eq!(unmasked.len(), clamped.len(), "a mask of every sample");
+    let mut col = if matches!(id, Column::Term(t) if t.unclamped()) {
+        unmasked.clone()
+    } else {
+        unmasked.iter().zip(clamped).map(|(&v, &c)| if c { 0.0 } else { v }).collect()
+    };
     // The sensor reads everything late: clamped where the surface lets go, then delayed.
     if st.delay > 0.0 {
-        for col in cols.iter_mut() {
-            *col = delayed(&d.time, col, st.delay);
-        }
+        col = delayed(&d.time, &col, st.delay);
     }
-    cols
+    if designed.len() >= DESIGNED_COLUMNS {
+        designed.remove(0);
+    }
+    designed.push((column_id, col.clone()));
+    col
 }
 
 /// One unmasked column at the effective deformation `zeff`.
@@ -423,7 +525,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
-    fit_columns_held_out(d, cols, None)
+    fit_columns_held_out(d, cols, None, None)
 }
 
 /// The squared held-out residual of every sample: each predicted by the fit with its fold left out.
@@ -431,7 +533,7 @@ pub(crate) fn held_out(d: &Data, st: &Structure) -> Vec<f64> {
     let mut out = vec![0.0; d.s.len()];
     let cols = columns(d, st);
     if st.delay <= 0.0 {
-        fit_columns_held_out(d, &cols, Some(&mut out));
+        fit_columns_held_out(d, &cols, None, Some(&mut out));
         return out;
     }
     // As `fit` does for a delay: masked with the delayed fit's own surface force.
@@ -439,18 +541,83 @@ pub(crate) fn held_out(d: &Data, st: &Structure) -> Vec<f64> {
     let undelayed = Structure { delay: 0.0, ..st.clone() };
     let raw = columns_masked(d, &undelayed, &vec![false; d.s.len()]);
     let mask = surface_clamped(&st.terms, &raw, &fitted.beta, |_| false);
-    fit_columns_held_out(d, &columns_masked(d, st, &mask), Some(&mut out));
+    fit_columns_held_out(d, &columns_masked(d, st, &mask), None, Some(&mut out));
     out
 }
 
-fn fit_columns_held_out(d: &Data, cols: &[Vec<f64>], mut per_sample: Option<&mut Vec<f64>>) -> Fit {
+/// The columns' dot products: Σ c² over all samples per column, and per fold Σ cⱼ·cₖ and Σ cⱼ·f (from the
+/// cache where the columns' identities are given).
+struct Products {
+    norms: Vec<f64>,
+    /// `pairs[j][k]` for k ≤ j, per fold.
+    pairs: Vec<Vec<Vec<f64>>>,
+    with_force: Vec<Vec<f64>>,
+}
+
+fn products(d: &Data, cols: &[Vec<f64>], ids: Option<&[ColumnId]>) -> Products {
+    let y = &d.s.f;
+    let per_fold =
+        |a: &[f64], b: &[f64]| -> Vec<f64> { d.folds.iter().map(|r| dot(&a[r.clone()], &b[r.clone()])).collect() };
+    let Some(ids) = ids else {
+        let p = cols.len();
+        return Products {
+            norms: cols.iter().map(|c| dot(c, c)).collect(),
+            pairs: (0..p).map(|j| (0..=j).map(|k| per_fold(&cols[j], &cols[k])).collect()).collect(),
+            with_force: cols.iter().map(|c| per_fold(c, y)).collect(),
+        };
+    };
+    let p = ids.len();
+    let mut cache = d.products.borrow_mut();
+    let norms = (0..p).map(|j| *cache.norms.entry(ids[j]).or_insert_with(|| dot(&cols[j], &cols[j]))).collect();
+    let pairs = (0..p)
+        .map(|j| {
+            (0..=j)
+                .map(|k| {
+                    let key = (ids[j].min(ids[k]), ids[j].max(ids[k]));
+                    cache.products.entry(key).or_insert_with(|| per_fold(&cols[j], &cols[k])).clone()
+                })
+                .collect()
+        })
+        .collect();
+    let with_force =
+        (0..p).map(|j| cache.with_force.entry(ids[j]).or_insert_with(|| per_fold(&cols[j], y)).clone()).collect();
+    Products { norms, pairs, with_force }
+}
+
+/// How much of a [`Fit`] to compute: a screen ranks shapes by the held-out MSE alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Extent {
+    Full,
+    /// The coefficients and the held-out MSE; no in-sample residual, standard errors, AICc or per-fold
+    /// coefficients (left empty or NaN; never returned outside this file).
+    HeldOutOnly,
+}
+
+fn fit_columns_held_out(
+    d: &Data,
+    cols: &[Vec<f64>],
+    ids: Option<&[ColumnId]>,
+    per_sample: Option<&mut Vec<f64>>,
+) -> Fit {
+    fit_columns_to(d, cols, ids, per_sample, Extent::Full)
+}
+
+fn fit_columns_to(
+    d: &Data,
+    cols: &[Vec<f64>],
+    ids: Option<&[ColumnId]>,
+    mut per_sample: Option<&mut Vec<f64>>,
+    extent: Extent,
+) -> Fit {
     let y = &d.s.f;
     let n = y.len();
-    let p = cols.len();
-    let scale: Vec<f64> = cols
+    let p = ids.map_or(cols.len(), |ids| ids.len());
+    let products = products(d, cols, ids);
+    let scale: Vec<f64> = products
+        .norms
         .iter()
-        .map(|c| {
-            let r = (dot(c, c) / n as f64).sqrt();
+        .map(|&c2| {
+            let r = (c2 / n as f64).sqrt();
             if r > 0.0 && r.is_finite() { r } else { 1.0 }
         })
         .collect();
@@ -458,26 +625,42 @@ fn fit_columns_held_out(d: &Data, cols: &[Vec<f64>], mut per_sample: Option<&mut
     let mut gf = Vec::with_capacity(d.folds.len());
     let mut hf = Vec::with_capacity(d.folds.len());
     let mut yyf = Vec::with_capacity(d.folds.len());
-    for r in &d.folds {
+    for f in 0..d.folds.len() {
         let mut g = DMatrix::<f64>::zeros(p, p);
         let mut h = DVector::<f64>::zeros(p);
-        let yr = &y[r.clone()];
         for j in 0..p {
-            let cj = &cols[j][r.clone()];
-            h[j] = dot(cj, yr) / scale[j];
+            h[j] = products.with_force[j][f] / scale[j];
             for k in 0..=j {
-                let v = dot(cj, &cols[k][r.clone()]) / (scale[j] * scale[k]);
+                let v = products.pairs[j][k][f] / (scale[j] * scale[k]);
                 g[(j, k)] = v;
                 g[(k, j)] = v;
             }
         }
         gf.push(g);
         hf.push(h);
-        yyf.push(dot(yr, yr));
+        yyf.push(d.force_squares[f]);
     }
     let g: DMatrix<f64> = gf.iter().fold(DMatrix::zeros(p, p), |a, b| a + b);
     let h: DVector<f64> = hf.iter().fold(DVector::zeros(p), |a, b| a + b);
     let (beta_s, inv) = solve(&g, &h);
+    let nf = n as f64;
+    if extent == Extent::HeldOutOnly {
+        let mut held = 0.0;
+        for f in 0..d.folds.len() {
+            let (bf, _) = solve(&(&g - &gf[f]), &(&h - &hf[f]));
+            held += (yyf[f] - 2.0 * bf.dot(&hf[f]) + (&gf[f] * &bf).dot(&bf)).max(0.0);
+        }
+        let beta = (0..p).map(|j| beta_s[j] / scale[j]).collect();
+        return Fit {
+            beta,
+            se: vec![],
+            fold_beta: vec![],
+            sse: f64::NAN,
+            cv_mse: held / nf,
+            aicc: f64::NAN,
+            pred: vec![],
+        };
+    }
     let mut pred = vec![0.0; n];
     for (j, c) in cols.iter().enumerate() {
         let b = beta_s[j] / scale[j];
@@ -509,14 +692,49 @@ fn fit_columns_held_out(d: &Data, cols: &[Vec<f64>], mut per_sample: Option<&mut
         }
         fold_beta.push((0..p).map(|j| bf[j] / scale[j]).collect());
     }
-    let nf = n as f64;
     let pf = p as f64;
     let aicc = nf * (sse.max(1e-300) / nf).ln() + 2.0 * pf + 2.0 * pf * (pf + 1.0) / (nf - pf - 1.0).max(1.0);
     Fit { beta: (0..p).map(|j| beta_s[j] / scale[j]).collect(), se, fold_beta, sse, cv_mse: held / nf, aicc, pred }
 }
 
 pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
-    let fitted = fit_columns(d, &columns(d, st));
+    fit_to(d, st, Extent::Full)
+}
+
+/// The held-out MSE of a structure's fit (what a screen ranks shapes by), without the rest of [`fit`].
+pub(crate) fn held_out_mse(d: &Data, st: &Structure) -> f64 {
+    fit_to(d, st, Extent::HeldOutOnly).cv_mse
+}
+
+fn fit_to(d: &Data, st: &Structure, extent: Extent) -> Fit {
+    let fit_structure_columns = |clamped: &[bool]| {
+        let design = design_of(st, clamped);
+        let ids: Vec<ColumnId> = design.iter().map(|x| x.2).collect();
+        let mut products = d.products.borrow_mut();
+        if products.products.len() > CACHED_PRODUCTS {
+            *products = ProductCache::default();
+        }
+        // Held-out scores need a column only where one of its products is not known yet.
+        let needed = |j: usize| {
+            extent == Extent::Full
+                || !products.norms.contains_key(&ids[j])
+                || !products.with_force.contains_key(&ids[j])
+                || ids.iter().any(|&k| !products.products.contains_key(&(ids[j].min(k), ids[j].max(k))))
+        };
+        let needed: Vec<bool> = (0..ids.len()).map(needed).collect();
+        drop(products);
+        let mut zeff = None;
+        let cols: Vec<Vec<f64>> = design
+            .iter()
+            .zip(&needed)
+            .map(|(&(id, key, column_id), &needed)| match needed {
+                true => design_column(d, st, clamped, id, key, column_id, &mut zeff),
+                false => vec![],
+            })
+            .collect();
+        fit_columns_to(d, &cols, Some(&ids), None, extent)
+    };
+    let fitted = fit_structure_columns(&st.clamped);
     if st.delay <= 0.0 {
         return fitted;
     }
@@ -528,7 +746,7 @@ pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
     let mut fitted = fitted;
     for _ in 0..2 {
         let mask = surface_clamped(&st.terms, &raw, &fitted.beta, |_| false);
-        fitted = fit_columns(d, &columns_masked(d, st, &mask));
+        fitted = fit_structure_columns(&mask);
     }
     fitted
 }
