@@ -295,3 +295,100 @@ fn topic_names_are_declared_once() {
     }
     assert!(spelled.is_empty(), "topic names spelled outside msgs/src/topics.rs:\n{}", spelled.join("\n"));
 }
+
+/// No product source file over [`MAX_FILE_LINES`] lines before its tests, and no function over
+/// [`MAX_FUNCTION_LINES`] lines (as `cargo fmt` lays it out: from its `fn` line to the brace that closes
+/// it at the same indentation). The files and functions over a limit today are listed in
+/// [`OVER_THE_LIMIT`] with the size each had when it was listed: one may shrink (and leaves the list once
+/// under its limit), none may grow, and nothing new may pass a limit.
+#[test]
+fn no_source_file_or_function_outgrows_its_limit() {
+    let mut over = vec![];
+    for doc in documents() {
+        let relative = doc.strip_prefix(root()).unwrap_or(&doc).to_string_lossy().to_string();
+        let product = ["nodes/src/", "cli/src/", "crates/", "msgs/src/"].iter().any(|p| relative.starts_with(p))
+            && relative.ends_with(".rs")
+            && !relative.contains("/tests/")
+            && !relative.ends_with("/tests.rs");
+        if !product {
+            continue;
+        }
+        let text = std::fs::read_to_string(&doc).unwrap();
+        let lines: Vec<&str> = text.lines().take_while(|l| !l.starts_with("#[cfg(test)]")).collect();
+        if lines.len() > MAX_FILE_LINES {
+            over.push((relative.clone(), String::new(), lines.len()));
+        }
+        for (name, length) in functions(&lines) {
+            if length > MAX_FUNCTION_LINES {
+                over.push((relative.clone(), name, length));
+            }
+        }
+    }
+    let mut problems = vec![];
+    for (file, function, size) in &over {
+        let what = if function.is_empty() { file.clone() } else { format!("{file} {function}") };
+        match OVER_THE_LIMIT.iter().find(|(f, g, _)| f == file && g == function) {
+            Some(&(_, _, listed)) if *size > listed => {
+                problems.push(format!("{what}: {size} lines, listed at {listed}"))
+            }
+            Some(_) => {}
+            None => problems.push(format!("{what}: {size} lines, over its limit")),
+        }
+    }
+    for (file, function, listed) in OVER_THE_LIMIT {
+        if !over.iter().any(|(f, g, _)| f == file && g == function) {
+            problems
+                .push(format!("{file} {function} (listed at {listed}) is within its limit now: take it off the list"));
+        }
+    }
+    assert!(problems.is_empty(), "sizes:\n{}", problems.join("\n"));
+}
+
+const MAX_FILE_LINES: usize = 800;
+const MAX_FUNCTION_LINES: usize = 100;
+
+/// (file, function or "" for the file, lines when listed): what is over a limit today, to be split.
+const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
+    ("nodes/src/deformation_controller.rs", "", 1336),
+    ("nodes/src/deformation_controller.rs", "tick", 184),
+    ("nodes/src/deformation_controller.rs", "declare", 140),
+    ("nodes/src/ft_sensor/component.rs", "run", 221),
+    ("nodes/src/lwr_driver.rs", "", 964),
+    ("nodes/src/ft_sensor.rs", "declare", 126),
+    ("nodes/src/lwr_driver/component.rs", "run", 239),
+    ("nodes/src/sim_arm.rs", "run", 117),
+    ("nodes/src/bin/contact_estimator.rs", "main", 110),
+    ("crates/discrepancy/src/refine.rs", "polish", 137),
+    ("crates/discrepancy/src/arm.rs", "name_arm_effects", 136),
+    ("crates/discrepancy/src/loading_paths.rs", "name_path_effects", 115),
+    ("crates/dynamics/src/model.rs", "from_urdf", 117),
+    ("cli/src/loading_paths_cmd.rs", "experiments", 159),
+    ("cli/src/loading_paths_cmd.rs", "run", 105),
+    ("cli/src/discrepancy_cmd.rs", "print_report", 103),
+    ("cli/src/model_cmd.rs", "run", 134),
+    ("cli/src/demo/corpus.rs", "cases", 246),
+    ("cli/src/table.rs", "read", 107),
+];
+
+/// Each function of `lines` (a formatted Rust file) with its length in lines.
+fn functions(lines: &[&str]) -> Vec<(String, usize)> {
+    let mut out = vec![];
+    for (i, line) in lines.iter().enumerate() {
+        let code = line.trim_start();
+        let indent = line.len() - code.len();
+        let signature = ["pub(crate) ", "pub(super) ", "pub ", "const ", "async ", "unsafe ", "extern \"C\" "]
+            .iter()
+            .fold(code, |c, prefix| c.strip_prefix(prefix).unwrap_or(c));
+        let Some(rest) = signature.strip_prefix("fn ") else { continue };
+        let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        if code.ends_with('}') || code.ends_with(';') {
+            continue; // on one line, or a declaration without a body
+        }
+        let closing = format!("{}}}", " ".repeat(indent));
+        let end = lines[i + 1..].iter().position(|l| *l == closing || l.starts_with(&format!("{closing} ")));
+        if let Some(end) = end {
+            out.push((name, end + 2));
+        }
+    }
+    out
+}
