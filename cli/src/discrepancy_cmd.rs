@@ -132,6 +132,13 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
 }
 
 fn print_report(report: &Report, name: &str) {
+    print_refit_and_effects(report, name);
+    print_where(report);
+    print_verdict(report);
+}
+
+/// The baseline, the noise floor, the refit and the effects named (or the rivals).
+fn print_refit_and_effects(report: &Report, name: &str) {
     let n = |v: f64| si(v, "N");
     println!("{name}: baseline {} — in-contact residual RMS {}", report.baseline.kind.id(), n(report.baseline.rms));
     println!(
@@ -184,6 +191,12 @@ fn print_report(report: &Report, name: &str) {
             None => println!("ambiguous between {} and {}: {}", a.between[0], a.between[1], a.would_separate),
         }
     }
+}
+
+/// Where the gap is, before and after: by phase, speed and force, its whiteness and lag, every wrench
+/// channel.
+fn print_where(report: &Report) {
+    let n = |v: f64| si(v, "N");
     println!("\n{:<12}{:>12}{:>12}", "phase", "RMS before", "RMS after");
     for (phase, rms) in &report.phases {
         println!("{:<12}{:>12}{:>12}", format!("{phase:?}").to_lowercase(), n(rms.rms_before), n(rms.rms_after));
@@ -216,6 +229,10 @@ fn print_report(report: &Report, name: &str) {
             );
         }
     }
+}
+
+/// What remains, and where most of it is.
+fn print_verdict(report: &Report) {
     let remaining = match report.remaining {
         softcontact_discrepancy::Remaining::None => "none: the residual is at the noise floor",
         softcontact_discrepancy::Remaining::Unexplained => {
@@ -229,7 +246,7 @@ fn print_report(report: &Report, name: &str) {
              stands, nothing is named"
         );
     }
-    println!("\nfinal RMS {}; remaining: {remaining}", n(report.final_rms));
+    println!("\nfinal RMS {}; remaining: {remaining}", si(report.final_rms, "N"));
     if let Some(left) = what_is_left(report) {
         println!("what is left is mostly in {left}");
     }

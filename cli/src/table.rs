@@ -261,48 +261,10 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
     let sep = separator(path)?;
     let mut rdr = reader(path, sep)?;
     let header = rdr.headers().with_context(|| format!("{}: reading the header", path.display()))?.clone();
-    let mut at: [Option<(usize, String, f64)>; 4] = Default::default();
-    let (mut depth_is, mut ignored) = (Depth::Position, Vec::new());
-    for (i, cell) in header.iter().enumerate() {
-        let Some((role, unit, scale)) = column(cell, i + 1).with_context(|| path.display().to_string())? else {
-            ignored.push(cell.trim().to_string());
-            continue;
-        };
-        let slot = match role {
-            Role::Time => 0,
-            Role::Depth(d) => {
-                depth_is = d;
-                1
-            }
-            Role::Force => 2,
-            Role::Rate => 3,
-        };
-        ensure!(
-            at[slot].is_none(),
-            "{}: header, column {}: `{}` is a second {} column",
-            path.display(),
-            i + 1,
-            cell,
-            ["time", "depth (z or x)", "force", "rate"][slot]
-        );
-        at[slot] = Some((i, unit, scale));
-    }
-    for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
-        ensure!(
-            at[slot].is_some(),
-            "{}: the header has no {what} column (it has: {})",
-            path.display(),
-            header.iter().collect::<Vec<_>>().join(" | ")
-        );
-    }
+    let (at, depth_is, ignored) = header_columns(path, &header)?;
     // First pass: the rows, so that a long table is averaged in blocks of equal length.
-    let mut rows = 0_u64;
+    let rows = data_rows(path, &mut rdr)?;
     let mut record = csv::StringRecord::new();
-    while rdr.read_record(&mut record).map_err(|e| malformed(path, e))? {
-        if !record.iter().all(str::is_empty) {
-            rows += 1;
-        }
-    }
     ensure!(rows >= 2, "{}: {rows} data rows; a table needs at least two", path.display());
     let block = usize::try_from(rows.div_ceil(MAX_ROWS as u64)).unwrap_or(usize::MAX);
     let capacity = usize::try_from(rows).unwrap_or(usize::MAX).div_ceil(block);
@@ -363,6 +325,60 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
     }
     ensure!(t.len() >= 2, "{}: fewer than two samples after averaging blocks of {block} rows", path.display());
     Ok(Table { t, depth, depth_is, f, rate: at[3].as_ref().map(|_| rate), rows, block, ignored })
+}
+
+/// Where the header puts time, depth, force and rate (each: column, unit, scale to SI), whether the depth
+/// is a deformation or a position, and the columns not read.
+type HeaderColumns = ([Option<(usize, String, f64)>; 4], Depth, Vec<String>);
+
+fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<HeaderColumns> {
+    let mut at: [Option<(usize, String, f64)>; 4] = Default::default();
+    let (mut depth_is, mut ignored) = (Depth::Position, Vec::new());
+    for (i, cell) in header.iter().enumerate() {
+        let Some((role, unit, scale)) = column(cell, i + 1).with_context(|| path.display().to_string())? else {
+            ignored.push(cell.trim().to_string());
+            continue;
+        };
+        let slot = match role {
+            Role::Time => 0,
+            Role::Depth(d) => {
+                depth_is = d;
+                1
+            }
+            Role::Force => 2,
+            Role::Rate => 3,
+        };
+        ensure!(
+            at[slot].is_none(),
+            "{}: header, column {}: `{}` is a second {} column",
+            path.display(),
+            i + 1,
+            cell,
+            ["time", "depth (z or x)", "force", "rate"][slot]
+        );
+        at[slot] = Some((i, unit, scale));
+    }
+    for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
+        ensure!(
+            at[slot].is_some(),
+            "{}: the header has no {what} column (it has: {})",
+            path.display(),
+            header.iter().collect::<Vec<_>>().join(" | ")
+        );
+    }
+    Ok((at, depth_is, ignored))
+}
+
+/// The data rows left in `rdr` (rows of empty cells not counted).
+fn data_rows(path: &Path, rdr: &mut csv::Reader<Box<dyn std::io::Read>>) -> anyhow::Result<u64> {
+    let mut rows = 0_u64;
+    let mut record = csv::StringRecord::new();
+    while rdr.read_record(&mut record).map_err(|e| malformed(path, e))? {
+        if !record.iter().all(str::is_empty) {
+            rows += 1;
+        }
+    }
+    Ok(rows)
 }
 
 impl Table {
