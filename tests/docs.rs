@@ -358,7 +358,6 @@ const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
     ("nodes/src/lwr_driver/component.rs", "run", 239),
     ("nodes/src/sim_arm.rs", "run", 117),
     ("nodes/src/bin/contact_estimator.rs", "main", 110),
-    ("crates/discrepancy/src/refine.rs", "polish", 137),
     ("crates/discrepancy/src/arm.rs", "name_arm_effects", 136),
     ("crates/discrepancy/src/loading_paths.rs", "name_path_effects", 115),
     ("crates/dynamics/src/model.rs", "from_urdf", 117),

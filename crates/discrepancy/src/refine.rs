@@ -19,43 +19,49 @@ pub(crate) fn polish(
     scales: &Scales,
     regrid: bool,
 ) -> bool {
-    let v_sat = scales.saturating_speed;
     let shaped: Vec<usize> = (0..st.terms.len()).filter(|&j| shape_of(st.terms[j]).is_some()).collect();
     if shaped.is_empty() {
         return false;
     }
-    let scaled = |t: Term, factor: f64| match shape_of(t) {
-        Some((fam, x)) => fam.term(x * factor).unwrap_or(t),
-        None => t,
-    };
-    let within_bounds = |s: &Structure| {
-        let taus: Vec<f64> =
-            s.terms.iter().filter_map(|t| if let Term::Relax(tau) = *t { Some(tau) } else { None }).collect();
-        s.terms.iter().all(|t| match *t {
-            Term::Relax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
-            Term::Hyst(v0) => v0 > 0.0 && v0 <= v_sat,
-            Term::Adhesion(range) => (scales.adhesion_ranges.0..=scales.adhesion_ranges.1).contains(&range),
-            Term::QuasiRelax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
-            _ => true,
-        }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
-    };
     let (start, start_sse) = (st.terms.clone(), cur.sse);
-    // First the shapes re-chosen on their grids, the others held — two relaxation branches as a pair: a
-    // branch chosen early (between two time scales, before the second branch was in) sits in a basin that
-    // Gauss–Newton does not leave.
-    let try_terms = |st: &mut Structure, cur: &mut Fit, set: &[(usize, Term)]| {
-        let mut trial = st.clone();
-        for &(j, t) in set {
-            trial.terms[j] = t;
+    if regrid {
+        regrid_shapes(d, st, cur, &shaped, scales);
+    }
+    gauss_newton_shapes(d, st, cur, &shaped, scales, if regrid { POLISH_ITERATIONS } else { POLISH_ITERATIONS / 2 });
+    search_adhesion_ranges(d, st, cur, &shaped, scales);
+    if cur.sse >= start_sse {
+        return false;
+    }
+    *st = refine_surface(d, st).0;
+    *cur = fit::fit(d, st);
+    for &j in &shaped {
+        let (Some((fam, before)), Some((_, after))) = (shape_of(start[j]), shape_of(st.terms[j])) else { continue };
+        if let Some(slot) = order.iter_mut().find(|x| x.0 == fam && x.1 == before) {
+            slot.1 = after;
         }
-        let ft = fit::fit(d, &trial);
-        if ft.sse < cur.sse {
-            *st = trial;
-            *cur = ft;
-        }
-    };
+    }
+    true
+}
+
+/// The structure with `set`'s terms in place, kept where it lowers the in-sample error.
+fn try_terms(d: &Data, st: &mut Structure, cur: &mut Fit, set: &[(usize, Term)]) {
+    let mut trial = st.clone();
+    for &(j, t) in set {
+        trial.terms[j] = t;
+    }
+    let ft = fit::fit(d, &trial);
+    if ft.sse < cur.sse {
+        *st = trial;
+        *cur = ft;
+    }
+}
+
+/// The shapes re-chosen on their grids, the others held — two relaxation branches as a pair: a branch
+/// chosen early (between two time scales, before the second branch was in) sits in a basin that
+/// Gauss–Newton does not leave.
+fn regrid_shapes(d: &Data, st: &mut Structure, cur: &mut Fit, shaped: &[usize], scales: &Scales) {
     let relaxation: Vec<usize> = shaped.iter().copied().filter(|&j| matches!(st.terms[j], Term::Relax(_))).collect();
-    if let (&[i, j], true) = (&relaxation[..], regrid) {
+    if let &[i, j] = &relaxation[..] {
         // The faster branch stays the faster (its slot in `order` keeps its round).
         let tau = |k: usize| if let Term::Relax(x) = st.terms[k] { x } else { 0.0 };
         let (i, j) = if tau(i) < tau(j) { (i, j) } else { (j, i) };
@@ -64,23 +70,59 @@ pub(crate) fn polish(
         let grid = Family::Relaxation.grid(scales, &without);
         for (m, &a) in grid.iter().enumerate() {
             for &b in grid[m + 1..].iter().filter(|&&b| b >= 3.0 * a) {
-                try_terms(st, cur, &[(i, Term::Relax(a)), (j, Term::Relax(b))]);
+                try_terms(d, st, cur, &[(i, Term::Relax(a)), (j, Term::Relax(b))]);
             }
         }
     }
-    for &j in shaped.iter().filter(|_| regrid) {
+    for &j in shaped {
         let Some((fam, _)) = shape_of(st.terms[j]) else { continue };
         let mut without = st.clone();
         without.terms.remove(j);
-        for x in fam.grid(scales, &without).into_iter().filter(|&x| fam != Family::Hysteresis || x <= v_sat) {
-            try_terms(st, cur, &[(j, fam.term(x).unwrap_or(st.terms[j]))]);
+        let grid = fam.grid(scales, &without);
+        for x in grid.into_iter().filter(|&x| fam != Family::Hysteresis || x <= scales.saturating_speed) {
+            try_terms(d, st, cur, &[(j, fam.term(x).unwrap_or(st.terms[j]))]);
         }
     }
+}
+
+/// The term with its shape multiplied by `factor`.
+fn scaled(t: Term, factor: f64) -> Term {
+    match shape_of(t) {
+        Some((fam, x)) => fam.term(x * factor).unwrap_or(t),
+        None => t,
+    }
+}
+
+/// Every shape within its bounds: τ in the screening grid's range with branches 3× apart, v₀ up to the
+/// saturating speed, an adhesion's range in its range.
+fn within_bounds(s: &Structure, scales: &Scales) -> bool {
+    let taus: Vec<f64> =
+        s.terms.iter().filter_map(|t| if let Term::Relax(tau) = *t { Some(tau) } else { None }).collect();
+    s.terms.iter().all(|t| match *t {
+        Term::Relax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
+        Term::Hyst(v0) => v0 > 0.0 && v0 <= scales.saturating_speed,
+        Term::Adhesion(range) => (scales.adhesion_ranges.0..=scales.adhesion_ranges.1).contains(&range),
+        Term::QuasiRelax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
+        _ => true,
+    }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
+}
+
+/// Gauss–Newton on the shapes' logarithms, each shape's column differentiated numerically and the change
+/// of its shape read from a joint fit (variable projection), a step that does not lower the in-sample error
+/// halved, at most `iterations` steps.
+fn gauss_newton_shapes(
+    d: &Data,
+    st: &mut Structure,
+    cur: &mut Fit,
+    shaped: &[usize],
+    scales: &Scales,
+    iterations: usize,
+) {
     const H: f64 = 1e-3;
-    for _ in 0..if regrid { POLISH_ITERATIONS } else { POLISH_ITERATIONS / 2 } {
+    for _ in 0..iterations {
         let mut cols = fit::columns(d, st);
         let p = cols.len();
-        for &j in &shaped {
+        for &j in shaped {
             let mut up = st.clone();
             up.terms[j] = scaled(st.terms[j], H.exp());
             let moved = fit::columns(d, &up).swap_remove(j + 2);
@@ -98,8 +140,8 @@ pub(crate) fn polish(
             for (m, &j) in shaped.iter().enumerate() {
                 trial.terms[j] = scaled(st.terms[j], step[m].exp());
             }
-            // The surface position's column stays in the fit: it is moved into the structure once, below.
-            if step.iter().all(|x| x.is_finite()) && within_bounds(&trial) {
+            // The surface position's column stays in the fit: it is moved into the structure once, after.
+            if step.iter().all(|x| x.is_finite()) && within_bounds(&trial, scales) {
                 let ft = fit::fit(d, &trial);
                 if ft.sse < cur.sse {
                     *st = trial;
@@ -114,9 +156,12 @@ pub(crate) fn polish(
             break;
         }
     }
-    // Where an adhesion lets go is a step of its column: Gauss–Newton sees only its smooth part, so its
-    // range gets a golden-section search of its own, the other shapes held.
-    for &j in &shaped {
+}
+
+/// Where an adhesion lets go is a step of its column: Gauss–Newton sees only its smooth part, so its range
+/// gets a golden-section search of its own, the other shapes held.
+fn search_adhesion_ranges(d: &Data, st: &mut Structure, cur: &mut Fit, shaped: &[usize], scales: &Scales) {
+    for &j in shaped {
         let Term::Adhesion(range) = st.terms[j] else { continue };
         let (lo, hi) = (scales.adhesion_ranges.0.max(range / 2.0), scales.adhesion_ranges.1.min(range * 2.0));
         if lo < hi {
@@ -135,18 +180,6 @@ pub(crate) fn polish(
             }
         }
     }
-    if cur.sse >= start_sse {
-        return false;
-    }
-    *st = refine_surface(d, st).0;
-    *cur = fit::fit(d, st);
-    for &j in &shaped {
-        let (Some((fam, before)), Some((_, after))) = (shape_of(start[j]), shape_of(st.terms[j])) else { continue };
-        if let Some(slot) = order.iter_mut().find(|x| x.0 == fam && x.1 == before) {
-            slot.1 = after;
-        }
-    }
-    true
 }
 
 /// The family and shape of a term [`polish`] refines (a relaxation's τ, a hysteresis' v₀, an adhesion's
