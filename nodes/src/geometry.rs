@@ -1,74 +1,10 @@
-//! The contact's geometry (one description for every node and tool), geometry_msgs ↔ nalgebra, and the
-//! fixed frames below the tool from /tf_static.
+//! geometry_msgs ↔ nalgebra and the fixed frames below the tool from /tf_static. The contact's geometry
+//! itself (eqs. 8–10 of the force-control paper) is the control crate's [`ContactGeometry`].
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+pub use softcontact_control::contact_task::{ContactGeometry, lwr4_tool_to_sensor};
 use softcontact_msgs::geometry_msgs::{Pose, Vector3 as Vector3Msg};
 use softcontact_msgs::tf2_msgs::TFMessage;
-
-/// The force-control paper's contact geometry (eqs. 8–10 and 12): the contact direction n in the world (the way the
-/// hand moves to compress the surface) and the sensor's mounting. The sensor reads the force F the
-/// surface exerts on the hand in its own frame; in the world that is R_world←tool · R_tool←sensor · F,
-/// and the normal force is f = −F·n (≥ 0 in contact: the surface pushes back against n). Deformation and
-/// rate are the hand's position and velocity along n from where the undeformed surface lies.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ContactGeometry {
-    normal: Vector3<f64>,
-    /// The sensor frame's rotation in the tool frame (/tf_static, or the URDF).
-    pub tool_to_sensor: UnitQuaternion<f64>,
-}
-
-impl ContactGeometry {
-    /// `normal` is normalised; `None` for a zero or non-finite direction.
-    pub fn new(normal: Vector3<f64>, tool_to_sensor: UnitQuaternion<f64>) -> Option<Self> {
-        let normal = normal.try_normalize(1e-9).filter(|n| n.iter().all(|v| v.is_finite()))?;
-        Some(Self { normal, tool_to_sensor })
-    }
-
-    /// The LWR IV's: the sensor mounted as the URDF says.
-    pub fn lwr4(normal: Vector3<f64>) -> Option<Self> {
-        Self::new(normal, lwr4_tool_to_sensor().rotation)
-    }
-
-    pub fn normal(&self) -> Vector3<f64> {
-        self.normal
-    }
-
-    /// The sensor's orientation in the world (sensor → world) for the tool's.
-    pub fn sensor_rotation(&self, tool_rotation: &UnitQuaternion<f64>) -> UnitQuaternion<f64> {
-        tool_rotation * self.tool_to_sensor
-    }
-
-    /// The force on the hand in the world, from the sensor's reading in its frame.
-    pub fn world_force(&self, tool_rotation: &UnitQuaternion<f64>, force_in_sensor: &Vector3<f64>) -> Vector3<f64> {
-        self.sensor_rotation(tool_rotation) * force_in_sensor
-    }
-
-    /// The reading along the normal, −F·n, unclamped (in free space: the sensor's noise and bias).
-    pub fn normal_reading(&self, world_force: &Vector3<f64>) -> f64 {
-        -world_force.dot(&self.normal)
-    }
-
-    /// The contact's normal force f = max(−F·n, 0).
-    pub fn normal_force(&self, world_force: &Vector3<f64>) -> f64 {
-        self.normal_reading(world_force).max(0.0)
-    }
-
-    /// A position's or velocity's component along n (deformation and its rate, from the surface's).
-    pub fn along(&self, v: &Vector3<f64>) -> f64 {
-        v.dot(&self.normal)
-    }
-}
-
-/// The sensor frame's pose in the tool frame of the LWR IV, from the URDF (/tf_static carries the same):
-/// the one tool → sensor transform of the product.
-pub fn lwr4_tool_to_sensor() -> Isometry3<f64> {
-    use softcontact_dynamics::lwr4;
-    let model = lwr4::model();
-    let mut data = model.data();
-    model.forward_kinematics(&mut data, &[0.0; 7]);
-    let frame = |name| model.frame_id(name).expect("the LWR IV model has its tool and sensor frames");
-    model.frame_pose(&data, frame(lwr4::TOOL_FRAME)).inverse() * model.frame_pose(&data, frame(lwr4::FT_SENSOR_FRAME))
-}
 
 pub fn vector_of(v: &Vector3Msg) -> Vector3<f64> {
     Vector3::new(v.x, v.y, v.z)

@@ -182,21 +182,20 @@ pub fn hold_request(joint_names: &[String], answered: &Header) -> JointState {
     JointState { effort: Vec::new(), ..torque_command(joint_names, &[0.0; 7], answered) }
 }
 
-impl ControllerState {
-    pub fn to_msg(&self, stamp: Time) -> ControllerStateMsg {
-        ControllerStateMsg {
-            header: header("world", stamp),
-            f_cmd: self.f_cmd,
-            z_cmd: self.z_cmd,
-            zdot_cmd: self.zdot_cmd,
-            z: self.z,
-            zdot: self.zdot,
-            f: self.f,
-            f_predicted: self.f_predicted,
-            in_contact: self.in_contact,
-            contact_lost: self.contact_lost,
-            force_limited: self.force_limited,
-        }
+/// /deformation_controller/state for the law's state of one tick.
+pub fn controller_state(state: &ControllerState, stamp: Time) -> ControllerStateMsg {
+    ControllerStateMsg {
+        header: header("world", stamp),
+        f_cmd: state.f_cmd,
+        z_cmd: state.z_cmd,
+        zdot_cmd: state.zdot_cmd,
+        z: state.z,
+        zdot: state.zdot,
+        f: state.f,
+        f_predicted: state.f_predicted,
+        in_contact: state.in_contact,
+        contact_lost: state.contact_lost,
+        force_limited: state.force_limited,
     }
 }
 

@@ -85,7 +85,11 @@ impl Observer for Recorder {
         }
         // The nodes' state topics at their 100 Hz.
         if self.ticks.is_multiple_of(10) {
-            self.writer.write(c.controller_state, ns, &tick.controller.to_msg(t))?;
+            self.writer.write(
+                c.controller_state,
+                ns,
+                &softcontact_nodes::messages::controller_state(&tick.controller, t),
+            )?;
             self.writer.write(c.estimator_state, ns, &tick.estimator.to_msg(t))?;
         }
         self.ticks += 1;

@@ -389,7 +389,9 @@ impl ControllerInterface {
                 errors +=
                     u64::from(self.torque_pub.publish(messages::torque_command(&self.names, tau, header)).is_err());
                 if control.counters.ticks.is_multiple_of(self.state_every) {
-                    errors += u64::from(self.state_pub.publish(step.state.to_msg(header.stamp)).is_err());
+                    errors += u64::from(
+                        self.state_pub.publish(messages::controller_state(&step.state, header.stamp)).is_err(),
+                    );
                 }
             }
             Reply::Hold(e) => {

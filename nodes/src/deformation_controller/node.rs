@@ -210,7 +210,6 @@ pub struct ControllerNode {
     /// The control law.
     pub law: DeformationController,
     policy: Policy,
-    geometry: ContactGeometry,
     kinematics: (Model, Data, FrameId),
     /// The newest force reading in the sensor frame and when it arrived (`now`).
     force: Option<(Vector3<f64>, f64)>,
@@ -236,7 +235,6 @@ pub struct ControllerNode {
 impl ControllerNode {
     /// The node with its parameters (checked by `Params::validate` when loaded) around `law`.
     pub fn new(params: &Params, law: DeformationController) -> Result<Self, ControlError> {
-        let geometry = ContactGeometry::lwr4(Vector3::from(params.normal)).ok_or(ControlError::ZeroNormal)?;
         let model = lwr4::model();
         let tool = model.frame_id(lwr4::TOOL_FRAME)?;
         let data = model.data();
@@ -249,7 +247,6 @@ impl ControllerNode {
                 model_update: params.model_update,
                 retarget_duration: params.retarget_duration,
             },
-            geometry,
             kinematics: (model, data, tool),
             force: None,
             newest_force_stamp: f64::NEG_INFINITY,
@@ -280,8 +277,9 @@ impl ControllerNode {
         Ok(node)
     }
 
+    /// The contact's geometry: the law's.
     pub fn geometry(&self) -> &ContactGeometry {
-        &self.geometry
+        self.law.geometry()
     }
 
     /// A force reading of the sensor in its own frame (/ft_sensor/wrench: tared, the hand's weight
@@ -447,11 +445,11 @@ impl ControllerNode {
         let (model, data, tool) = &mut self.kinematics;
         let force_world = if js.q.iter().all(|v| v.is_finite()) {
             model.forward_kinematics(data, &js.q);
-            self.geometry.world_force(&model.frame_pose(data, *tool).rotation, &force_in_sensor)
+            self.law.geometry().world_force(&model.frame_pose(data, *tool).rotation, &force_in_sensor)
         } else {
             Vector3::repeat(f64::NAN)
         };
-        let f = self.geometry.normal_force(&force_world);
+        let f = self.law.geometry().normal_force(&force_world);
         // The sensor against the arm's joint torques, on every tick that has both.
         let arm_torque = self.external_torque.filter(|(at, _)| (js.stamp - at).abs() <= self.policy.stale_after);
         let Some((_, arm_torque)) = arm_torque else {
@@ -463,7 +461,7 @@ impl ControllerNode {
             model.frame_jacobian(data, *tool, Axes::World, &mut self.jacobian);
             // Near a singularity the torques say nothing of the force: no comparison, no disagreement.
             let arm = ForceCheck::arm_force(&self.jacobian, &arm_torque);
-            self.law.observe_arm_force(arm.map(|a| self.geometry.normal_force(&a)));
+            self.law.observe_arm_force(arm.map(|a| self.law.geometry().normal_force(&a)));
             match arm {
                 Some(arm) => {
                     let tripped_before = self.force_check.error().is_some();
