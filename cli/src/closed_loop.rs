@@ -263,7 +263,7 @@ fn replay(
             let geometry = cell.controller.geometry();
             out.t.push(t);
             out.force.push(geometry.normal_reading(&tick.force_world));
-            out.deformation.push((cell.sim.tool_pose().translation.vector - identified).dot(&normal));
+            out.deformation.push(geometry.deformation(&cell.sim.tool_pose().translation.vector, &identified));
             out.q.push(tick.driver.q);
         }
     }

@@ -105,11 +105,11 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 }
                 if let Some(p) = pairing.force(stamp, geometry::vector_of(&w.wrench.force)) {
                     t.push(stamp);
-                    zs.push((p.position - surface).dot(&n));
-                    zdot.push(p.velocity.dot(&n));
+                    let contact = &pairing.geometry;
+                    zs.push(contact.deformation(&p.position, surface));
+                    zdot.push(contact.rate(&p.velocity));
                     f.push(p.normal_reading);
-                    let along = p.force.dot(&n);
-                    tangential.push((p.force - along * n).into());
+                    tangential.push(contact.across(&p.force).into());
                     let now = rows(&p.sensor_rotation);
                     newest = Some(now);
                     positions.push(p.position.into());

@@ -65,7 +65,8 @@ pub struct ModelOut {
 
 pub struct ContactEstimatorNode {
     config: EstimatorConfig,
-    normal: Vector3<f64>,
+    /// The contact direction (eqs. 9–10: deformation and rate along it).
+    geometry: ContactGeometry,
     onset: OnsetDetector,
     contact: Option<(f64, Vector3<f64>)>,
     window: WindowEstimator,
@@ -92,9 +93,7 @@ pub struct RefitSchedule {
 
 impl ContactEstimatorNode {
     pub fn new(config: EstimatorConfig) -> Result<Self, ContactError> {
-        let normal = config
-            .normal
-            .try_normalize(1e-9)
+        let geometry = ContactGeometry::lwr4(config.normal)
             .ok_or_else(|| ContactError::InvalidConfig("the contact normal must not be zero".into()))?;
         if !(config.sample_period.is_finite() && config.sample_period > 0.0) {
             return Err(ContactError::InvalidConfig("sample period must be positive".into()));
@@ -106,7 +105,7 @@ impl ContactEstimatorNode {
             next_sample: 0.0,
             refits: None,
             structure: None,
-            normal,
+            geometry,
             config,
         })
     }
@@ -169,11 +168,11 @@ impl ContactEstimatorNode {
         velocity: &Vector3<f64>,
         normal_force: f64,
     ) -> Result<ContactStateOut, ContactError> {
-        let along = position.dot(&self.normal);
+        let along = self.geometry.along(position);
         if let Some(event) = self.onset.update(along, normal_force)? {
             match event {
                 OnsetEvent::Contact { position: level } if self.contact.is_none() => {
-                    self.contact = Some((level, position - (along - level) * self.normal));
+                    self.contact = Some((level, position - (along - level) * self.geometry.normal()));
                 }
                 _ => {}
             }
@@ -183,7 +182,7 @@ impl ContactEstimatorNode {
         };
         let out = ContactStateOut {
             deformation: along - level,
-            deformation_rate: velocity.dot(&self.normal),
+            deformation_rate: self.geometry.rate(velocity),
             normal_force,
             in_contact: self.onset.in_contact(),
         };
@@ -224,7 +223,7 @@ impl ContactEstimatorNode {
                 let timed: Vec<TimedSample> = self.window.timed_samples().collect();
                 let fitted = match surface {
                     Some(p) => {
-                        let offset = (p - onset_point).dot(&self.normal);
+                        let offset = self.geometry.deformation(p, &onset_point);
                         (offset, fit_with_effects_at(&timed, structure, offset)?)
                     }
                     None => fit_with_effects(&timed, structure, self.config.offset_range)?,
@@ -248,7 +247,7 @@ impl ContactEstimatorNode {
         Ok(ModelOut {
             model,
             offset,
-            contact_position: onset_point + offset * self.normal,
+            contact_position: onset_point + offset * self.geometry.normal(),
             window_fill: self.window_fill(),
             stiffness_excited: !chosen.stiffness_held,
             damping_excited: !chosen.damping_held,
