@@ -56,8 +56,8 @@ fn main() -> anyhow::Result<()> {
         outcome
     })?;
     let controller = InProcessController::new(&controller_params, controller_declared, forces)?;
-    let links = lwr_driver::component::Links { controller: Some(controller), poses: Some(poses) };
-    let driven = lwr_driver::component::run(driver_params, driver_declared, links, Arc::clone(&stop));
+    let composed = |_: &mut _| Ok(controller);
+    let driven = lwr_driver::component::run(driver_params, driver_declared, composed, Some(poses), Arc::clone(&stop));
     stop.store(true, Ordering::Relaxed);
     let sensed = ft.join().map_err(|_| anyhow::anyhow!("the ft_sensor thread panicked"))?;
     driven.context("lwr_driver")?;

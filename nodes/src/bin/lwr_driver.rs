@@ -6,6 +6,7 @@
 //! the arm, and the driver logs an error once and reports ERROR on /diagnostics; it never exits for it.
 
 use clap::Parser;
+use softcontact_nodes::lwr_driver::commander::TopicCommands;
 use softcontact_nodes::lwr_driver::{Params, component};
 use softcontact_nodes::params::{self, ParamArgs};
 use softcontact_nodes::ros;
@@ -23,5 +24,5 @@ struct Args {
 fn main() -> anyhow::Result<()> {
     ros::init_logging("lwr_driver");
     let (p, declared) = params::load::<Params>("lwr_driver", &Args::parse().params)?;
-    component::run(p, declared, component::Links::default(), ros::shutdown_flag()?)
+    component::run(p, declared, TopicCommands::new, None, ros::shutdown_flag()?)
 }

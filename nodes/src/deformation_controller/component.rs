@@ -12,9 +12,12 @@ use softcontact_msgs::std_msgs::Header;
 
 use super::{ControllerInterface, ControllerNode, JointSample, Params, Reply, Step};
 use crate::handover::{ForceReading, Latest};
+use crate::lwr_driver::commander::{Answered, Commander};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
 use crate::messages::DriverSession;
 use crate::ros::LogLevel;
+use ros2_client::Node;
+use softcontact_msgs::sensor_msgs::JointState;
 
 pub struct InProcessController {
     pub control: ControllerNode,
@@ -44,17 +47,26 @@ impl InProcessController {
     fn seconds(&self, t: Instant) -> f64 {
         t.saturating_duration_since(self.start).as_secs_f64()
     }
+}
+
+/// Composed, the controller answers each measurement itself: nobody else may command the arm, and the
+/// external torque reaches it in memory (no fifth message a cycle on the FRI thread).
+impl Commander for InProcessController {
+    fn in_process(&self) -> bool {
+        true
+    }
 
     /// Models, force commands and goals that arrived (between cycles, never between a measurement and
     /// its answer).
-    pub fn take_inputs(&mut self) {
+    fn take_inputs(&mut self) {
         self.topics.take_inputs(&mut self.control);
     }
 
     /// The answer to the measurement `out`, stamped `stamp` on the driver's clock, handed to `driver`:
     /// a torque for this very measurement, or a hold at once (a failed tick, no fresh force). Allocates
     /// nothing.
-    pub fn respond(&mut self, driver: &mut LwrDriver, out: &DriverOutput, stamp: f64) {
+    fn answer(&mut self, _: &Node, driver: &mut LwrDriver, out: &DriverOutput, stamp: Time) -> Answered {
+        let stamp = stamp.as_secs_f64();
         match self.forces.get() {
             Some(r) => self.control.on_force(r.stamp, r.force, self.seconds(r.arrived)),
             None => self.control.force_withheld(),
@@ -75,13 +87,18 @@ impl InProcessController {
             Reply::Hold(_) | Reply::Nothing(_) => driver.clear_command(),
         }
         self.last = Some((step, stamp, session));
+        Answered { command_stamp: Some(stamp), ..Default::default() }
     }
 
     /// After the answer went: the torque command and the state on their topics, the press's progress,
     /// and what is worth a log line.
-    pub fn publish(&mut self, stamp: Time) -> u64 {
+    fn publish(&mut self, stamp: Time, _: JointState) -> u64 {
         let Some((step, _, session)) = self.last.take() else { return 0 };
         let header = Header { stamp, frame_id: session.to_frame_id() };
         self.topics.publish(&self.control, &step, &header, session.commanding)
+    }
+
+    fn exit_report(&self) {
+        eprintln!("deformation_controller: exit: {}", self.control.counters);
     }
 }

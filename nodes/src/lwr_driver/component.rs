@@ -11,11 +11,11 @@ use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 
-use super::{DriverCounters, DriverError, DriverOutput, LwrDriver, Params, Refusals, Waiting};
-use crate::deformation_controller::InProcessController;
+use super::commander::Commander;
+use super::{DriverCounters, DriverOutput, Params, Refusals, Waiting};
 use crate::handover::{Latest, ToolPose};
 use crate::liveness::{DeadStream, StreamWatch};
-use crate::messages::{self, DriverSession};
+use crate::messages;
 use crate::realtime;
 use crate::ros::{self, LogLevel};
 use crate::stats::Histogram;
@@ -96,29 +96,22 @@ fn diagnostics(
     )
 }
 
-/// What the driver shares with the components of its process, when composed (`lwr_control`).
-#[derive(Default)]
-pub struct Links {
-    /// The controller answering each measurement on this thread; without it the driver takes
-    /// /lwr/joint_torque_command from the network.
-    pub controller: Option<InProcessController>,
-    /// The newest tool pose, for the F/T node.
-    pub poses: Option<Arc<Latest<ToolPose>>>,
-}
-
-/// The node until `stop` is set (or it exits after a silence): the binary's `main`, and the FRI thread of
-/// `lwr_control`.
-pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
-    let Links { mut controller, poses } = links;
-    let mut client = FriClient::bind(p.fri_bind, LwrDriver::new(p.clone()))?;
+/// The node until `stop` is set (or it exits after a silence): the binary's `main` with
+/// [`TopicCommands`](super::commander::TopicCommands), and the FRI thread of `lwr_control` with the
+/// controller composed. Each cycle: read the measurement, the commander's answer, write it; then the
+/// commander's and the driver's messages. `commander` is made with the driver's node; `poses` takes the
+/// newest tool pose for the F/T node, when composed.
+pub fn run<C: Commander>(
+    p: Params,
+    declared: crate::params::Declared,
+    commander: impl FnOnce(&mut ros2_client::Node) -> anyhow::Result<C>,
+    poses: Option<Arc<Latest<ToolPose>>>,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
+    let mut client = FriClient::bind(p.fri_bind, super::LwrDriver::new(p.clone()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;
     let joint_states = ros::publisher(&mut node, &topics::JOINT_STATES, ros::sensor_qos())?;
-    // For a controller of its own; composed, the controller has the estimate in memory, and the FRI
-    // thread's share of two cores is spared a fifth message a cycle.
-    let external_torque = match controller {
-        None => Some(ros::publisher(&mut node, &topics::EXTERNAL_TORQUE, ros::sensor_qos())?),
-        Some(_) => None,
-    };
+    let mut commander = commander(&mut node)?;
     let ee_pose = ros::publisher(&mut node, &topics::EE_POSE, ros::sensor_qos())?;
     let ee_twist = ros::publisher(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
     let tf = ros::publisher(&mut node, &topics::TF, ros::tf_qos())?;
@@ -129,11 +122,6 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         false => None,
     };
     let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
-    // Composed, the controller answers in process: nobody else may command the arm.
-    let commands = match controller {
-        None => Some(ros::subscription(&mut node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?),
-        Some(_) => None,
-    };
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
@@ -178,9 +166,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     // Cycles answered with a held command once the controller first commanded (start-up excluded).
     let mut stale_at_first_command: Option<u64> = None;
     while !ros::stopping(&stop) {
-        if let Some(c) = controller.as_mut() {
-            c.take_inputs();
-        }
+        commander.take_inputs();
         // The measurement's stamp: the controller answers it, and the joint state carries it.
         let mut measured_at = None;
         let mut sign_of_life = false;
@@ -190,34 +176,11 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             // datagram, and a repeated stamp would leave the measurement unanswered.
             let stamp = if p.use_sim_time { Time::from_secs_f64(out.krc_time) } else { clock.now() };
             measured_at = Some(stamp);
-            if let Some(c) = controller.as_mut() {
-                c.respond(driver, out, stamp.as_secs_f64());
-            }
-            // A controller of its own: the newest torque command, taken now, just before the answer — so
-            // that the command for the previous measurement has had the whole cycle to arrive.
-            // A bad one is refused and counted, the previous one stays. A command must answer a joint
-            // state of the present KRC session, within the watchdog's age by that joint state's stamp
-            // (the driver's own clock); an empty one asks for a hold.
-            // Only the session's pinned writer commands (crate::writer_pin).
-            while let Some(Ok(Some((cmd, info)))) = commands.as_ref().map(|c| c.take()) {
-                let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
-                let age = stamp.as_secs_f64() - cmd.header.stamp.as_secs_f64();
-                let writer = info.publisher_gid().to_bytes16();
-                let writers = || commands.as_ref().map_or(0, |c| c.get_publisher_count(&node));
-                let taken = driver.set_remote_command(&cmd.effort, session, age, writer, writers);
-                // A live controller answers the present session in time (a hold request included); a
-                // backlog delivered after a stall, another session's commands, or a stranger's, are no sign
-                // of life.
-                if !matches!(
-                    taken,
-                    Err(DriverError::TooOld(..) | DriverError::OtherSession(..) | DriverError::Writer(_))
-                ) {
-                    sign_of_life = true;
-                }
-                match taken {
-                    Ok(()) => command_stamp = Some(cmd.header.stamp.as_secs_f64()),
-                    Err(e) => refused = Some(e),
-                }
+            let answered = commander.answer(&node, driver, out, stamp);
+            sign_of_life = answered.sign_of_life;
+            refused = answered.refused;
+            if let Some(s) = answered.command_stamp {
+                command_stamp = Some(s);
             }
         })?;
         if sign_of_life {
@@ -256,23 +219,17 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
             if commanded {
                 stale_at_first_command.get_or_insert(client.driver.counters.stale_cycles);
             }
-            // The torque of a composed controller answered this very measurement.
-            if controller.is_some() && commanded {
-                command_stamp = Some(stamp.as_secs_f64());
-            }
             lag.measured(stamp.as_secs_f64());
             if let Some(t) = command_stamp.filter(|_| commanded) {
                 command_age.record(clock.now().as_secs_f64() - t);
                 lag.applied(t);
             }
-            if let Some(c) = controller.as_mut() {
-                publish_errors += c.publish(stamp);
-            }
             let m = out.messages(&names, stamp);
             // The KRC is answered already; a middleware error is counted, never the end of the driver.
-            // The external torque first: a controller of its own pairs it with the joint state by stamp.
+            // The commander's first: a controller of its own pairs the external torque with the joint
+            // state by stamp.
+            publish_errors += commander.publish(stamp, m.external_torque);
             let sent = [
-                external_torque.as_ref().is_none_or(|p| p.publish(m.external_torque).is_ok()),
                 joint_states.publish(m.joint_state).is_ok(),
                 ee_pose.publish(m.ee_pose).is_ok(),
                 ee_twist.publish(m.ee_twist).is_ok(),
@@ -288,7 +245,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         let now = start.elapsed().as_secs_f64();
         let krc_commands =
             last.as_ref().is_some_and(|o| o.torque_mode()) && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
-        if !krc_commands || controller.is_some() {
+        if !krc_commands || commander.in_process() {
             command_watch.not_due(now);
         }
         match (command_watch.dead(now), &commands_dead) {
@@ -341,9 +298,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
         command_age.summary(1e3, "ms")
     );
     eprintln!("lwr_driver: {lag}");
-    if let Some(c) = &controller {
-        eprintln!("deformation_controller: exit: {}", c.control.counters);
-    }
+    commander.exit_report();
     eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
 }
