@@ -343,7 +343,7 @@ pub struct LwrDriver {
     sample_time: f64,
     peer: Option<SocketAddr>,
     session: u32,
-    command: Option<([f64; 7], u64)>,
+    command: Option<Command>,
     /// The writer of the network's commands, pinned for the session.
     commander: WriterPin,
     hold: Option<Hold>,
@@ -482,6 +482,12 @@ impl LwrDriver {
     /// not 7 finite values within the joints' effort limits it is refused and the driver holds from the
     /// next cycle on (an empty command is the controller's way to ask for that hold).
     pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
+        self.take_command(effort, 0.0)
+    }
+
+    /// Takes a command `age` seconds old by the newest measurement's clock, if it is 7 finite torques
+    /// within the effort limits.
+    fn take_command(&mut self, effort: &[f64], age: f64) -> Result<(), DriverError> {
         let refused = if effort.len() != 7 {
             Some(DriverError::CommandLength(effort.len()))
         } else if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
@@ -495,7 +501,7 @@ impl LwrDriver {
             self.command = None;
             return Err(e);
         }
-        self.command = Some((std::array::from_fn(|i| effort[i]), self.cycle));
+        self.command = Some(Command { effort: std::array::from_fn(|i| effort[i]), at: self.cycle, age });
         Ok(())
     }
 
@@ -509,7 +515,9 @@ impl LwrDriver {
     /// middleware matched on the topic): it names the session of the joint state it answers and is `age`
     /// seconds old by that joint state's stamp. One from a writer other than the session's pinned one is
     /// refused and touches nothing; one from another session, or older than `max_command_age` (or stamped
-    /// as far in the future), is refused and the present command ages out as usual.
+    /// as far in the future), is refused and the present command ages out as usual. A command taken keeps
+    /// ageing: it answers no measurement once its stamp is older than `max_command_age`, even within the
+    /// watchdog's cycles.
     pub fn set_remote_command(
         &mut self,
         effort: &[f64],
@@ -533,7 +541,7 @@ impl LwrDriver {
             self.counters.commands_too_old += 1;
             return Err(DriverError::TooOld(age, bound));
         }
-        self.set_command(effort)
+        self.take_command(effort, age.max(0.0))
     }
 
     fn check_plausible(&self, m: &fri::Measurement) -> Result<(), DriverError> {
@@ -703,7 +711,7 @@ impl LwrDriver {
     pub fn answer(&mut self, measured: Measured) -> (fri::Command, DriverOutput) {
         let Measured { m, mut output } = measured;
         let (q, seq) = (output.q, output.sequence);
-        let fresh = self.command.filter(|(_, at)| self.cycle.saturating_sub(*at) <= self.config.watchdog_cycles);
+        let fresh = self.command.filter(|c| c.fresh(self.cycle, self.sample_time, &self.config)).map(|c| c.effort);
 
         let mut reply = fri::Command::default();
         self.send_seq = self.send_seq.wrapping_add(1);
@@ -720,7 +728,7 @@ impl LwrDriver {
         let waits = output.waiting.is_some_and(|w| !matches!(w, Waiting::Fault(_)));
         self.counters.waiting_cycles += u64::from(in_command && waits);
         let holding = match (output.waiting, fresh) {
-            (None, Some((effort, _))) => {
+            (None, Some(effort)) => {
                 for (i, total) in effort.iter().enumerate() {
                     // The KRC adds its own gravity model: send only the rest.
                     reply.add_jnt_trq[i] = (total - m.data.gravity[i] as f64) as f32;
@@ -797,6 +805,23 @@ impl LwrDriver {
             let inside = |x: f64| x >= lower + margin && x <= upper - margin;
             (!inside(q[i]) || !inside(ahead)).then_some(Fault::PositionLimit { joint: i + 1, position: q[i] })
         })
+    }
+}
+
+/// A command and its age: taken at cycle `at`, when its stamp was `age` seconds old.
+#[derive(Debug, Clone, Copy)]
+struct Command {
+    effort: [f64; 7],
+    at: u64,
+    age: f64,
+}
+
+impl Command {
+    /// Whether the command may still answer the measurement of `cycle`: at most `watchdog_cycles` after
+    /// it was taken, and its stamp then at most `max_command_age` old.
+    fn fresh(&self, cycle: u64, sample_time: f64, config: &Params) -> bool {
+        let cycles = cycle.saturating_sub(self.at);
+        cycles <= config.watchdog_cycles && self.age + cycles as f64 * sample_time <= config.max_command_age
     }
 }
 

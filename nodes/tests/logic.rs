@@ -167,6 +167,39 @@ fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
 }
 
 #[test]
+fn a_held_command_answers_no_measurement_once_its_stamp_is_older_than_max_command_age() {
+    // Commands arriving 15–19 ms old were reused for the watchdog's 5 cycles: applied at 24 ms old.
+    let mut d = LwrDriver::new(DriverParams::default());
+    d.accept_sender("127.0.0.1:40000".parse().unwrap(), f64::INFINITY);
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    let s = Some(d.session());
+    for arrival_age in [0.0155, 0.0175, 0.0195] {
+        d.set_remote_command(&[5.0; 7], s, arrival_age, CONTROLLER, || 1).unwrap();
+        let mut applied = 0;
+        for _ in 0..5 {
+            let seq = 2 + d.counters.measurements as u16;
+            let (reply, out) = d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap();
+            if !out.holding {
+                applied += 1;
+                assert!(reply.add_jnt_trq.iter().any(|t| *t != 0.0));
+            }
+        }
+        // Answered 1 ms apart from the cycle after its arrival on: applied while 20 ms old at most.
+        let expected = ((0.020 - arrival_age) / 0.001).floor() as usize;
+        assert_eq!(applied, expected, "a command {arrival_age} s old at arrival");
+    }
+    // The in-process controller's own command (age 0) is applied for the whole watchdog.
+    d.set_command(&[5.0; 7]).unwrap();
+    let held = (0..5)
+        .filter(|_| {
+            let seq = 2 + d.counters.measurements as u16;
+            d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().1.holding
+        })
+        .count();
+    assert_eq!(held, 0);
+}
+
+#[test]
 fn implausible_measurements_are_refused_unanswered() {
     // Safety class 8: sample time +inf disabled the overspeed guard; positions of 1e30 became the hold.
     let mut d = LwrDriver::new(DriverParams::default());

@@ -87,7 +87,7 @@ impl crate::params::NodeParams for Params {
             "max_command_age",
             self.max_command_age,
             (0.001, 0.1),
-            "a command answering a joint state older than this is refused [s]",
+            "a command answering a joint state older than this is refused, and one taken is applied no more once its stamp is older than this [s]",
         );
         d.integer(
             "watchdog_cycles",
