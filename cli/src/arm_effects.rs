@@ -19,11 +19,11 @@ use crate::identify_cmd::WRENCH;
 
 pub const JOINT_STATES: &str = topics::JOINT_STATES.name;
 pub const TORQUE_COMMAND: &str = topics::JOINT_TORQUE_COMMAND.name;
-/// A force reading above this means contact [N].
+/// A force reading above this means contact \[N\].
 pub const CONTACT: f64 = 1.0;
 /// The most samples analysed.
 pub const MAX_SAMPLES: usize = 20_000;
-/// Joint states waiting for their command are kept this long [ns]: memory stays bounded.
+/// Joint states waiting for their command are kept this long \[ns\]: memory stays bounded.
 const PAIRING_WINDOW: i64 = 1_000_000_000;
 
 fn stamp_ns(t: &softcontact_msgs::builtin_interfaces::Time) -> i64 {

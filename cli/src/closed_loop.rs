@@ -33,20 +33,20 @@ use crate::identify_cmd;
 
 const FORCE_COMMAND: &str = topics::FORCE_COMMAND.name;
 const JOINT_STATES: &str = topics::JOINT_STATES.name;
-/// The compared samples' spacing [s].
+/// The compared samples' spacing \[s\].
 const SAMPLE: f64 = 0.01;
-/// How long the replayed cell holds in contact before the first command [s].
+/// How long the replayed cell holds in contact before the first command \[s\].
 const SETTLE: f64 = 3.0;
 /// The most simulated seconds a replay runs (memory and time stay bounded whatever the recording).
 const MAX_SECONDS: f64 = 600.0;
 
-/// The recording's signals along one time axis, from its first force command [s].
+/// The recording's signals along one time axis, from its first force command \[s\].
 #[derive(Debug, Clone, Default)]
 struct Signals {
     t: Vec<f64>,
-    /// The sensor's reading along the normal [N].
+    /// The sensor's reading along the normal \[N\].
     force: Vec<f64>,
-    /// Deformation from the identified surface [m].
+    /// Deformation from the identified surface \[m\].
     deformation: Vec<f64>,
     q: Vec<[f64; 7]>,
 }
@@ -56,7 +56,7 @@ struct Signals {
 pub struct Gap {
     pub force_n: f64,
     pub deformation_m: f64,
-    /// Over all seven joints [rad].
+    /// Over all seven joints \[rad\].
     pub joints_rad: f64,
 }
 
@@ -116,8 +116,8 @@ pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// What the replay needs of the recording, read in one pass: every force command (time [s], force [N],
-/// duration [s]), the first joint state, and the joint angles in force at each of the workflow's samples
+/// What the replay needs of the recording, read in one pass: every force command (time \[s\], force \[N\],
+/// duration \[s\]), the first joint state, and the joint angles in force at each of the workflow's samples
 /// (the first joint state stamped at or after it; as many as the series has samples, so memory stays
 /// bounded with the series).
 struct Read {
@@ -186,7 +186,7 @@ fn recorded(q_at: &[[f64; 7]], analysis: &Analysis, t0: f64, t1: f64) -> anyhow:
 }
 
 /// Where the replay starts: the recording's first joint state, and the deformation it held at the first
-/// command [m].
+/// command \[m\].
 #[derive(Debug, Clone, Copy)]
 struct Start {
     q: [f64; 7],

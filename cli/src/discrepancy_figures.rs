@@ -16,15 +16,15 @@ use crate::table::prefix;
 pub struct Figures<'a> {
     /// Recording name, used in file names and titles.
     pub name: &'a str,
-    /// t [s], z [m] (deformation from the refitted surface; negative = free space), zdot [m/s], f [N] measured.
+    /// t \[s\], z \[m\] (deformation from the refitted surface; negative = free space), zdot [m/s], f \[N\] measured.
     pub series: &'a Series,
     /// Phase of each sample.
     pub phases: &'a [Phase],
-    /// Force predicted by the baseline model [N], per sample.
+    /// Force predicted by the baseline model \[N\], per sample.
     pub before: &'a [f64],
-    /// Force predicted by the augmented model [N], per sample.
+    /// Force predicted by the augmented model \[N\], per sample.
     pub after: &'a [f64],
-    /// σ [N].
+    /// σ \[N\].
     pub noise_floor: f64,
 }
 

@@ -37,19 +37,19 @@ pub struct IdentifyArgs {
     /// Contact direction in the world, the way the hand moves to compress the surface.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1", value_parser = crate::ranges::real(-1.0, 1.0, ""))]
     pub normal: Vec<f64>,
-    /// Onset threshold of the normal force [N]; default: 1 N for a recording (the force-control paper), from a table's own
+    /// Onset threshold of the normal force \[N\]; default: 1 N for a recording (the force-control paper), from a table's own
     /// free part for a table (10 noise σ above its free level, at least 2 % of its force range).
     #[arg(long, value_parser = crate::ranges::real(1e-15, 1e5, " N"))]
     pub onset: Option<f64>,
-    /// Time between the samples fitted [s]; default: 10 ms for a recording (the force-control paper), every sample of a
+    /// Time between the samples fitted \[s\]; default: 10 ms for a recording (the force-control paper), every sample of a
     /// table.
     #[arg(long, value_parser = crate::ranges::real(1e-7, 10.0, " s"))]
     pub sample_period: Option<f64>,
 }
 
-/// The onset threshold of a recording when `--onset` does not say (the force-control paper) [N].
+/// The onset threshold of a recording when `--onset` does not say (the force-control paper) \[N\].
 pub const RECORDING_ONSET: f64 = 1.0;
-/// The sample period of a recording's fits when `--sample-period` does not say (the force-control paper) [s].
+/// The sample period of a recording's fits when `--sample-period` does not say (the force-control paper) \[s\].
 pub const RECORDING_SAMPLE_PERIOD: f64 = 0.01;
 
 /// Reads the recording and identifies; `progress` is told the messages read so far.
@@ -116,7 +116,7 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
 }
 
 /// A measurement table identified: the identification, what its free part said, and where the surface is
-/// along the table's depth [m].
+/// along the table's depth \[m\].
 pub struct TableIdentification {
     pub id: Identification,
     pub onset: table::Onset,

@@ -31,15 +31,15 @@ const BANDWIDTH: f64 = 150.0;
 /// Approach and path speed [m/s] (quasi-static: the specimen's law has no rate), and the return's.
 const SPEED: f64 = 1e-3;
 const RETURN_SPEED: f64 = 5e-3;
-/// The sole starts this far above the specimen [m].
+/// The sole starts this far above the specimen \[m\].
 const HOVER: f64 = 0.3e-3;
-/// A sample every this much of the path [m] (the ideal bench's step).
+/// A sample every this much of the path \[m\] (the ideal bench's step).
 const SAMPLE_STEP: f64 = 5e-6;
 
 /// The experiments as the arm ran them, and how well the stage tracked.
 pub struct ArmRuns {
     pub runs: Vec<BenchRun>,
-    /// RMS and largest distance of the tool from its reference along the paths [m].
+    /// RMS and largest distance of the tool from its reference along the paths \[m\].
     pub tracking_rms: f64,
     pub tracking_max: f64,
     /// Simulated seconds.
@@ -48,11 +48,11 @@ pub struct ArmRuns {
 
 /// The hidden part of the cell (the truth; never read by the fits).
 pub struct HiddenErrors {
-    /// Standard deviation of the creep of the zero over one experiment [m].
+    /// Standard deviation of the creep of the zero over one experiment \[m\].
     pub creep_sd: f64,
-    /// The sensor's axes turned from the plate's in the loading plane [rad].
+    /// The sensor's axes turned from the plate's in the loading plane \[rad\].
     pub misalignment: f64,
-    /// White noise of each force axis [N].
+    /// White noise of each force axis \[N\].
     pub noise: f64,
     pub seed: u64,
 }

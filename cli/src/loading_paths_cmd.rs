@@ -22,7 +22,7 @@ use crate::{loading_paths_arm, loading_paths_figures, loading_paths_record};
 
 use softcontact_contact::N_PER_MM_1_5 as PER_MM;
 
-/// The deepest the found zero is searched for below the surface [m] (the snake paper's rule finds it ≈ 35 µm deep).
+/// The deepest the found zero is searched for below the surface \[m\] (the snake paper's rule finds it ≈ 35 µm deep).
 pub const MAX_ZERO_DEPTH: f64 = 100e-6;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -33,13 +33,13 @@ pub struct LoadingPathsArgs {
     /// The specimen's tangential law.
     #[arg(long, value_enum, default_value_t = LawArg::MindlinDeresiewicz)]
     law: LawArg,
-    /// Standard deviation of the creep of the zero over one experiment [µm].
+    /// Standard deviation of the creep of the zero over one experiment \[µm\].
     #[arg(long, default_value_t = 5.0, value_parser = crate::ranges::real(0.0, 1000.0, " µm"))]
     creep_um: f64,
     /// Sensor axes turned from the pushing axes in the loading plane [°].
     #[arg(long, default_value_t = 0.5, allow_hyphen_values = true, value_parser = crate::ranges::real(-45.0, 45.0, "°"))]
     misalignment_deg: f64,
-    /// White noise of each force channel [N].
+    /// White noise of each force channel \[N\].
     #[arg(long, default_value_t = 0.005, value_parser = crate::ranges::real(0.0, 10.0, " N"))]
     noise: f64,
     /// Write figures like the paper's Figs. 4–8 (paths, fits, convergence points) into this folder.
@@ -131,14 +131,14 @@ struct SetRow {
 struct Report {
     comparison: &'static str,
     stage: &'static str,
-    /// How far the arm's tool was from its reference along the paths (RMS, largest) [µm]; 0 for the
+    /// How far the arm's tool was from its reference along the paths (RMS, largest) \[µm\]; 0 for the
     /// ideal stage.
     tracking_rms_um: f64,
     tracking_max_um: f64,
     /// The RMS tracking error as a normal force error at 25 N (times the specimen's tangent stiffness
-    /// there, 1.5 k_n √δ) [N], beside Table I's mean absolute error.
+    /// there, 1.5 k_n √δ) \[N\], beside Table I's mean absolute error.
     tracking_force_equivalent: f64,
-    /// Wall time of the experiments [s], and the simulated time on the arm.
+    /// Wall time of the experiments \[s\], and the simulated time on the arm.
     wall_seconds: f64,
     simulated_seconds: f64,
     specimen_law: &'static str,
@@ -174,7 +174,7 @@ struct TangentialLawRow {
     mindlin_deresiewicz_cv_rms: f64,
     paths: usize,
     samples: usize,
-    /// How deep below the surface the found zero lies, fitted (Hertz with the zero's depth) [µm].
+    /// How deep below the surface the found zero lies, fitted (Hertz with the zero's depth) \[µm\].
     zero_depth_um: f64,
     /// The same, the simulator's truth: the mean over experiments (for grading; never read by the fits).
     true_zero_depth_um: f64,

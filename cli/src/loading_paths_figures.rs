@@ -55,7 +55,7 @@ fn file(out: &Path, name: &str) -> PathBuf {
     out.join(format!("loading_paths.{name}.svg"))
 }
 
-/// Fig. 5 and 7: the paths of the linear and two-segment families [mm].
+/// Fig. 5 and 7: the paths of the linear and two-segment families \[mm\].
 fn path_figure(out: &Path, paths: &[LoadingPath]) -> anyhow::Result<PathBuf> {
     let path = file(out, "paths");
     let root = SVGBackend::new(&path, (800, 600)).into_drawing_area();

@@ -22,11 +22,11 @@ use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::messages::transform;
 use softcontact_sim::BenchRun;
 
-/// Time between samples [ns] (1 kHz).
+/// Time between samples \[ns\] (1 kHz).
 const PERIOD_NS: u64 = 1_000_000;
 /// Free-space samples before and after each experiment.
 const FREE_SAMPLES: usize = 20;
-/// Height above the surface the tool starts and ends each experiment at [m].
+/// Height above the surface the tool starts and ends each experiment at \[m\].
 const LIFT: f64 = 1e-4;
 /// Stamps start here (2026-01-01, ns since the epoch), as a recording made on a bench would.
 const START_NS: u64 = 1_767_225_600_000_000_000;

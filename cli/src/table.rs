@@ -382,7 +382,7 @@ fn data_rows(path: &Path, rdr: &mut csv::Reader<Box<dyn std::io::Read>>) -> anyh
 }
 
 impl Table {
-    /// The median time between samples [s].
+    /// The median time between samples \[s\].
     pub fn sample_period(&self) -> f64 {
         let mut dt: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
         dt.sort_by(f64::total_cmp);
@@ -455,11 +455,11 @@ pub fn prefix(magnitude: f64) -> (&'static str, f64) {
 /// Where the contact begins, from the force alone: what the table's own free part says.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Onset {
-    /// The force read with nothing touching [N] (0 when the table starts in contact).
+    /// The force read with nothing touching \[N\] (0 when the table starts in contact).
     pub free_level: f64,
-    /// The free part's noise [N], from its first differences (a slow trend does not inflate it).
+    /// The free part's noise \[N\], from its first differences (a slow trend does not inflate it).
     pub noise: f64,
-    /// The force above the free level that counts as contact [N].
+    /// The force above the free level that counts as contact \[N\].
     pub threshold: f64,
     /// Samples before the contact (the free part), 0 when the table starts in contact.
     pub free_samples: usize,

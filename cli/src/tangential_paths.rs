@@ -22,11 +22,11 @@ use softcontact_nodes::geometry::{self, ContactGeometry};
 use crate::identify_cmd::{POSE, TF_STATIC, WRENCH};
 use crate::loading_paths_cmd::MAX_ZERO_DEPTH;
 
-/// The snake paper's zero: the third reading in a row above this normal force [N].
+/// The snake paper's zero: the third reading in a row above this normal force \[N\].
 pub const ZERO_THRESHOLD: f64 = 0.03;
-/// An episode whose tool moved less than this across the normal carries no tangential law [m].
+/// An episode whose tool moved less than this across the normal carries no tangential law \[m\].
 const MIN_SIDEWAYS: f64 = 20e-6;
-/// Samples kept this far apart in the (δ_n, δ_t) plane [m].
+/// Samples kept this far apart in the (δ_n, δ_t) plane \[m\].
 const SPACING: f64 = 40e-6;
 
 /// What the recording says about the tangential law.
@@ -34,7 +34,7 @@ const SPACING: f64 = 40e-6;
 pub struct TangentialReport {
     /// Hertz's k_n fitted to every episode [N/m^{3/2}].
     pub k_n: f64,
-    /// How far below the surface the zeros lie, fitted with k_n [m].
+    /// How far below the surface the zeros lie, fitted with k_n \[m\].
     pub zero_depth: f64,
     /// Episodes in contact, and those with sideways motion (the paths fitted).
     pub episodes: usize,

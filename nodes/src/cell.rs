@@ -33,7 +33,7 @@ pub enum CellError {
 /// What one cycle produced, once the KRC is in command mode.
 #[derive(Debug, Clone)]
 pub struct Tick {
-    /// Simulated time [s].
+    /// Simulated time \[s\].
     pub time: f64,
     pub driver: DriverOutput,
     pub ft: FtOutput,
@@ -41,7 +41,7 @@ pub struct Tick {
     pub tared: bool,
     /// The bias of a tare taken since the previous tick (the node publishes it on /ft_sensor/tare).
     pub tare: Option<[f64; 6]>,
-    /// The contact force on the hand in the world, from the sensor (zero until tared) [N].
+    /// The contact force on the hand in the world, from the sensor (zero until tared) \[N\].
     pub force_world: Vector3<f64>,
     pub controller: ControllerState,
     /// The torque sent to the driver; `None` when the controller's tick failed and the driver was asked

@@ -15,13 +15,13 @@ use softcontact_contact::{
 pub struct EstimatorConfig {
     /// Contact direction n in the world.
     pub normal: Vector3<f64>,
-    /// Time between window samples [s].
+    /// Time between window samples \[s\].
     pub sample_period: f64,
     /// Samples in the window.
     pub window: usize,
     pub onset: OnsetConfig,
     pub fit: FitConfig,
-    /// Where to look for the true surface relative to the onset position, along n [m].
+    /// Where to look for the true surface relative to the onset position, along n \[m\].
     pub offset_range: (f64, f64),
 }
 
@@ -78,16 +78,16 @@ pub struct ContactEstimatorNode {
     structure: Option<(ContactModel, Option<Vector3<f64>>)>,
 }
 
-/// The farthest a surface point may lie from the arm's base [m] (the LWR reaches 1.2 m).
+/// The farthest a surface point may lie from the arm's base \[m\] (the LWR reaches 1.2 m).
 pub const MAX_SURFACE_DISTANCE: f64 = 5.0;
 
-/// When the node refits on its own: every `period` [s] of reading time, once the window is at least
+/// When the node refits on its own: every `period` \[s\] of reading time, once the window is at least
 /// `min_window_fill` full (`Params::refit_period`, `min_window_fill`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefitSchedule {
     pub period: f64,
     pub min_window_fill: f64,
-    /// The reading time from which the next refit is due [s].
+    /// The reading time from which the next refit is due \[s\].
     pub next: f64,
 }
 
@@ -160,7 +160,7 @@ impl ContactEstimatorNode {
         Some(self.refit())
     }
 
-    /// One reading at time t [s]: tool position and velocity in the world, normal force f = −F·n.
+    /// One reading at time t \[s\]: tool position and velocity in the world, normal force f = −F·n.
     pub fn update(
         &mut self,
         t: f64,
@@ -500,11 +500,11 @@ pub struct ForcePairing {
 pub struct Paired {
     pub position: Vector3<f64>,
     pub velocity: Vector3<f64>,
-    /// The contact's normal force, f ≥ 0 [N].
+    /// The contact's normal force, f ≥ 0 \[N\].
     pub normal_force: f64,
-    /// The sensor's reading along the normal, unclamped [N]: in free space its noise and bias.
+    /// The sensor's reading along the normal, unclamped \[N\]: in free space its noise and bias.
     pub normal_reading: f64,
-    /// The whole force on the hand in the world [N] and the sensor's orientation (sensor → world).
+    /// The whole force on the hand in the world \[N\] and the sensor's orientation (sensor → world).
     pub force: Vector3<f64>,
     pub sensor_rotation: UnitQuaternion<f64>,
 }

@@ -1,7 +1,7 @@
 //! The deformation controller node: the contact task of the force-control paper
 //! ([`softcontact_control::contact_task`], the law and its equations) wired to ROS. One folder: the node's
-//! policy ([`node`]: what is ticked, with which force, what the driver is told), its parameters
-//! ([`params`]), its topics and action ([`interface`]) and the component that runs it in the driver's
+//! policy (`node`: what is ticked, with which force, what the driver is told), its parameters
+//! (`params`), its topics and action ([`interface`]) and the component that runs it in the driver's
 //! 1 kHz process ([`component`]).
 
 pub mod component;

@@ -28,7 +28,7 @@ pub struct FtConfig {
     /// The tool beyond the sensing frame (mass, centre of mass in the sensing frame).
     pub tool: BodyInertia,
     pub gravity: Vector3<f64>,
-    /// Low-pass cut-off [Hz] at `sample_rate`; `None` for no filter.
+    /// Low-pass cut-off \[Hz\] at `sample_rate`; `None` for no filter.
     pub low_pass: Option<f64>,
     pub sample_rate: f64,
 }
@@ -144,15 +144,15 @@ pub struct TarePolicy {
     /// Records the checks look back over (`bias_window` × rate).
     pub window: usize,
     /// The first tare of the node, when the sensor's own offset is unknown: |reading − hand's weight|
-    /// of the force at most this [N] (the sensor's offset plus any contact force).
+    /// of the force at most this \[N\] (the sensor's offset plus any contact force).
     pub max_offset: f64,
-    /// Any later tare: |force with the present tare, hand's weight removed| at most this [N].
+    /// Any later tare: |force with the present tare, hand's weight removed| at most this \[N\].
     pub max_force: f64,
-    /// Standard deviation of each force axis over the window at most this [N].
+    /// Standard deviation of each force axis over the window at most this \[N\].
     pub max_spread: f64,
-    /// Travel of the tool over the window at most this [m] (needs /lwr/ee_pose through the window).
+    /// Travel of the tool over the window at most this \[m\] (needs /lwr/ee_pose through the window).
     pub max_motion: f64,
-    /// Rotation of the tool over the window at most this [rad].
+    /// Rotation of the tool over the window at most this \[rad\].
     pub max_rotation: f64,
 }
 
@@ -162,7 +162,7 @@ impl Default for TarePolicy {
     }
 }
 
-/// Time between start-up tare attempts while they are refused [s].
+/// Time between start-up tare attempts while they are refused \[s\].
 pub const TARE_RETRY: f64 = 0.1;
 
 /// The start-up tare (the node's `tare_after`, one default for every host): once, `after` seconds after
@@ -531,7 +531,7 @@ impl FtSensorNode {
 /// forms such a run, and if the box's stream is lost the periodic start request restarts it anyway).
 pub const RESTART_RUN: usize = 50;
 
-/// The lowest low-pass cut-off the node accepts [Hz]. The controller feeds the force forward, and a
+/// The lowest low-pass cut-off the node accepts \[Hz\]. The controller feeds the force forward, and a
 /// 2nd-order Butterworth delays it by 0.225 / f_c: an adversarial run at 15 Hz (15 ms) made the hand
 /// slide 32 mm across the sponge under quick presses, at 5 Hz 73 mm with 892 overspeed cycles
 /// (`deformation_controller::node::tests::the_lowest_low_pass_the_sensor_accepts_keeps_the_hand_in_place`).

@@ -38,7 +38,7 @@ impl<T: Copy> Latest<T> {
 /// The F/T node's compensated force (/ft_sensor/wrench's force), in the sensor frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForceReading {
-    /// The sensor node's stamp [s].
+    /// The sensor node's stamp \[s\].
     pub stamp: f64,
     pub force: Vector3<f64>,
     /// When the record arrived.

@@ -8,7 +8,7 @@
 use std::fmt;
 use std::ops::RangeInclusive;
 
-/// The bounds of every node's `dead_after` parameter [s].
+/// The bounds of every node's `dead_after` parameter \[s\].
 pub const DEAD_AFTER_RANGE: RangeInclusive<f64> = 0.1..=60.0;
 
 /// Declares a node's `dead_after` parameter: a liveness time within [`DEAD_AFTER_RANGE`], above `lowest`.
@@ -27,9 +27,9 @@ pub enum Liveness {
     /// Never seen (or not due since it was last seen): no verdict; a node starting before its
     /// publishers is not a fault.
     NotYet,
-    /// Seen within `dead_after`; the silence so far [s].
+    /// Seen within `dead_after`; the silence so far \[s\].
     Alive(f64),
-    /// Seen once, then silent for longer than `dead_after` while due; the silence [s].
+    /// Seen once, then silent for longer than `dead_after` while due; the silence \[s\].
     Dead(f64),
 }
 
@@ -44,7 +44,7 @@ pub struct StreamWatch {
 }
 
 impl StreamWatch {
-    /// A watch of `topic`, due at `rate` [Hz], dead after `dead_after` [s] of silence.
+    /// A watch of `topic`, due at `rate` \[Hz\], dead after `dead_after` \[s\] of silence.
     pub fn new(topic: impl Into<String>, rate: f64, dead_after: f64) -> Self {
         Self { topic: topic.into(), rate, dead_after, last: None }
     }
@@ -53,7 +53,7 @@ impl StreamWatch {
         &self.topic
     }
 
-    /// A message arrived at `t` [s]. Times never go back (an earlier `t` is ignored).
+    /// A message arrived at `t` \[s\]. Times never go back (an earlier `t` is ignored).
     pub fn seen(&mut self, t: f64) {
         if t.is_finite() {
             self.last = Some(self.last.map_or(t, |l| l.max(t)));
@@ -73,7 +73,7 @@ impl StreamWatch {
         self.last = None;
     }
 
-    /// The verdict at `t` [s].
+    /// The verdict at `t` \[s\].
     pub fn check(&self, t: f64) -> Liveness {
         match self.last {
             None => Liveness::NotYet,
@@ -102,9 +102,9 @@ pub fn first_dead(watches: &[&StreamWatch], t: f64) -> Option<DeadStream> {
 #[derive(Debug, Clone, PartialEq)]
 pub struct DeadStream {
     pub topic: String,
-    /// Its rate [Hz].
+    /// Its rate \[Hz\].
     pub rate: f64,
-    /// How long it has been silent [s].
+    /// How long it has been silent \[s\].
     pub silence: f64,
 }
 

@@ -65,7 +65,7 @@ use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
 use crate::writer_pin::{WriterId, WriterPin, WriterRefused};
 
-/// How far beyond its limit a measured joint position is still believed [rad] (the KRC's software
+/// How far beyond its limit a measured joint position is still believed \[rad\] (the KRC's software
 /// limits lie inside the URDF's; more is a corrupt or forged datagram).
 pub const POSITION_MARGIN: f64 = 0.1;
 /// The hold's joint stiffness per joint [N·m/rad], lowest and highest: below, the hold does not hold
@@ -73,7 +73,7 @@ pub const POSITION_MARGIN: f64 = 0.1;
 /// KRC chatters at 500 Hz (5000 on joints 1–4 did, at every start).
 pub const HOLD_STIFFNESS: [(f64, f64); 7] =
     [(500.0, 3000.0), (500.0, 3000.0), (200.0, 1500.0), (200.0, 1500.0), (50.0, 500.0), (20.0, 300.0), (20.0, 300.0)];
-/// How far ahead the position-limit guard looks at the present joint velocity [s]: the hold's spring
+/// How far ahead the position-limit guard looks at the present joint velocity \[s\]: the hold's spring
 /// stops a joint within about this long (ω ≈ 30–80 rad/s at the hold's stiffness), so a joint moving
 /// into its last `limit_margin` is stopped before its limit, not after.
 pub const LIMIT_LOOKAHEAD: f64 = 0.05;
@@ -158,7 +158,7 @@ pub struct DriverCounters {
 pub enum Fault {
     /// Joint (from 1) at this velocity [rad/s], beyond `velocity_margin` of its limit.
     Overspeed { joint: usize, velocity: f64 },
-    /// Joint (from 1) at this position [rad] heading into its last `limit_margin`.
+    /// Joint (from 1) at this position \[rad\] heading into its last `limit_margin`.
     PositionLimit { joint: usize, position: f64 },
 }
 
@@ -195,7 +195,7 @@ pub enum Waiting {
     DriveError(u16),
     /// The link graded below OK.
     Quality(Quality),
-    /// The KRL program opened FRI at a cycle [s] slower than torque control is run at.
+    /// The KRL program opened FRI at a cycle \[s\] slower than torque control is run at.
     SlowCycle(f64),
     Fault(Fault),
 }
@@ -304,7 +304,7 @@ pub struct DriverOutput {
     pub sequence: u16,
     /// The KRC session this measurement belongs to (published with the joint state).
     pub session: u32,
-    /// The KRC's own clock (FRI `intf.timestamp`) [s], to the sample time: the simulated KRC keeps the
+    /// The KRC's own clock (FRI `intf.timestamp`) \[s\], to the sample time: the simulated KRC keeps the
     /// simulated time on it, the loop's clock in lockstep (`use_sim_time`), where /clock can lag the
     /// datagram. FRI sends it as f32: whole cycles stay exact for about 2 hours (2^13 s at 1 ms).
     pub krc_time: f64,
@@ -428,7 +428,7 @@ impl LwrDriver {
         }
     }
 
-    /// The KRC's cycle, from the newest measurement [s].
+    /// The KRC's cycle, from the newest measurement \[s\].
     pub fn sample_time(&self) -> f64 {
         self.sample_time
     }

@@ -308,7 +308,7 @@ pub struct Declared {
     pub remapping: crate::names::Remapping,
 }
 
-/// The largest parameter or model file read [bytes]: memory stays bounded whatever the path names.
+/// The largest parameter or model file read \[bytes\]: memory stays bounded whatever the path names.
 pub const MAX_FILE: u64 = 1 << 20;
 
 /// A YAML file's text: a regular file of at most [`MAX_FILE`] bytes nested at most [`MAX_NESTING`]
@@ -333,7 +333,7 @@ pub fn read_small(path: &Path) -> std::io::Result<String> {
 /// indentation, in levels. The deepest parameter is three levels down; a YAML parser takes time and
 /// stack in the depth, so a hostile file is refused before it is parsed.
 pub const MAX_NESTING: usize = 32;
-/// The widest block indentation of a parameter file's line [characters].
+/// The widest block indentation of a parameter file's line \[characters\].
 pub const MAX_INDENT: usize = 4 * MAX_NESTING;
 
 /// The text's nesting, if within [`MAX_NESTING`] levels of brackets and [`MAX_INDENT`] characters of

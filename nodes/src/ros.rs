@@ -129,7 +129,7 @@ pub fn stopping(flag: &AtomicBool) -> bool {
     flag.load(Ordering::Relaxed)
 }
 
-/// Peak resident memory of this process [MB] (Linux `VmHWM`), for the exit report.
+/// Peak resident memory of this process \[MB\] (Linux `VmHWM`), for the exit report.
 pub fn peak_rss_mb() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;

@@ -27,9 +27,9 @@ pub struct FriClient {
     socket: UdpSocket,
     pub driver: LwrDriver,
     /// Time from a measurement's arrival (the kernel's receive timestamp, SO_TIMESTAMPNS: scheduling
-    /// delays before `recv` returns count) to its answer leaving the driver for the kernel [s].
+    /// delays before `recv` returns count) to its answer leaving the driver for the kernel \[s\].
     pub reply_latency: Histogram,
-    /// Time the kernel takes to accept the answer (on loopback it also delivers it) [s].
+    /// Time the kernel takes to accept the answer (on loopback it also delivers it) \[s\].
     pub send_duration: Histogram,
     last_arrival: Option<Instant>,
 }

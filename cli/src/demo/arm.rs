@@ -36,9 +36,9 @@ const EXCITATION: f64 = 10.0;
 /// How the hand followed its references over one cycle of force commands.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct Tracking {
-    /// RMS of the deformation's distance from its reference [m].
+    /// RMS of the deformation's distance from its reference \[m\].
     pub deformation_rms: f64,
-    /// RMS of the hand's distance across the surface from where it is held [m].
+    /// RMS of the hand's distance across the surface from where it is held \[m\].
     pub lateral_rms: f64,
     /// The largest |true force − command| / command at the end of a move.
     pub worst_force_error: f64,

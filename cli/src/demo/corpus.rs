@@ -23,7 +23,7 @@ pub struct Case {
     pub name: String,
     pub truth: ContactModel,
     pub sensor: FtSensorConfig,
-    /// The base law's push range [m] and the controller's force limit [N].
+    /// The base law's push range \[m\] and the controller's force limit \[N\].
     pub push: (f64, f64),
     pub max_force: f64,
     /// The effect ids the workflow should name (empty: a null case).

@@ -23,11 +23,11 @@ pub struct SurfaceSpec {
     pub name: &'static str,
     /// What the simulator's surface is made of (the truth, effects included).
     pub truth: ContactModel,
-    /// Identification pushes between these deformations [m] (the force-control paper: up to 5 cm sponge, 7 cm dice).
+    /// Identification pushes between these deformations \[m\] (the force-control paper: up to 5 cm sponge, 7 cm dice).
     pub push: (f64, f64),
-    /// Identification pushes of the `--graph` run, by force commands: high and low [N].
+    /// Identification pushes of the `--graph` run, by force commands: high and low \[N\].
     pub push_forces: (f64, f64),
-    /// The controller's limits on this surface: force [N], deformation [m].
+    /// The controller's limits on this surface: force \[N\], deformation \[m\].
     pub max_force: f64,
     pub max_deformation: f64,
     /// The simulated F/T sensor (the demo's drifts as a Gamma warming up; tared before each experiment).
@@ -47,7 +47,7 @@ pub struct Plan {
     /// crosstalk and an unknown tool weight need, spread through the recording so that every fold of the
     /// workflow's cross-validation sees some.
     pub across: bool,
-    /// The hand starts this deep [m] in the surface instead of 4 cm above it, so that the start-up tare
+    /// The hand starts this deep \[m\] in the surface instead of 4 cm above it, so that the start-up tare
     /// takes the contact force for the sensor's zero, and control starts without a second tare: the
     /// whole recording then reads a constant offset (a sensor bias, as after a tare taken touching).
     pub start_pressed: Option<f64>,
@@ -84,13 +84,13 @@ pub struct CommandResult {
     pub cycle: usize,
     pub ratio: f64,
     pub command: f64,
-    /// The true normal contact force at the end of the move (the simulator's) [N].
+    /// The true normal contact force at the end of the move (the simulator's) \[N\].
     pub reached: f64,
-    /// The same as the F/T sensor read it (tared, gravity compensated) [N].
+    /// The same as the F/T sensor read it (tared, gravity compensated) \[N\].
     pub reached_measured: f64,
-    /// |reached − command| [N].
+    /// |reached − command| \[N\].
     pub error: f64,
-    /// |reached_measured − command| [N].
+    /// |reached_measured − command| \[N\].
     pub error_measured: f64,
     pub model: ModelUse,
     /// The stiffness of the model the command went through (JSON null: not known to the client).
@@ -103,7 +103,7 @@ fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> 
 }
 
 impl CommandResult {
-    /// Command `i` (from 0) of the force-control paper's sequence: its cycle (from 1), ratio and force [N].
+    /// Command `i` (from 0) of the force-control paper's sequence: its cycle (from 1), ratio and force \[N\].
     pub fn planned(i: usize, max_force: f64) -> (usize, f64, f64) {
         let cycle = i / 6 + 1;
         let ratio = RATIOS[usize::from(cycle == CYCLES)][i % 6];
@@ -141,7 +141,7 @@ pub struct Series {
     pub command: Vec<f64>,
 }
 
-/// One control experiment: the force over it (every 10 ms) and the times [s] its commands were sent.
+/// One control experiment: the force over it (every 10 ms) and the times \[s\] its commands were sent.
 #[derive(Debug, Clone, Default)]
 pub struct Control {
     pub series: Series,
@@ -208,7 +208,7 @@ impl Observer for NoObserver {
 
 const CYCLE: f64 = 1e-3;
 const RETREAT: f64 = -0.01;
-/// [`Plan::across`]: the lateral sway [m] (each way) and the tilt of the hand [rad] about y.
+/// [`Plan::across`]: the lateral sway \[m\] (each way) and the tilt of the hand \[rad\] about y.
 const SWAY: f64 = 0.008;
 const TILT: f64 = 0.35;
 
@@ -271,7 +271,7 @@ fn start<'a, O: Observer>(
 
 /// One long hold, as when a surface identified earlier is pressed again: the sensor tared out of contact
 /// at start-up, the hand lowered onto the surface, the controller given `model` (the surface where the
-/// simulator has it), one force command of `force` [N] over 2 s and a hold of `hold` seconds; the
+/// simulator has it), one force command of `force` \[N\] over 2 s and a hold of `hold` seconds; the
 /// recording ends in contact. Over such a hold a drifting sensor and a creeping surface read alike.
 pub fn run_hold(
     spec: &SurfaceSpec,

@@ -40,7 +40,7 @@ pub struct DemoArgs {
     #[arg(long, hide = true)]
     pub graph_client: Option<String>,
     /// (internal) the --graph client's second experiment, through the augmented model of the graph's
-    /// parameters, its commands planned from this maximum force [N].
+    /// parameters, its commands planned from this maximum force \[N\].
     #[arg(long, hide = true, requires = "graph_client", value_parser = crate::ranges::real(0.0, 1e6, ""))]
     pub graph_augmented: Option<f64>,
 }

@@ -3,9 +3,9 @@
 pub struct PaperSurface {
     /// Table I: fitness mean and standard deviation of Kelvin-Voigt, Hunt-Crossley, Azad-Featherstone.
     pub fitness: [(f64, f64); 3],
-    /// The maximum normal force of the identification experiments [N].
+    /// The maximum normal force of the identification experiments \[N\].
     pub max_force: f64,
-    /// Tables II/III: |command − actual| [N] per cycle and command (cycles 1–4: the first six ratios,
+    /// Tables II/III: |command − actual| \[N\] per cycle and command (cycles 1–4: the first six ratios,
     /// cycle 5: the second six).
     pub errors: [[f64; 6]; 5],
 }

@@ -45,7 +45,7 @@ pub struct SurfaceReport {
     pub fitness: BTreeMap<String, Fitness>,
     pub selected: String,
     pub identified: Identified,
-    /// The largest normal force of the identification [N]: commands are ratios of it.
+    /// The largest normal force of the identification \[N\]: commands are ratios of it.
     pub max_force: f64,
     /// Both control experiments' commands: `model` is `identified` or `augmented`.
     pub commands: Vec<CommandResult>,
@@ -62,7 +62,7 @@ pub struct Discrepancy {
     pub named: Vec<NamedEffect>,
     /// `none`, `unexplained` or `ambiguous`: what is left after them.
     pub remaining: String,
-    /// In-contact RMS of the identified model and of the augmented one [N], and the noise floor.
+    /// In-contact RMS of the identified model and of the augmented one \[N\], and the noise floor.
     pub rms_before: f64,
     pub rms_after: f64,
     pub noise_floor: f64,

@@ -22,7 +22,7 @@ use softcontact_msgs::RosType;
 use crate::metadata::{MetadataFile, Qos};
 use crate::{BagError, Result, cdr};
 
-/// The largest record read [bytes]: a chunk, compressed or decompressed, or a message or schema
+/// The largest record read \[bytes\]: a chunk, compressed or decompressed, or a message or schema
 /// outside chunks. Writers close chunks far below it (this crate at 1 MiB, `ros2 bag` at 768 KiB).
 pub const RECORD_LIMIT: u64 = 256 << 20;
 /// Opcode and length prefix of every record.

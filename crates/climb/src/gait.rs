@@ -49,7 +49,7 @@ pub struct ClimbConfig {
     pub links: usize,
     pub link_length: f64,
     pub link_mass: f64,
-    /// The grips' angle from the horizontal when both their feet just touch [rad]: the gap is
+    /// The grips' angle from the horizontal when both their feet just touch \[rad\]: the gap is
     /// l cos(angle) + 2R.
     pub opening_angle: f64,
     /// The rubber feet: the snake paper's 1-inch gum-rubber half-ball (R, kₙ, kₜ) on sandpaper (μ).
@@ -63,17 +63,17 @@ pub struct ClimbConfig {
     pub tangential_damping: f64,
     pub kp: f64,
     pub kd: f64,
-    /// How far past a wall a pressed foot's set point lies [m].
+    /// How far past a wall a pressed foot's set point lies \[m\].
     pub squeeze: f64,
-    /// How far from its wall a released foot's set point keeps it [m].
+    /// How far from its wall a released foot's set point keeps it \[m\].
     pub clearance: f64,
-    /// How far a grip moves up per cycle [m].
+    /// How far a grip moves up per cycle \[m\].
     pub step: f64,
-    /// How high to climb [m].
+    /// How high to climb \[m\].
     pub height: f64,
-    /// How long a set point takes to move to the next (smoothly) [s].
+    /// How long a set point takes to move to the next (smoothly) \[s\].
     pub move_time: f64,
-    /// The longest the snake is given to come to rest at a set point [s].
+    /// The longest the snake is given to come to rest at a set point \[s\].
     pub settle_time: f64,
     /// Whether each set point is followed by a small change that evens out the feet's use of their
     /// friction cones ([`stability::rebalance`]).
@@ -111,7 +111,7 @@ impl Default for ClimbConfig {
 }
 
 impl ClimbConfig {
-    /// The wall gap [m].
+    /// The wall gap \[m\].
     pub fn gap(&self) -> f64 {
         self.link_length * self.opening_angle.cos() + 2.0 * self.foot_radius
     }
@@ -183,7 +183,7 @@ pub struct SetPoint {
     pub name: String,
     pub pressed: Vec<usize>,
     pub joints: Vec<f64>,
-    /// The designed absolute angle of every link [rad].
+    /// The designed absolute angle of every link \[rad\].
     pub link_angles: Vec<f64>,
     /// The tripod that holds while the other moves (none for the first squeeze).
     pub holding: Option<Tripod>,
@@ -388,7 +388,7 @@ fn low_height(planner: &Planner) -> Result<f64, Error> {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SetPointReport {
     pub name: String,
-    /// The joint angles commanded [rad].
+    /// The joint angles commanded \[rad\].
     pub joints: Vec<f64>,
     /// The feet meant to press, and of them those pressed at the set point before too (meant to hold
     /// through the move).
@@ -396,14 +396,14 @@ pub struct SetPointReport {
     pub holding: Vec<usize>,
     /// Each foot's force, in the order of the feet along the chain.
     pub forces: Vec<FootForce>,
-    /// The same as [fₙ ≥ 0, fₜ signed, positive up the wall] [N], in the order of the feet.
+    /// The same as [fₙ ≥ 0, fₜ signed, positive up the wall] \[N\], in the order of the feet.
     pub contact_forces: Vec<[f64; 2]>,
     /// Each foot's cone margin 1 − |fₜ|/(μfₙ) (`None` off the walls).
     pub cone_margins: Vec<Option<f64>>,
     pub min_cone_margin: f64,
     /// The smallest cone margin of a foot meant to stay pressed through the move here.
     pub min_margin_on_the_way: f64,
-    /// How far each foot slid along its wall on the way here and while settling [m].
+    /// How far each foot slid along its wall on the way here and while settling \[m\].
     pub slip: Vec<f64>,
     /// Feet meant to stay pressed that slid farther than [`SLIP_TOLERANCE`].
     pub unintended_slides: Vec<usize>,
@@ -413,7 +413,7 @@ pub struct SetPointReport {
     /// ‖G‖∞ at the equilibrium after Newton [N, N m].
     pub residual: f64,
     pub stability: Stability,
-    /// Height of node 0 and of the centre of mass [m].
+    /// Height of node 0 and of the centre of mass \[m\].
     pub foot_height: f64,
     pub com_height: f64,
     pub q: Vec<f64>,
@@ -491,7 +491,7 @@ impl SetPointReport {
 
 /// The least cone margin a sound set point keeps: a tenth of the friction in reserve.
 pub const MIN_MARGIN: f64 = 0.1;
-/// The farthest a foot meant to hold may creep between two set points [m]: as a foot of a tripod lets
+/// The farthest a foot meant to hold may creep between two set points \[m\]: as a foot of a tripod lets
 /// go, the load it carried moves to the others, and an unloading neighbour creeps a fraction of a
 /// millimetre (reported per foot as `slip`).
 pub const SLIP_TOLERANCE: f64 = 1e-3;
@@ -502,7 +502,7 @@ pub struct Climb {
     pub config: ClimbConfig,
     pub gap: f64,
     pub set_points: Vec<SetPointReport>,
-    /// Height gained by node 0 and by the centre of mass from the first equilibrium to the last [m].
+    /// Height gained by node 0 and by the centre of mass from the first equilibrium to the last \[m\].
     pub climbed: f64,
     pub com_climbed: f64,
     /// Every set point sound and the height reached.

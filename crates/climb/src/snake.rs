@@ -43,11 +43,11 @@ impl Wall {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Snake {
     pub chain: PlanarChain,
-    /// Distance between the walls [m].
+    /// Distance between the walls \[m\].
     pub gap: f64,
     /// The nodes that carry a foot (every node on the climbing snake).
     pub feet: Vec<usize>,
-    /// The feet's radius R [m].
+    /// The feet's radius R \[m\].
     pub foot_radius: f64,
     /// The feet's contact law: Hertz normal force (`hertz_walton`, its damping λ) and a tangential law.
     pub contact: ContactModel,
@@ -71,11 +71,11 @@ pub struct FootState {
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct FootForce {
     pub wall: Option<Wall>,
-    /// Depth z [m].
+    /// Depth z \[m\].
     pub depth: f64,
-    /// fₙ ≥ 0 [N].
+    /// fₙ ≥ 0 \[N\].
     pub normal: f64,
-    /// fₜ [N], signed, positive up the wall (+y), on the snake.
+    /// fₜ \[N\], signed, positive up the wall (+y), on the snake.
     pub tangential: f64,
     /// |fₜ| = μfₙ: the foot slides.
     pub slides: bool,

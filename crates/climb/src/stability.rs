@@ -21,7 +21,7 @@ use serde::Serialize;
 use crate::Error;
 use crate::snake::{FootForce, Snake, State};
 
-/// Integration step of every simulation [s]: a twentieth of the fastest contact period of the default
+/// Integration step of every simulation \[s\]: a twentieth of the fastest contact period of the default
 /// snake (≈ 2 ms at 1 mm depth).
 pub const DT: f64 = 1e-4;
 /// "Stable": the largest real part of the eigenvalues is below this [1/s].
@@ -36,11 +36,11 @@ pub const PERTURBATION: f64 = 1e-5;
 /// How a settling ended.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Settled {
-    /// Simulated time to rest [s].
+    /// Simulated time to rest \[s\].
     pub time: f64,
     /// Whether every velocity fell below the rest speed (else the time limit ended it).
     pub at_rest: bool,
-    /// How far each foot slid on the way [m].
+    /// How far each foot slid on the way \[m\].
     pub slip: Vec<f64>,
 }
 
@@ -63,7 +63,7 @@ pub fn step_counting_slip(
 }
 
 /// Simulates the snake under a constant set point until every velocity stays below `rest_speed` [m/s,
-/// rad/s] for 50 ms, or for `max_time` [s].
+/// rad/s] for 50 ms, or for `max_time` \[s\].
 pub fn settle(snake: &Snake, state: &mut State, set_point: &[f64], max_time: f64) -> Result<Settled, Error> {
     let rest_speed = 1e-6;
     let (mut t, mut calm_since) = (0.0, 0.0);
@@ -215,7 +215,7 @@ pub struct Stability {
     pub eigenvalues: Vec<(f64, f64)>,
     /// Distance [m, rad, infinity norm] from the equilibrium at the end of the run from a perturbed start.
     pub return_distance: f64,
-    /// How long that run was [s], and its largest speed at the end [m/s, rad/s].
+    /// How long that run was \[s\], and its largest speed at the end [m/s, rad/s].
     pub return_time: f64,
     pub return_speed: f64,
     pub stable: bool,
@@ -251,7 +251,7 @@ pub fn analyse(snake: &Snake, equilibrium: &State, set_point: &[f64]) -> Result<
     })
 }
 
-/// The largest change [`rebalance`] makes to a joint's set point [rad]: small enough to stay elastic.
+/// The largest change [`rebalance`] makes to a joint's set point \[rad\]: small enough to stay elastic.
 pub const MAX_REBALANCE: f64 = 0.005;
 
 /// The set point's correction that evens out how much of their friction cones the `pressed` feet use:

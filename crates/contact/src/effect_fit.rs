@@ -23,7 +23,7 @@ use crate::exponent::minimize_scalar;
 use crate::fit::Sample;
 use crate::model::{ContactModel, Effect, adhesion_share, maxwell_step, pow};
 
-/// A window sample with its time [s].
+/// A window sample with its time \[s\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimedSample {
     pub t: f64,
@@ -194,7 +194,7 @@ fn fit_at(
 
 /// Refits the amplitudes of `structure` (a model with named effects) to `samples` (in time order, in
 /// contact, deformation from the onset position) and places the surface within `offset_range` of the
-/// onset [m]. Returns the offset and the model: the structure's effects in their order with the new
+/// onset \[m\]. Returns the offset and the model: the structure's effects in their order with the new
 /// amplitudes, the sensor's bias and drift replaced by the offset the window reads now
 /// (`sensor_bias`), any other effect as named.
 ///
@@ -217,7 +217,7 @@ pub fn fit_with_effects(
     Ok((offset, fit_with_effects_at(samples, structure, offset)?))
 }
 
-/// [`fit_with_effects`] with the surface held `offset` [m] below the onset position.
+/// [`fit_with_effects`] with the surface held `offset` \[m\] below the onset position.
 pub fn fit_with_effects_at(
     samples: &[TimedSample],
     structure: &ContactModel,

@@ -9,7 +9,7 @@ use faer::linalg::solvers::SolveLstsq;
 use crate::ContactError;
 use crate::model::{ContactModel, Exponents, Kind, pow};
 
-/// One observation: deformation z [m], rate ż [m/s], normal force f [N].
+/// One observation: deformation z \[m\], rate ż [m/s], normal force f \[N\].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample {
     pub z: f64,

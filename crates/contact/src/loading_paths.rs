@@ -30,7 +30,7 @@ pub enum Family {
     TwoSegment(u8),
 }
 
-/// One experiment: straight segments through `waypoints` from (0, 0), in the (δ_n, δ_t) plane [m].
+/// One experiment: straight segments through `waypoints` from (0, 0), in the (δ_n, δ_t) plane \[m\].
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoadingPath {
     pub family: Family,
@@ -47,7 +47,7 @@ impl LoadingPath {
         *self.waypoints.last().expect("a path has at least one waypoint")
     }
 
-    /// The path's length in the (δ_n, δ_t) plane [m].
+    /// The path's length in the (δ_n, δ_t) plane \[m\].
     pub fn length(&self) -> f64 {
         let mut from = [0.0, 0.0];
         let mut length = 0.0;
@@ -64,10 +64,10 @@ pub const SET_ANGLES: [&[f64]; 3] =
     [&[10.0, 15.0, 20.0, 25.0, 30.0], &[16.0, 18.0, 20.0, 22.0, 24.0], &[18.0, 19.0, 20.0, 21.0, 22.0]];
 /// The ray the convergence points lie on [°].
 pub const CONVERGENCE_ANGLE: f64 = 20.0;
-/// Every experiment runs to this normal force [N] (normal and linear paths).
+/// Every experiment runs to this normal force \[N\] (normal and linear paths).
 pub const FINAL_NORMAL_FORCE: f64 = 25.0;
 
-/// The convergence points: 5 equally spaced along the 20° ray, the last `last_point` deep [m].
+/// The convergence points: 5 equally spaced along the 20° ray, the last `last_point` deep \[m\].
 pub fn convergence_points(last_point: f64) -> [[f64; 2]; 5] {
     let slope = CONVERGENCE_ANGLE.to_radians().tan();
     std::array::from_fn(|j| {
@@ -90,7 +90,7 @@ pub fn corner_path(angle: f64, point: [f64; 2]) -> Vec<[f64; 2]> {
 }
 
 /// The snake paper's 205 experiments for a specimen whose normal law is `model`'s, with the convergence points
-/// up to `last_point` deep [m].
+/// up to `last_point` deep \[m\].
 pub fn seed_000_experiments(model: &ContactModel, last_point: f64) -> Result<Vec<LoadingPath>, ContactError> {
     let depth = model.deformation_for_force(FINAL_NORMAL_FORCE)?;
     if !(last_point > 0.0 && last_point.is_finite()) {
@@ -131,7 +131,7 @@ pub fn seed_000_experiments(model: &ContactModel, last_point: f64) -> Result<Vec
     Ok(paths)
 }
 
-/// The forces (f_n, f_t) [N] the model predicts at the end of `path`, walked quasi-statically in `steps`
+/// The forces (f_n, f_t) \[N\] the model predicts at the end of `path`, walked quasi-statically in `steps`
 /// steps a segment: the normal law at rest and the model's tangential law — Walton's from the end point
 /// alone, Mindlin–Deresiewicz's integrated along the path.
 pub fn forces_at_end(model: &ContactModel, path: &LoadingPath, steps: usize) -> Result<(f64, f64), ContactError> {

@@ -80,25 +80,25 @@ pub enum Effect {
     Hysteresis { fraction: f64, velocity_scale: f64 },
     /// The surface zero moves at a constant rate [m/s] along the contact normal (the snake paper's creep).
     ContactOffsetDrift { rate: f64 },
-    /// Constant offset [N] of the measured normal force.
+    /// Constant offset \[N\] of the measured normal force.
     SensorBias { offset: f64 },
     /// Offset of the measured normal force growing at a constant rate [N/s] since the sensor's last tare
     /// ([`EffectState::tare`]).
     SensorDrift { rate: f64 },
-    /// The reading reaches the recording `delay` [s] after the force acts (a slow sensor chain or a skewed
+    /// The reading reaches the recording `delay` \[s\] after the force acts (a slow sensor chain or a skewed
     /// stamp): measured(t) = reading(t − delay), 0 ≤ delay ≤ [`MAX_DELAY`].
     TimeDelay { delay: f64 },
     /// Force channels mix (the snake paper: a sensor axis misaligned with the pushing axis): the normal reading
     /// gains coupling · F_t, F_t the tangential force the surface exerts on the hand, both in the frame of
     /// the normal. A misalignment by a small rotation ω of the sensing frame gives coupling ≈ n × ω.
     SensorCrosstalk { coupling: [f64; 3] },
-    /// A tool mass the gravity compensation does not know [kg] (negative: it assumes too much): the normal
+    /// A tool mass the gravity compensation does not know \[kg\] (negative: it assumes too much): the normal
     /// reading gains mass · Δg_n, with Δg_n how gravity along the normal, as the sensor sees it, has changed
     /// since its last tare ([`SensorInputs::gravity_change`]); nothing while the hand keeps its orientation.
     ToolGravity { mass: f64 },
     /// The surface holds on to the hand on the way out (JKR/DMT-like adhesion): once pressed, it pulls
-    /// with `force` · min(1, (z_peak − z)/(z_peak + range)) [N] as the deformation falls from the deepest
-    /// z_peak of the present contact, the full pull-off `force` at `range` [m] beyond the surface, where it
+    /// with `force` · min(1, (z_peak − z)/(z_peak + range)) \[N\] as the deformation falls from the deepest
+    /// z_peak of the present contact, the full pull-off `force` at `range` \[m\] beyond the surface, where it
     /// lets go; nothing while pressing deeper, nothing after letting go until the next contact.
     Adhesion { force: f64, range: f64 },
     /// Fung's quasi-linear viscoelasticity with one term, G(t) = 1 + g e^{−t/τ}: a branch driven by the
@@ -107,13 +107,13 @@ pub enum Effect {
     QuasiLinearRelaxation { fraction: f64, time_constant: f64 },
 }
 
-/// The longest [`Effect::TimeDelay`] a model may carry [s].
+/// The longest [`Effect::TimeDelay`] a model may carry \[s\].
 pub const MAX_DELAY: f64 = 1.0;
 
 /// What the sensor effects read besides the normal force (see [`ContactModel::sense`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SensorInputs {
-    /// Tangential force the surface exerts on the hand, in the frame of the normal [N].
+    /// Tangential force the surface exerts on the hand, in the frame of the normal \[N\].
     pub tangential_force: [f64; 3],
     /// ((R R_tareᵀ − I) g)·n [m/s²]: the change since the last tare of gravity along the normal as the
     /// sensor sees it (R the sensor's orientation now, R_tare at the tare, g gravity, n the normal; see
@@ -334,9 +334,9 @@ pub const MAX_EFFECTS: usize = 8;
 /// relaxation branch together (the demo's sponge: 1.4e4; a rigid table: beyond 1e7). The simulated arm
 /// at its 1 ms step is stable on it.
 pub const MAX_CONTACT_STIFFNESS: f64 = 1e6;
-/// The depth at which a plausible law's stiffness is taken [m].
+/// The depth at which a plausible law's stiffness is taken \[m\].
 pub const PLAUSIBLE_DEPTH: f64 = 0.1;
-/// The time constants of a plausible model's relaxation branches [s].
+/// The time constants of a plausible model's relaxation branches \[s\].
 pub const TIME_CONSTANT_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
 /// The largest hysteresis of a plausible model (a share of the elastic force).
 pub const MAX_HYSTERESIS: f64 = 0.5;
@@ -347,21 +347,21 @@ pub const MIN_HYSTERESIS_SCALE: f64 = 1e-4;
 pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
 /// The fastest sensor drift of a plausible model [N/s] (a warming F/T sensor drifts mN/s).
 pub const MAX_SENSOR_DRIFT: f64 = 0.1;
-/// The largest sensor bias of a plausible model [N].
+/// The largest sensor bias of a plausible model \[N\].
 pub const MAX_SENSOR_BIAS: f64 = 20.0;
-/// The strongest pull-off of a plausible model's adhesion [N] (a suction cup on glass: tens of N).
+/// The strongest pull-off of a plausible model's adhesion \[N\] (a suction cup on glass: tens of N).
 pub const MAX_ADHESION: f64 = 50.0;
-/// The farthest beyond the surface a plausible model's adhesion holds on [m].
+/// The farthest beyond the surface a plausible model's adhesion holds on \[m\].
 pub const MAX_ADHESION_RANGE: f64 = 0.02;
 
-/// The share of an [`Effect::Adhesion`]'s pull-off force at deformation z [m] after the contact's deepest
+/// The share of an [`Effect::Adhesion`]'s pull-off force at deformation z \[m\] after the contact's deepest
 /// deformation `peak`: min(1, (peak − z)/(peak + range)), 0 while pressing deeper.
 #[inline]
 pub fn adhesion_share(peak: f64, z: f64, range: f64) -> f64 {
     ((peak - z) / (peak + range)).clamp(0.0, 1.0)
 }
 
-/// The contact's deepest deformation after a step to z: deeper in contact, kept until z is `reach` [m]
+/// The contact's deepest deformation after a step to z: deeper in contact, kept until z is `reach` \[m\]
 /// beyond the surface (the farthest an adhesion holds on), then forgotten.
 #[inline]
 pub fn next_adhesion_peak(peak: Option<f64>, z: f64, reach: f64) -> Option<f64> {
@@ -377,9 +377,9 @@ pub fn next_adhesion_peak(peak: Option<f64>, z: f64, reach: f64) -> Option<f64> 
 /// State of the effects that have memory (see [`ContactModel::step`]).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EffectState {
-    /// Time since the model was applied [s].
+    /// Time since the model was applied \[s\].
     pub time: f64,
-    /// Time since the sensor was last tared (or since the model was applied) [s]: a tare zeroes the
+    /// Time since the sensor was last tared (or since the model was applied) \[s\]: a tare zeroes the
     /// offset the sensor has drifted, so [`Effect::SensorDrift`] counts from it.
     pub since_tare: f64,
     /// Force of each viscoelastic branch, in the order of `effects`.
@@ -559,7 +559,7 @@ impl ContactModel {
         (self.stiffness * pow(z, e.a), self.damping * pow(z, e.b) * signed_pow(zdot, e.c))
     }
 
-    /// Normal force of the base law at deformation z [m] and rate ż [m/s]: k zᵃ + λ zᵇ żᶜ for z > 0,
+    /// Normal force of the base law at deformation z \[m\] and rate ż [m/s]: k zᵃ + λ zᵇ żᶜ for z > 0,
     /// 0 out of contact, and never negative (a soft surface pushes, it does not pull).
     pub fn force(&self, z: f64, zdot: f64) -> Result<f64, ContactError> {
         let (z, zdot) = (finite("z", z)?, finite("ż", zdot)?);
@@ -729,7 +729,7 @@ impl ContactModel {
         Ok((force.max(0.0) - pull, slope - pull_slope))
     }
 
-    /// What the named sensor effects add to a reading now [N]: the bias, and the drift since the last
+    /// What the named sensor effects add to a reading now \[N\]: the bias, and the drift since the last
     /// tare. A reading minus it is the surface force (the effects that need the tangential force, the
     /// orientation or the past are not in it).
     pub fn sensor_offset(&self, state: &EffectState) -> f64 {

@@ -10,7 +10,7 @@ use crate::ContactError;
 /// Onset detector settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OnsetConfig {
-    /// Normal force above which a reading counts [N] (the force-control paper: 1 N).
+    /// Normal force above which a reading counts \[N\] (the force-control paper: 1 N).
     pub threshold: f64,
     /// Consecutive readings that confirm contact, or its loss (the snake paper: 3).
     pub confirm: usize,

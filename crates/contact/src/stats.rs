@@ -8,13 +8,13 @@ pub struct FitStatistics {
     /// R² "as reported by Mathematica" for a nonlinear model fit: 1 − Σ(f_d − f_m)² / Σ f_d², with the
     /// uncorrected total sum of squares (NonlinearModelFit does not subtract the mean).
     pub r_squared: f64,
-    /// (1/n) Σ |f_d − f_m| [N].
+    /// (1/n) Σ |f_d − f_m| \[N\].
     pub mean_abs_error: f64,
     /// (1/n) Σ |(f_d − f_m) / f_m| over the samples where the model predicts a non-zero force.
     pub mean_normalized_abs_error: f64,
-    /// max (f_d − f_m) [N].
+    /// max (f_d − f_m) \[N\].
     pub max_error: f64,
-    /// min (f_d − f_m) [N].
+    /// min (f_d − f_m) \[N\].
     pub min_error: f64,
     pub samples: usize,
 }
@@ -55,7 +55,7 @@ pub fn fit_statistics(measured: &[f64], predicted: &[f64]) -> Result<FitStatisti
 /// points, where a path-independent model must predict one force.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Dispersion {
-    /// Σ_j Σ_i ‖(f_n, f_t)_ij − μ_j‖ [N].
+    /// Σ_j Σ_i ‖(f_n, f_t)_ij − μ_j‖ \[N\].
     pub total_error: f64,
     /// (1/n) Σ_j Σ_i ‖(f_n, f_t)_ij − μ_j‖ / ‖μ_j‖, n the number of points.
     pub mean_normalized_error: f64,

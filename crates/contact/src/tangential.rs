@@ -120,7 +120,7 @@ pub struct MindlinDeresiewicz {
 }
 
 impl MindlinDeresiewicz {
-    /// The tangential force T [N] now.
+    /// The tangential force T \[N\] now.
     pub fn force(&self) -> f64 {
         self.force
     }
@@ -243,8 +243,8 @@ pub struct TangentialMemory {
 }
 
 impl ContactModel {
-    /// Tangential force [N] of the Walton law at normal deformation z and tangential displacement δ_t
-    /// [m], limited to the friction cone of the given normal force; `None` without a tangential law.
+    /// Tangential force \[N\] of the Walton law at normal deformation z and tangential displacement δ_t
+    /// \[m\], limited to the friction cone of the given normal force; `None` without a tangential law.
     /// Returns the force and whether the contact slides. (The incremental law needs the path:
     /// [`MindlinDeresiewicz::step`].)
     pub fn tangential_force(

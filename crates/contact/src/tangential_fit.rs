@@ -17,9 +17,9 @@
 use crate::model::finite;
 use crate::{ContactError, MindlinDeresiewicz, Tangential, TangentialLaw};
 
-/// One sample along a path: normal deformation z [m] (from the zero), tangential displacement δ_t [m]
-/// (signed, from where contact began, along the path's tangential axis), the normal force P [N] the law
-/// sees, and the measured tangential force T [N].
+/// One sample along a path: normal deformation z \[m\] (from the zero), tangential displacement δ_t \[m\]
+/// (signed, from where contact began, along the path's tangential axis), the normal force P \[N\] the law
+/// sees, and the measured tangential force T \[N\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathSample {
     pub normal_displacement: f64,
@@ -33,7 +33,7 @@ pub struct PathSample {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TangentialFit {
     pub law: Tangential,
-    /// Whether the data slide enough to identify μ; if not, `law.friction` is [`NO_SLIP`] and
+    /// Whether the data slide enough to identify μ; if not, `law.friction` is `NO_SLIP` and
     /// `friction_at_least` the lowest μ that fits as well.
     pub friction_identified: bool,
     pub friction_at_least: f64,
@@ -101,7 +101,7 @@ pub fn with_hertz(paths: &[Vec<PathSample>], k_n: f64, zero_depth: f64) -> Vec<V
     paths.iter().map(|p| p.iter().map(sample).collect()).collect()
 }
 
-/// The samples of `path` at least `spacing` [m] apart in the (δ_n, δ_t) plane, and its last: the laws
+/// The samples of `path` at least `spacing` \[m\] apart in the (δ_n, δ_t) plane, and its last: the laws
 /// are exact on straight steps, so a dense recording fits the same with a fraction of its samples.
 pub fn thinned(path: &[PathSample], spacing: f64) -> Vec<PathSample> {
     let mut out: Vec<PathSample> = Vec::new();
@@ -203,7 +203,7 @@ fn fit_law(kind: TangentialLaw, paths: &[&[PathSample]]) -> Result<(Tangential, 
 
 /// Both laws fitted to `paths` (each a sequence of samples from the start of contact) and scored by
 /// `folds`-fold cross-validation over whole paths (path i held out in fold i mod folds); the incremental
-/// law chosen only where it predicts held-out paths better by more than [`MARGIN`].
+/// law chosen only where it predicts held-out paths better by more than `MARGIN`.
 pub fn identify_tangential(paths: &[Vec<PathSample>], folds: usize) -> Result<TangentialIdentification, ContactError> {
     let paths: Vec<&[PathSample]> = paths.iter().map(Vec::as_slice).filter(|p| !p.is_empty()).collect();
     let folds = folds.clamp(2, 10).min(paths.len());

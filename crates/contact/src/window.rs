@@ -130,7 +130,7 @@ impl WindowEstimator {
         self.push_at(f64::NAN, sample)
     }
 
-    /// [`WindowEstimator::push`] with the sample's time [s] (a fit with named effects needs it).
+    /// [`WindowEstimator::push`] with the sample's time \[s\] (a fit with named effects needs it).
     pub fn push_at(&mut self, t: f64, sample: Sample) -> Result<(), ContactError> {
         let sample = Sample::new(sample.z, sample.zdot, sample.f)?;
         if self.samples.len() == self.capacity

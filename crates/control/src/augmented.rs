@@ -72,18 +72,18 @@ impl AugmentedInverse {
         self.state.tare();
     }
 
-    /// Advances the states with the measured deformation z [m] from the model's surface and its rate
-    /// [m/s] over dt [s]; returns the model's surface force [N].
+    /// Advances the states with the measured deformation z \[m\] from the model's surface and its rate
+    /// [m/s] over dt \[s\]; returns the model's surface force \[N\].
     pub fn observe(&mut self, z: f64, zdot: f64, dt: f64) -> Result<f64, ContactError> {
         self.model.step_surface(&mut self.state, z, zdot, dt)
     }
 
-    /// A normal force reading [N] without the sensor's named bias and drift: the surface force.
+    /// A normal force reading \[N\] without the sensor's named bias and drift: the surface force.
     pub fn surface_reading(&self, reading: f64) -> f64 {
         reading - self.model.sensor_offset(&self.state)
     }
 
-    /// The deformation [m] to move to over the next `dt` seconds so that the surface force at rest there
+    /// The deformation \[m\] to move to over the next `dt` seconds so that the surface force at rest there
     /// is `force`, the states as they are now (Newton on a monotone function, bracketed; dt = 0: at once).
     /// Allocates nothing.
     pub fn hold(&self, force: f64, guess: f64, dt: f64) -> Result<f64, ContactError> {
@@ -130,7 +130,7 @@ impl AugmentedInverse {
         Ok(z)
     }
 
-    /// The model's surface force [N] at the end of the quintic from `from` to rest at `end` in `duration`
+    /// The model's surface force \[N\] at the end of the quintic from `from` to rest at `end` in `duration`
     /// seconds, the states carried through it from now (a copy: the states are not changed).
     pub fn force_after_move(&self, from: &Reference, end: f64, duration: f64) -> Result<f64, ContactError> {
         let to = Reference { position: end, ..Default::default() };
@@ -146,7 +146,7 @@ impl AugmentedInverse {
         Ok(self.model.force_at_rest(&state, end, 0.0)?.0)
     }
 
-    /// The end [m] of the move from `from` over `duration` seconds after which the surface force at rest
+    /// The end \[m\] of the move from `from` over `duration` seconds after which the surface force at rest
     /// is `force`: secant steps on the simulated move, started from the hold's answer now.
     pub fn end_of_move(&self, from: &Reference, force: f64, duration: f64) -> Result<f64, ContactError> {
         let guess = self.hold(force, from.position.max(0.0), 0.0)?;

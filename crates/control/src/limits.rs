@@ -12,20 +12,20 @@ pub struct Limits {
     pub joint_torque: Vec<f64>,
     /// |dτ_i/dt| [N·m/s]: no torque step above this rate.
     pub torque_rate: f64,
-    /// Largest force command [N].
+    /// Largest force command \[N\].
     pub max_force: f64,
-    /// Largest deformation command [m].
+    /// Largest deformation command \[m\].
     pub max_deformation: f64,
-    /// Largest lift above the surface a deformation command may ask for [m] (a negative deformation).
+    /// Largest lift above the surface a deformation command may ask for \[m\] (a negative deformation).
     pub max_lift: f64,
-    /// Shortest and longest move [s]: a quicker move is a jolt, a longer one a forgotten command (and
+    /// Shortest and longest move \[s\]: a quicker move is a jolt, a longer one a forgotten command (and
     /// beyond ~1e150 s a quintic's coefficients are no longer numbers).
     pub move_duration: (f64, f64),
     /// Fastest a move may compress or lift [m/s] (a quick plunge overshoots any force guard).
     pub max_deformation_rate: f64,
-    /// Below this normal force while a force is commanded, contact counts as lost [N].
+    /// Below this normal force while a force is commanded, contact counts as lost \[N\].
     pub contact_lost_below: f64,
-    /// Above this measured normal force the controller backs off [N] (above `max_force`: a model that
+    /// Above this measured normal force the controller backs off \[N\] (above `max_force`: a model that
     /// is too soft, or a surface that stiffened, must not crush anything).
     pub force_limit: f64,
 }

@@ -111,7 +111,7 @@ impl SetpointSequence {
 pub struct Oscillation {
     pub mean: f64,
     pub amplitude: f64,
-    /// [Hz]
+    /// \[Hz\]
     pub frequency: f64,
     pub periods: u32,
 }

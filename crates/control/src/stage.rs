@@ -76,7 +76,7 @@ impl PositionStage {
 
     /// Joint torques (total, gravity included) for the measurement (q, q̇) that drive the tool to
     /// `position` moving at `velocity` (world) with the held orientation, the contact force on the hand
-    /// `force` (world, measured) fed forward; `dt` the time since the last cycle [s].
+    /// `force` (world, measured) fed forward; `dt` the time since the last cycle \[s\].
     pub fn update(
         &mut self,
         q: &[f64; 7],

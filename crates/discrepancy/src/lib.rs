@@ -163,7 +163,7 @@ pub struct Options {
     pub collinear_corr: f64,
     /// Held-out scores within this factor "explain nearly as much" (PySR's 1.5×).
     pub rival_ratio: f64,
-    /// How long a tare reads the sensor [s] (the F/T node's `bias_window`): the time scale of
+    /// How long a tare reads the sensor \[s\] (the F/T node's `bias_window`): the time scale of
     /// [`NoiseFloor::level_sigma`].
     pub tare_window: f64,
     /// A slow offset (a sensor bias, a sensor drift, a drifting surface zero) is named only where it moves

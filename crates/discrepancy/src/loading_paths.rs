@@ -88,18 +88,18 @@ pub struct PathNamed {
 pub struct PathReport {
     pub episodes: usize,
     pub samples: usize,
-    /// Hertz's k_n [N/m^{3/2}] and how far below the surface the zeros lie [m].
+    /// Hertz's k_n [N/m^{3/2}] and how far below the surface the zeros lie \[m\].
     pub k_n: f64,
     pub zero_depth: f64,
     /// The effects named, in the order they were.
     pub named: Vec<PathNamed>,
-    /// The final model's parameters: k_t [N/m^{3/2}]; the misalignment ε [rad] (0 unless named); the
-    /// creep of the zero per episode, mean and standard deviation [m] (0 unless named).
+    /// The final model's parameters: k_t [N/m^{3/2}]; the misalignment ε \[rad\] (0 unless named); the
+    /// creep of the zero per episode, mean and standard deviation \[m\] (0 unless named).
     pub k_t: f64,
     pub misalignment: f64,
     pub creep_mean: f64,
     pub creep_sd: f64,
-    /// RMS of the residual [N] of the normal and tangential channels, before (the baseline) and after.
+    /// RMS of the residual \[N\] of the normal and tangential channels, before (the baseline) and after.
     pub rms_before: [f64; 2],
     pub rms_after: [f64; 2],
 }

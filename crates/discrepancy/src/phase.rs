@@ -99,13 +99,13 @@ pub enum NoiseSource {
     AllDifferences,
 }
 
-/// The force noise σ [N] and how it was measured.
+/// The force noise σ \[N\] and how it was measured.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct NoiseFloor {
     pub sigma: f64,
     pub source: NoiseSource,
     pub samples: usize,
-    /// σ of the noise averaged over [`Options::tare_window`] [N]: the error a tare's own reading leaves
+    /// σ of the noise averaged over [`Options::tare_window`] \[N\]: the error a tare's own reading leaves
     /// as an offset, and the level a slow noise (a low-passed sensor, a wandering offset) moves the force
     /// by. From the free samples' autocovariance up to that window; σ itself where free space has
     /// structure of its own or there is none.

@@ -18,7 +18,7 @@ pub enum Remaining {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Baseline {
     pub kind: Kind,
-    /// In-contact residual RMS of the baseline as given [N].
+    /// In-contact residual RMS of the baseline as given \[N\].
     pub rms: f64,
 }
 
@@ -27,7 +27,7 @@ pub struct Baseline {
 pub struct Refit {
     pub stiffness: f64,
     pub damping: f64,
-    /// The surface position refitted along the normal [m] (positive: deeper than the given one), and the
+    /// The surface position refitted along the normal \[m\] (positive: deeper than the given one), and the
     /// half-width of its 95 % interval.
     pub contact_shift: f64,
     pub contact_shift_ci: f64,
@@ -45,7 +45,7 @@ pub struct NamedEffect {
     /// The parameters the record does not identify: an interval wider than the value itself (its sign
     /// unknown) or, for a time, than the record's own duration. Reported, not read as values.
     pub not_identifiable: Vec<String>,
-    /// In-contact RMS before and after this effect was added [N].
+    /// In-contact RMS before and after this effect was added \[N\].
     pub rms_before: f64,
     pub rms_after: f64,
 }
@@ -80,13 +80,13 @@ pub struct Bin {
 /// Where the gap is (before: the refitted baseline; after: the augmented model).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Locate {
-    /// Quartiles of the in-contact samples by |ż| [m/s] and by measured force [N].
+    /// Quartiles of the in-contact samples by |ż| [m/s] and by measured force \[N\].
     pub by_speed: Vec<Bin>,
     pub by_force: Vec<Bin>,
     /// Lag-1 autocorrelation of the in-contact residual (≈ 0 when white).
     pub whiteness_before: f64,
     pub whiteness_after: f64,
-    /// The lag [s] within ±0.2 s at which the measured force's rate correlates best with the given
+    /// The lag \[s\] within ±0.2 s at which the measured force's rate correlates best with the given
     /// baseline's predicted rate, and that correlation: a force that lags the motion by d peaks at +d (to a
     /// sample; smooth motions make the peak broad).
     pub lag_s: f64,
@@ -238,7 +238,7 @@ pub struct Report {
     pub final_rms: f64,
     /// Where the gap is: by speed and force level, whiteness, lag against the motion.
     pub locate: Locate,
-    /// The surface position of the augmented model, along the normal from the given one [m]; re-simulate
+    /// The surface position of the augmented model, along the normal from the given one \[m\]; re-simulate
     /// the recording with `series.shifted(contact_shift)`.
     pub contact_shift: f64,
     pub contact_shift_ci: f64,

@@ -32,17 +32,17 @@ pub(crate) const EDGE: f64 = 1.05;
 /// robot-sized contact (1 nN to 10 kN, 1 nm to 10 cm, any sample period).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Scales {
-    /// The record's median sample period [s].
+    /// The record's median sample period \[s\].
     pub sample_period: f64,
     /// The 95th percentile of |ż| [m/s].
     pub p95_speed: f64,
     /// The speed a quarter of the moving in-contact samples exceed [m/s].
     pub saturating_speed: f64,
-    /// The relaxation time constants screened [s].
+    /// The relaxation time constants screened \[s\].
     pub time_constants: (f64, f64),
-    /// The delays screened [s].
+    /// The delays screened \[s\].
     pub delays: (f64, f64),
-    /// The adhesion ranges screened [m]: from a fiftieth of the deepest deformation to twice it.
+    /// The adhesion ranges screened \[m\]: from a fiftieth of the deepest deformation to twice it.
     pub adhesion_ranges: (f64, f64),
 }
 

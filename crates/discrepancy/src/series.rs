@@ -2,11 +2,11 @@
 
 use super::*;
 
-/// Samples along the contact normal: time t [s], deformation z [m] from the contact position (negative in
-/// free space), its rate ż [m/s] and the measured normal force f [N]; and the times [s] the sensor was
+/// Samples along the contact normal: time t \[s\], deformation z \[m\] from the contact position (negative in
+/// free space), its rate ż [m/s] and the measured normal force f \[N\]; and the times \[s\] the sensor was
 /// tared (a tare zeroes the sensor's drifted offset: [`softcontact_contact::EffectState::tare`]).
 /// Optionally the rest of the wrench and pose, per sample, as the sensor effects read them
-/// ([`SensorInputs`]): the tangential force [N] and the change of gravity along the normal since the last
+/// ([`SensorInputs`]): the tangential force \[N\] and the change of gravity along the normal since the last
 /// tare [m/s²] (empty when not recorded: no crosstalk or tool weight can then be named).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Series {
@@ -43,7 +43,7 @@ impl Series {
         Ok(s)
     }
 
-    /// The same samples with the tangential force [N] and the change of gravity along the normal since the
+    /// The same samples with the tangential force \[N\] and the change of gravity along the normal since the
     /// last tare [m/s²] of every sample (see [`SensorInputs`]).
     pub fn with_sensor_inputs(
         mut self,
@@ -71,7 +71,7 @@ impl Series {
         }
     }
 
-    /// The same samples with the sensor tared at these times [s] (any order; non-finite ones are refused).
+    /// The same samples with the sensor tared at these times \[s\] (any order; non-finite ones are refused).
     pub fn with_tares(mut self, mut tares: Vec<f64>) -> Result<Self, DiscrepancyError> {
         if let Some(index) = tares.iter().position(|x| !x.is_finite()) {
             return Err(DiscrepancyError::NonFinite { name: "tares", index });

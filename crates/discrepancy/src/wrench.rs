@@ -19,9 +19,9 @@ pub struct Wrench {
     pub position: Vec<[f64; 3]>,
     /// The sensor's orientation: the rotation sensor → world, by rows.
     pub sensor_rotation: Vec<[[f64; 3]; 3]>,
-    /// The tool point, where the contact force acts, in the sensor frame [m].
+    /// The tool point, where the contact force acts, in the sensor frame \[m\].
     pub lever: [f64; 3],
-    /// What the sensor read: Fx Fy Fz [N], Tx Ty Tz [N·m], in its frame (the hand's weight compensated).
+    /// What the sensor read: Fx Fy Fz \[N\], Tx Ty Tz [N·m], in its frame (the hand's weight compensated).
     pub measured: Vec<[f64; 6]>,
 }
 

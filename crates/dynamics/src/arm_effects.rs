@@ -21,12 +21,12 @@ pub const MAX_VISCOUS_SHARE: f64 = 0.01;
 /// A1–A2, 0.3 N m at A3–A5, 0.11 N m at the wrist): fed forward on an arm without it, it pushes each
 /// joint along its motion; at these the arm stays below a quarter of its velocity limits.
 pub const MAX_COULOMB_SHARE: f64 = 0.003;
-/// The heaviest payload a file may give [kg]: a load the description does not know (an adapter, cables),
+/// The heaviest payload a file may give \[kg\]: a load the description does not know (an adapter, cables),
 /// not a tool — a tool belongs in the URDF. Compensated on an arm that does not carry it, a file's payload
 /// pushes the hand with its full weight (14 kg at 0.5 m swung a wrist joint past its velocity limit;
 /// 1.5 kg at 5 cm moves the hand about 1 cm across and takes 15 N off a press).
 pub const MAX_PAYLOAD_MASS: f64 = 1.5;
-/// The farthest a payload's centre may lie from the flange [m].
+/// The farthest a payload's centre may lie from the flange \[m\].
 pub const MAX_PAYLOAD_REACH: f64 = 0.3;
 /// The largest first moment m·|c| of a payload about the flange [kg m]: the torque it puts on the wrist.
 pub const MAX_PAYLOAD_MOMENT: f64 = 0.075;
@@ -81,9 +81,9 @@ impl JointFriction {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Payload {
-    /// [kg].
+    /// \[kg\].
     pub mass: f64,
-    /// Its centre in the `lwr_flange` frame [m].
+    /// Its centre in the `lwr_flange` frame \[m\].
     pub com: [f64; 3],
 }
 

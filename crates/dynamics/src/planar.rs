@@ -21,10 +21,10 @@ use crate::model::STANDARD_GRAVITY;
 /// One rigid link of a planar chain.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlanarLink {
-    /// Distance between its two nodes [m].
+    /// Distance between its two nodes \[m\].
     pub length: f64,
     pub mass: f64,
-    /// Centre of mass along the link from its proximal node [m].
+    /// Centre of mass along the link from its proximal node \[m\].
     pub com: f64,
     /// Moment of inertia about the centre of mass, about the plane's normal [kg m²].
     pub inertia: f64,
@@ -110,7 +110,7 @@ impl PlanarChain {
         out
     }
 
-    /// World position of the point `along` [m] from node k on link k (k < N; `along` may be any length,
+    /// World position of the point `along` \[m\] from node k on link k (k < N; `along` may be any length,
     /// e.g. the link's length for node k+1).
     pub fn point(&self, q: &[f64], link: usize, along: f64) -> Vector2<f64> {
         let phi = self.link_angles(q);
@@ -119,7 +119,7 @@ impl PlanarChain {
         base + nodes + along * unit(phi[link])
     }
 
-    /// Jacobian (2 × n, world axes) of the point `along` [m] from node k on link k: its velocity is J q̇.
+    /// Jacobian (2 × n, world axes) of the point `along` \[m\] from node k on link k: its velocity is J q̇.
     pub fn point_jacobian(&self, q: &[f64], link: usize, along: f64) -> Matrix2xX<f64> {
         let phi = self.link_angles(q);
         let mut j = Matrix2xX::zeros(self.dof());

@@ -43,7 +43,7 @@ pub struct KrcConfig {
     pub quality: QualityPolicy,
     /// Consecutive unanswered cycles in command mode before the KRC falls back to monitor mode.
     pub max_consecutive_misses: usize,
-    /// Largest |jntPos − current| accepted on entering command mode [rad].
+    /// Largest |jntPos − current| accepted on entering command mode \[rad\].
     pub mirror_tolerance: f64,
     /// Noise of the joint torque sensors [N·m].
     pub torque_noise: f64,

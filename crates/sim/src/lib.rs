@@ -49,9 +49,9 @@ pub use softcontact_dynamics::{JointFriction, Payload};
 /// Everything that defines a simulated run.
 #[derive(Debug, Clone)]
 pub struct SimConfig {
-    /// Integration step [s]; the FRI cycle is a whole number of steps.
+    /// Integration step \[s\]; the FRI cycle is a whole number of steps.
     pub step: f64,
-    /// FRI cycle [s].
+    /// FRI cycle \[s\].
     pub cycle: f64,
     pub initial_q: [f64; 7],
     pub friction: Option<JointFriction>,
@@ -223,7 +223,7 @@ impl Simulator {
         Ok(sim)
     }
 
-    /// The FRI cycle [s].
+    /// The FRI cycle \[s\].
     pub fn krc_cycle(&self) -> f64 {
         self.config.cycle
     }

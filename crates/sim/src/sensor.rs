@@ -11,7 +11,7 @@ use softcontact_wire::rdt::{self, Calibration, Record, Status};
 #[derive(Debug, Clone)]
 pub struct FtSensorConfig {
     pub calibration: Calibration,
-    /// Standard deviation of white noise per axis (Fx Fy Fz [N], Tx Ty Tz [N·m]).
+    /// Standard deviation of white noise per axis (Fx Fy Fz \[N\], Tx Ty Tz [N·m]).
     pub noise: [f64; 6],
     /// Constant offset per axis.
     pub bias: [f64; 6],
@@ -20,7 +20,7 @@ pub struct FtSensorConfig {
     /// Coloured noise per axis: the standard deviation of an Ornstein–Uhlenbeck process (first-order
     /// low-passed white noise) added to the reading; 0 for none.
     pub coloured_noise: [f64; 6],
-    /// Its correlation time [s]: tens of ms is a filtered electronics' noise, tens of seconds a slow
+    /// Its correlation time \[s\]: tens of ms is a filtered electronics' noise, tens of seconds a slow
     /// wander of the offset that no tare schedule follows.
     pub coloured_time_constant: f64,
     /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (the snake paper's

@@ -27,17 +27,17 @@ use crate::SimError;
 pub struct SpecimenConfig {
     /// Normal (Hertz) and tangential law of the half-ball on the plate.
     pub model: ContactModel,
-    /// Sensor resolution [N] (a Nano17: 1/1280 N).
+    /// Sensor resolution \[N\] (a Nano17: 1/1280 N).
     pub resolution: f64,
-    /// White noise of each force channel [N].
+    /// White noise of each force channel \[N\].
     pub noise: f64,
-    /// Standard deviation of the creep of the zero over one experiment [m].
+    /// Standard deviation of the creep of the zero over one experiment \[m\].
     pub creep_sd: f64,
-    /// Sensor axes turned from the pushing axes in the loading plane [rad].
+    /// Sensor axes turned from the pushing axes in the loading plane \[rad\].
     pub misalignment: f64,
-    /// Stage step along the path [m].
+    /// Stage step along the path \[m\].
     pub step: f64,
-    /// How far above the surface each experiment starts [m].
+    /// How far above the surface each experiment starts \[m\].
     pub approach: f64,
     pub seed: u64,
 }
@@ -62,8 +62,8 @@ impl SpecimenConfig {
     }
 }
 
-/// One sample of an experiment: the stage's displacements from the found zero [m] and the sensor's
-/// reading in its own axes [N].
+/// One sample of an experiment: the stage's displacements from the found zero \[m\] and the sensor's
+/// reading in its own axes \[N\].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BenchSample {
     pub normal_displacement: f64,
@@ -76,9 +76,9 @@ pub struct BenchSample {
 #[derive(Debug, Clone, PartialEq)]
 pub struct BenchRun {
     pub samples: Vec<BenchSample>,
-    /// The creep of the zero over this experiment [m].
+    /// The creep of the zero over this experiment \[m\].
     pub creep: f64,
-    /// How far below the true surface the found zero lies [m] (the third reading above 0.03 N).
+    /// How far below the true surface the found zero lies \[m\] (the third reading above 0.03 N).
     pub zero_error: f64,
 }
 

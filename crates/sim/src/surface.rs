@@ -19,18 +19,18 @@ pub struct SurfaceConfig {
 /// The contact of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Contact {
-    /// z = (r − surface point)·n [m]; positive in contact.
+    /// z = (r − surface point)·n \[m\]; positive in contact.
     pub deformation: f64,
     /// ż [m/s].
     pub rate: f64,
-    /// The normal force the surface exerts, f ≥ 0 [N].
+    /// The normal force the surface exerts, f ≥ 0 \[N\].
     pub normal_force: f64,
     /// What a sensor reads of the normal force with the model's sensor effects (bias, drift, crosstalk,
-    /// delay) [N].
+    /// delay) \[N\].
     pub measured_normal_force: f64,
-    /// Total force on the hand, world [N].
+    /// Total force on the hand, world \[N\].
     pub force: Vector3<f64>,
-    /// The force a sensor reads, with the model's sensor effects, world [N].
+    /// The force a sensor reads, with the model's sensor effects, world \[N\].
     pub sensed_force: Vector3<f64>,
     pub sliding: bool,
 }
@@ -59,7 +59,7 @@ impl Surface {
         &self.config
     }
 
-    /// Moves the undeformed top by `distance` along the normal [m] (the snake paper's creep of the specimen's
+    /// Moves the undeformed top by `distance` along the normal \[m\] (the snake paper's creep of the specimen's
     /// zero between and during experiments: a hidden effect, set by the scenario, never read by the tools).
     pub fn creep(&mut self, distance: f64) {
         if distance.is_finite() {

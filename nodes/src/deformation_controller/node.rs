@@ -36,7 +36,7 @@ use crate::ros::LogLevel;
 /// A joint state as the driver measured it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointSample {
-    /// When it was measured, on the driver's clock [s].
+    /// When it was measured, on the driver's clock \[s\].
     pub stamp: f64,
     /// The KRC session it belongs to, and whether the KRC commands (`None`: not said).
     pub session: Option<u32>,
@@ -155,7 +155,7 @@ pub struct Step {
     pub reply: Reply,
     /// The controller's report (the normal force alone when it did not tick).
     pub state: ControllerState,
-    /// The contact force on the hand in the world [N] (zero without a fresh reading).
+    /// The contact force on the hand in the world \[N\] (zero without a fresh reading).
     pub force_world: Vector3<f64>,
     /// The controller restarted before this joint state (new session, monitor mode or a gap).
     pub restarted: bool,
@@ -191,8 +191,8 @@ struct Policy {
     retarget_duration: f64,
 }
 
-/// How far the hand lifts off the surface to re-tare [m], over how long [s], and how long it then
-/// settles before the tare [s] (the surface's fast relaxation and the arm's motion die out).
+/// How far the hand lifts off the surface to re-tare \[m\], over how long \[s\], and how long it then
+/// settles before the tare \[s\] (the surface's fast relaxation and the arm's motion die out).
 pub const RETARE_LIFT: f64 = 0.01;
 const RETARE_LIFT_TIME: f64 = 1.0;
 const RETARE_SETTLE: f64 = 0.5;
@@ -200,7 +200,7 @@ const RETARE_SETTLE: f64 = 0.5;
 /// Where a retreat to re-tare is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Retare {
-    /// Lifting and settling until the controller's time `until` [s].
+    /// Lifting and settling until the controller's time `until` \[s\].
     Lifting { until: f64 },
     /// Free and still: the F/T node is to tare now.
     Taring,
@@ -331,7 +331,7 @@ impl ControllerNode {
         }
     }
 
-    /// A force command [N] reached over `duration` [s]. The newest model waiting is adopted with it,
+    /// A force command \[N\] reached over `duration` \[s\]. The newest model waiting is adopted with it,
     /// once in contact (the force-control paper: once per command cycle); if the model is refused the command goes on
     /// with the present model, and the refusal is returned beside the command's own result. A command
     /// refused changes nothing: the model keeps waiting for the next.
@@ -529,9 +529,9 @@ const PRESS_AVERAGE: usize = 10;
 pub enum PressProgress {
     /// Taken, not ticked since (no fresh force: the driver holds meanwhile).
     Waiting,
-    /// The move goes on: the measured normal force [N] and deformation [m].
+    /// The move goes on: the measured normal force \[N\] and deformation \[m\].
     Moving { force: f64, deformation: f64 },
-    /// The move ended: the force reached [N] (its error is `force − Press::force`).
+    /// The move ended: the force reached \[N\] (its error is `force − Press::force`).
     Done { force: f64 },
     /// It cannot end as commanded.
     Aborted(String),

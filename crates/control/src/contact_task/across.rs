@@ -8,11 +8,11 @@ use super::{ControlError, DeformationController};
 use crate::Quintic;
 
 /// Farthest [`DeformationController::command_across`] moves the hand across the surface from its start
-/// [m]. A lateral offset is a test excitation (a tangential load on the surface: it sticks, then slips;
+/// \[m\]. A lateral offset is a test excitation (a tangential load on the surface: it sticks, then slips;
 /// the sensor's crosstalk), not a motion planner: a few centimetres are enough for that, keep the hand
 /// on the sample and the arm near its start posture, where the null-space impedance holds the elbow.
 pub const MAX_LATERAL: f64 = 0.03;
-/// Largest tilt of the hand from its start orientation [rad] (20°): enough to change the sensor's
+/// Largest tilt of the hand from its start orientation \[rad\] (20°): enough to change the sensor's
 /// orientation to gravity measurably — along the pushing axis the tool's weight changes by 1 − cos 20° ≈
 /// 6 % (a tool mass error of 0.6 kg shows 0.36 N there), across it by 34 % — small enough that the wrist
 /// stays far from its limits. (Tilt in free space: in contact the hand's edge would dig into the surface.)
@@ -39,7 +39,7 @@ pub(super) struct AcrossMove {
 }
 
 /// The reference across the surface and in orientation at one instant: lateral offset from the start
-/// position [m], its velocity and acceleration; tilt (rotation vector, R_ref = exp(tilt) · R_start), the
+/// position \[m\], its velocity and acceleration; tilt (rotation vector, R_ref = exp(tilt) · R_start), the
 /// world angular velocity and acceleration of R_ref.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AcrossReference {
@@ -103,8 +103,8 @@ impl DeformationController {
     }
 
     /// Moves the hand's hold across the surface and its orientation: a quintic of `duration` seconds from
-    /// the present lateral/tilt reference to `lateral` [m] (a world vector ⊥ n, from the start position;
-    /// its n component is refused if not ~0) and `tilt` [rad] (a rotation vector in the world, applied to
+    /// the present lateral/tilt reference to `lateral` \[m\] (a world vector ⊥ n, from the start position;
+    /// its n component is refused if not ~0) and `tilt` \[rad\] (a rotation vector in the world, applied to
     /// the start orientation: R_ref = exp(tilt) · R_start). The normal part (deformation/force command) is
     /// left as it is. Allowed in free space and in contact; a command during a move starts from where the
     /// reference is then (at rest). Refused, and the present move kept, for inputs that are not finite,

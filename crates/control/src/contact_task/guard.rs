@@ -11,14 +11,14 @@ use super::{ControlError, ControllerConfig, DeformationController, EXPONENT_RANG
 /// cut to it (a drift, which grows with the time since the tare).
 pub const MAX_SENSOR_CORRECTION: f64 = 0.05;
 /// How far above a force command the hold of an augmented model lets the measured force stand (a share
-/// of the command, and at least [N]) before it backs off, whatever the model says of the surface.
+/// of the command, and at least \[N\]) before it backs off, whatever the model says of the surface.
 pub const MODEL_FORCE_EXCESS: f64 = 0.05;
 pub const MODEL_FORCE_EXCESS_MIN: f64 = 2.0;
-/// The least force [N] a contact model must give at `max_deformation` for the controller to take it.
+/// The least force \[N\] a contact model must give at `max_deformation` for the controller to take it.
 pub const MIN_MODEL_FORCE: f64 = 1.0;
 
 /// How far above a force command the measured force may go, whatever the model and its plan, before
-/// the controller backs off as it does from `force_limit` (a share of the command, and at least [N]).
+/// the controller backs off as it does from `force_limit` (a share of the command, and at least \[N\]).
 /// While the command's move runs, the bound is taken from the larger of the command and the force
 /// measured when it was given, so a step down is not a trip. A model that misplaces or softens the
 /// surface (a stranger's, or one identified on another material) would otherwise press on to the force
@@ -28,14 +28,14 @@ pub const OVER_COMMAND: f64 = 0.25;
 pub const OVER_COMMAND_MIN: f64 = 5.0;
 
 /// The time constant over which the arm's normal force is smoothed before it confirms a sensor
-/// correction [s].
+/// correction \[s\].
 pub const ARM_FORCE_SMOOTHING: f64 = 0.05;
 
 /// How far above the command the surface's measured force may be before the hold of an augmented model
 /// stops going deeper (a share of the command; above the sensor's noise at the forces commanded).
 pub const HOLD_FORCE_MARGIN: f64 = 0.02;
 
-/// How far the hold of an augmented model may lead the measured deformation [m].
+/// How far the hold of an augmented model may lead the measured deformation \[m\].
 pub const HOLD_LEAD: f64 = 1e-3;
 
 /// How fast the controller backs off after passing the force limit [s].

@@ -77,17 +77,17 @@ pub struct ControllerConfig {
     pub posture_damping: [f64; 7],
     /// Descent speed before contact [m/s].
     pub approach_speed: f64,
-    /// Farthest the approach goes from where it started [m]: with no surface within it (none there,
+    /// Farthest the approach goes from where it started \[m\]: with no surface within it (none there,
     /// or a wrong `normal`) the hand stops and holds, instead of travelling to a joint limit.
     pub max_approach: f64,
     pub onset: OnsetConfig,
     pub limits: Limits,
-    /// Farthest an estimated surface may lie from the measured onset position [m]: a model placing
+    /// Farthest an estimated surface may lie from the measured onset position \[m\]: a model placing
     /// it further is refused (a surface 5 cm too low turned a 50 N command into 302 N).
     pub max_surface_offset: f64,
-    /// Joint states interrupted this long [s] mean a new KRC session or a moved arm: approach again.
+    /// Joint states interrupted this long \[s\] mean a new KRC session or a moved arm: approach again.
     pub restart_after: f64,
-    /// Nominal control period [s]: the step of the first tick after a (re)start; later ticks step by the
+    /// Nominal control period \[s\]: the step of the first tick after a (re)start; later ticks step by the
     /// time between their joint states.
     pub period: f64,
     /// The arm's own effects beyond the URDF to compensate (`softcontact discrepancy --arm` names them):
@@ -351,12 +351,12 @@ impl DeformationController {
         &self.geometry
     }
 
-    /// Where the undeformed surface is along n [m] (`None`: no contact found since the (re)start).
+    /// Where the undeformed surface is along n \[m\] (`None`: no contact found since the (re)start).
     pub fn contact_level(&self) -> Option<f64> {
         self.contact_level
     }
 
-    /// The controller's own clock [s]: it advances with each tick (by the joint states' stamps) and
+    /// The controller's own clock \[s\]: it advances with each tick (by the joint states' stamps) and
     /// starts again at a restart; moves are planned on it.
     pub fn time(&self) -> f64 {
         self.time
@@ -366,7 +366,7 @@ impl DeformationController {
         &self.contact_model
     }
 
-    /// The force commanded now [N] (0: none stands, or it was cancelled by a back-off or a lost contact).
+    /// The force commanded now \[N\] (0: none stands, or it was cancelled by a back-off or a lost contact).
     pub fn force_command(&self) -> f64 {
         self.f_cmd
     }
