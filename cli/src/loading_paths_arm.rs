@@ -20,7 +20,7 @@ use rand::rngs::SmallRng;
 use rand_distr::{Distribution, Normal};
 use softcontact_contact::{ContactModel, LoadingPath};
 use softcontact_control::PositionStage;
-use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
 use softcontact_sim::{BenchRun, BenchSample, FtSensorConfig, SimConfig, Simulator, ZERO_THRESHOLD};
@@ -62,9 +62,9 @@ struct Cell {
     driver: LwrDriver,
     ft: FtSensorNode,
     stage: PositionStage,
-    model: Model,
-    data: Data,
-    sensor: FrameId,
+    /// The sensor's orientation in the tool frame (the URDF's), and in the world at the last cycle.
+    tool_to_sensor: UnitQuaternion<f64>,
+    sensor_orientation: UnitQuaternion<f64>,
     /// The contact normal n and the loading direction, in the world and in the sensor's nominal axes.
     normal: Vector3<f64>,
     along: Vector3<f64>,
@@ -108,9 +108,8 @@ impl Cell {
             along_sensor: sensor_rotation.inverse() * along,
             normal,
             along,
-            model,
-            data,
-            sensor,
+            tool_to_sensor: softcontact_control::contact_task::lwr4_tool_to_sensor().rotation,
+            sensor_orientation: sensor_rotation,
         })
     }
 
@@ -119,9 +118,11 @@ impl Cell {
         let record = self.sim.ft_record().encode();
         let measured = self.driver.measure(&self.sim.measurement().encode())?;
         let out = &measured.output;
-        self.ft.observe_tool_pose(&out.tool_pose);
-        self.model.forward_kinematics(&mut self.data, &out.q);
-        let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
+        // The cycle's kinematics, the stage's (its update reuses them).
+        let tool = self.stage.tool_motion(&out.q, &out.dq);
+        self.ft.observe_tool_pose(&tool.pose);
+        let orientation = tool.pose.rotation * self.tool_to_sensor;
+        self.sensor_orientation = orientation;
         let ft = self.ft.handle(&record, Some(&orientation))?;
         anyhow::ensure!(!(ft.invalid && ft.fresh), "the F/T sensor's reading is invalid (saturated?)");
         let reading = match ft.compensated.filter(|_| self.ft.tared()) {
@@ -137,7 +138,7 @@ impl Cell {
         }
         let seen = Seen {
             commanding,
-            position: out.tool_pose.translation.vector,
+            position: tool.pose.translation.vector,
             // The force on the hand, along the sensor's axes: the specimen pushes back.
             normal: -reading.dot(&self.normal_sensor),
             tangential: -reading.dot(&self.along_sensor),
@@ -181,8 +182,7 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
         }
     }
     anyhow::ensure!(commanding > 300, "the KRC did not enter command mode");
-    let orientation = cell.model.frame_pose(&cell.data, cell.sensor).rotation;
-    cell.ft.checked_tare(Some(&orientation)).map_err(|e| anyhow::anyhow!("tare: {e}"))?;
+    cell.ft.checked_tare(Some(&cell.sensor_orientation)).map_err(|e| anyhow::anyhow!("tare: {e}"))?;
     let (n, t) = (cell.normal, cell.along);
     let (mut runs, mut sum, mut count, mut worst) = (Vec::with_capacity(paths.len()), 0.0, 0usize, 0.0f64);
     for path in paths {

@@ -15,7 +15,7 @@ use softcontact_nodes::identify::{SyntheticReading, synthetic_pushes, synthetic_
 const SURFACE_Z: f64 = 0.3;
 
 fn tf_static() -> TFMessage {
-    let r = softcontact_nodes::contact_estimator::ForcePairing::urdf_tool_to_sensor().unwrap();
+    let r = softcontact_nodes::geometry::lwr4_tool_to_sensor().rotation;
     let mut t = softcontact_msgs::geometry_msgs::TransformStamped::default();
     t.header.frame_id = "lwr_tool".into();
     t.child_frame_id = "ft_sensor".into();

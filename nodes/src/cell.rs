@@ -6,7 +6,7 @@
 //! very measurement (`LwrDriver::measure`, `set_command`, `answer`), from the F/T sensor's newest record.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use softcontact_dynamics::{Data, FrameId, Model, lwr4};
+use softcontact_dynamics::FrameMotion;
 use softcontact_sim::{SimConfig, SimError, Simulator};
 
 use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
@@ -36,6 +36,8 @@ pub struct Tick {
     /// Simulated time \[s\].
     pub time: f64,
     pub driver: DriverOutput,
+    /// The tool's pose and twist at the measurement.
+    pub tool: FrameMotion,
     pub ft: FtOutput,
     /// The F/T node has tared: it publishes /ft_sensor/wrench.
     pub tared: bool,
@@ -60,9 +62,6 @@ pub struct Cell {
     pub ft: FtSensorNode,
     pub controller: ControllerNode,
     pub estimator: ContactEstimatorNode,
-    model: Model,
-    data: Data,
-    sensor: FrameId,
     orientation: Option<UnitQuaternion<f64>>,
     startup_tare: StartupTare,
     pending_tare: Option<[f64; 6]>,
@@ -74,7 +73,6 @@ impl Cell {
     /// after `tare_after`, with the node's checks), the estimator, and the controller node around `law`
     /// (the node's default policy, the law's normal).
     pub fn new(sim: SimConfig, law: DeformationController, estimator: ContactEstimatorNode) -> Result<Self, CellError> {
-        let model = lwr4::model();
         let ft_params = ft_sensor::Params::default();
         let ft = FtSensorNode::new(FtConfig::lwr4(sim.sensor.calibration))
             .map_err(CellError::Ft)?
@@ -90,9 +88,6 @@ impl Cell {
             ft,
             controller: ControllerNode::new(&params, law)?,
             estimator,
-            data: model.data(),
-            sensor: model.frame_id(lwr4::FT_SENSOR_FRAME).map_err(ControlError::from)?,
-            model,
             orientation: None,
             startup_tare: StartupTare::new(ft_params.tare_after),
             pending_tare: None,
@@ -117,10 +112,11 @@ impl Cell {
         let record = self.sim.ft_record().encode();
         let measured = self.driver.measure(&self.sim.measurement().encode())?;
         let out = &measured.output;
+        // The cycle's one kinematics pass, the law's (its tick reuses it).
+        let tool = self.controller.law.tool_motion(&out.q, &out.dq);
         // /lwr/ee_pose, which the F/T node's tare checks for motion.
-        self.ft.observe_tool_pose(&out.tool_pose);
-        self.model.forward_kinematics(&mut self.data, &out.q);
-        let orientation = self.model.frame_pose(&self.data, self.sensor).rotation;
+        self.ft.observe_tool_pose(&tool.pose);
+        let orientation = self.controller.geometry().sensor_rotation(&tool.pose.rotation);
         self.orientation = Some(orientation);
         let ft = self.ft.handle(&record, Some(&orientation)).map_err(|e| CellError::Ft(e.to_string()))?;
         if let Some(Ok(bias)) = self.startup_tare.poll(&mut self.ft, &orientation, time) {
@@ -144,9 +140,7 @@ impl Cell {
             return Ok(None);
         }
         let f = self.controller.geometry().normal_force(&step.force_world);
-        let v = out.tool_twist;
-        let estimator =
-            self.estimator.update(time, &out.tool_pose.translation.vector, &Vector3::new(v[0], v[1], v[2]), f)?;
+        let estimator = self.estimator.update(time, &tool.pose.translation.vector, &tool.linear(), f)?;
         // On the FRI thread nothing is late: anything but a torque for this measurement holds at once.
         let (torque, refused) = match step.reply {
             Reply::Torque(tau) => (Some(tau), None),
@@ -165,6 +159,7 @@ impl Cell {
         Ok(Some(Tick {
             time,
             driver,
+            tool,
             ft,
             tared: self.startup_tare.tared(),
             tare: self.pending_tare.take(),

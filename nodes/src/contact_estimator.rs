@@ -521,11 +521,6 @@ impl ForcePairing {
         })
     }
 
-    /// The sensor's rotation in the tool frame as the URDF gives it.
-    pub fn urdf_tool_to_sensor() -> Result<UnitQuaternion<f64>, softcontact_dynamics::Error> {
-        Ok(crate::geometry::lwr4_tool_to_sensor().rotation)
-    }
-
     pub fn pose(&mut self, t: f64, position: Vector3<f64>, rotation: UnitQuaternion<f64>) {
         if !self.twists_seen
             && let Some((previous, _, t0)) = self.pose

@@ -53,7 +53,7 @@ impl Identifier {
         let (normal, fit) = (config.normal, config.fit);
         Ok(Self {
             estimator: ContactEstimatorNode::new(config)?,
-            pairing: ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, stale_after)
+            pairing: ForcePairing::new(crate::geometry::lwr4_tool_to_sensor().rotation, normal, stale_after)
                 .ok_or_else(|| anyhow::anyhow!("the normal must be a non-zero direction"))?,
             frames: FramesFrom::Urdf,
             tool_frame: softcontact_dynamics::lwr4::TOOL_FRAME.into(),
@@ -222,7 +222,7 @@ pub fn synthetic_readings(
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
     };
     let tool = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
-    let to_sensor = (tool * ForcePairing::urdf_tool_to_sensor()?).inverse();
+    let to_sensor = (tool * crate::geometry::lwr4_tool_to_sensor().rotation).inverse();
     let n = (seconds * rate) as usize;
     let mut out = Vec::with_capacity(n);
     let mut effects = model.effect_state();

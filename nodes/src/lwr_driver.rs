@@ -53,17 +53,20 @@
 
 pub mod commander;
 pub mod component;
+mod counters;
+mod held;
 mod params;
+pub use counters::{DriverCounters, Refusals};
 pub use params::Params;
 
 use std::net::SocketAddr;
 
-use nalgebra::{Isometry3, Matrix6xX, Vector6};
-use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
+use softcontact_dynamics::{Data, FrameId, FrameMotion, Model, lwr4};
 use softcontact_wire::WireError;
 use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
 use crate::writer_pin::{WriterId, WriterPin, WriterRefused};
+use held::{Command, Hold};
 
 /// How far beyond its limit a measured joint position is still believed \[rad\] (the KRC's software
 /// limits lie inside the URDF's; more is a corrupt or forged datagram).
@@ -112,45 +115,10 @@ pub enum DriverError {
     Writer(#[from] WriterRefused),
     #[error("torque command answers KRC session {0:?}, the present one is {1}")]
     OtherSession(Option<u32>, u32),
-    #[error("torque command is {0:.4} s old, beyond the watchdog's {1:.4} s")]
+    #[error("torque command is {0:.4} s old, beyond the watchdog's {1:.4} s (or stamped in the future)")]
     TooOld(f64, f64),
     #[error("implausible measurement: {0}")]
     Implausible(String),
-}
-
-/// What the driver counted (published on /diagnostics).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct DriverCounters {
-    pub measurements: u64,
-    /// Measurements the sequence counter says never arrived.
-    pub lost: u64,
-    /// Repeated or reordered measurements (answered, not used for control).
-    pub out_of_order: u64,
-    pub malformed: u64,
-    /// Well-formed measurements refused as physically implausible (unanswered).
-    pub implausible: u64,
-    /// Datagrams from anyone but the pinned KRC (unanswered).
-    pub strangers: u64,
-    /// KRC sessions begun (the first included).
-    pub sessions: u64,
-    /// Socket errors on receive or on sending a reply (counted; the driver goes on).
-    pub network_errors: u64,
-    /// Cycles answered with a command older than the watchdog, or none.
-    pub stale_cycles: u64,
-    /// Cycles held for a fault: a joint too fast, or heading into its position limit.
-    pub overspeed_cycles: u64,
-    pub limit_cycles: u64,
-    pub commands_refused: u64,
-    /// Commands refused for their age or their session (part of `commands_refused`).
-    pub commands_too_old: u64,
-    /// Commands from another writer than the pinned one, or while writers were ambiguous (not part of
-    /// `commands_refused`: they never touch the present command).
-    pub commands_from_strangers: u64,
-    /// Latched faults cleared by the operator restarting the KRL program.
-    pub faults_cleared: u64,
-    /// Cycles the KRC commanded (any strategy) and the driver applied no torque for a reason other
-    /// than a fault or a stale command: what /diagnostics names.
-    pub waiting_cycles: u64,
 }
 
 /// Why the driver holds until the KRC starts a new session.
@@ -232,54 +200,6 @@ impl std::fmt::Display for Waiting {
     }
 }
 
-impl DriverCounters {
-    /// Datagrams refused since `before`, beside those accepted: what /diagnostics says about who talks
-    /// FRI. Every datagram refused (a KRC sending nonsense, a stranger in the robot network) leaves the
-    /// arm to the KRC's own fallback, and says so.
-    pub fn refusals_since(&self, before: &DriverCounters) -> Refusals {
-        Refusals {
-            accepted: self.measurements.saturating_sub(before.measurements),
-            implausible: self.implausible.saturating_sub(before.implausible),
-            malformed: self.malformed.saturating_sub(before.malformed),
-            strangers: self.strangers.saturating_sub(before.strangers),
-        }
-    }
-}
-
-/// Datagrams accepted and refused over an interval.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Refusals {
-    pub accepted: u64,
-    pub implausible: u64,
-    pub malformed: u64,
-    pub strangers: u64,
-}
-
-impl Refusals {
-    pub fn refused(&self) -> u64 {
-        self.implausible + self.malformed + self.strangers
-    }
-
-    /// Datagrams came, and not one was accepted.
-    pub fn all_refused(&self) -> bool {
-        self.refused() > 0 && self.accepted == 0
-    }
-}
-
-impl std::fmt::Display for Refusals {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} FRI datagrams refused ({} implausible, {} malformed, {} from strangers), {} accepted",
-            self.refused(),
-            self.implausible,
-            self.malformed,
-            self.strangers,
-            self.accepted
-        )
-    }
-}
-
 /// The state the driver publishes for one measurement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DriverOutput {
@@ -291,9 +211,6 @@ pub struct DriverOutput {
     /// The KRC's estimate of the external joint torques (FRI estExtJntTrq: measured less its model's)
     /// [N·m]: the arm's own, independent view of the contact force.
     pub external_torque: [f64; 7],
-    pub tool_pose: Isometry3<f64>,
-    /// Twist of the tool origin, world axes (linear, angular).
-    pub tool_twist: Vector6<f64>,
     pub state: InterfaceState,
     pub quality: Quality,
     /// The driver is holding position instead of applying the command.
@@ -331,7 +248,6 @@ pub struct LwrDriver {
     model: Model,
     data: Data,
     tool: FrameId,
-    jacobian: Matrix6xX<f64>,
     effort_limits: [f64; 7],
     velocity_limits: [f64; 7],
     position_limits: [(f64, f64); 7],
@@ -371,7 +287,6 @@ impl LwrDriver {
         Self {
             data: model.data(),
             tool: model.frame_id(lwr4::TOOL_FRAME).expect("the LWR model has lwr_tool"),
-            jacobian: Matrix6xX::zeros(7),
             effort_limits,
             velocity_limits,
             position_limits,
@@ -395,6 +310,14 @@ impl LwrDriver {
             last_torque: [0.0; 7],
             counters: DriverCounters::default(),
         }
+    }
+
+    /// The tool's pose and twist at (q, q̇) by the driver's own kinematics: for a process whose
+    /// controller computes none (an in-process one hands over its own, [`Commander::tool_motion`]).
+    ///
+    /// [`Commander::tool_motion`]: commander::Commander::tool_motion
+    pub fn tool_motion(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> FrameMotion {
+        self.model.frame_motion(&mut self.data, q, dq, self.tool)
     }
 
     /// The KRC session of the newest measurement.
@@ -482,12 +405,13 @@ impl LwrDriver {
     /// not 7 finite values within the joints' effort limits it is refused and the driver holds from the
     /// next cycle on (an empty command is the controller's way to ask for that hold).
     pub fn set_command(&mut self, effort: &[f64]) -> Result<(), DriverError> {
-        self.take_command(effort, 0.0)
+        self.take_command(effort, None)
     }
 
-    /// Takes a command `age` seconds old by the newest measurement's clock, if it is 7 finite torques
-    /// within the effort limits.
-    fn take_command(&mut self, effort: &[f64], age: f64) -> Result<(), DriverError> {
+    /// Takes a command, from the network `age` seconds old by the newest measurement's stamp (`None`:
+    /// the in-process controller's, for this very measurement), if it is 7 finite torques within the
+    /// effort limits.
+    fn take_command(&mut self, effort: &[f64], age: Option<f64>) -> Result<(), DriverError> {
         let refused = if effort.len() != 7 {
             Some(DriverError::CommandLength(effort.len()))
         } else if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
@@ -501,7 +425,8 @@ impl LwrDriver {
             self.command = None;
             return Err(e);
         }
-        self.command = Some(Command { effort: std::array::from_fn(|i| effort[i]), at: self.cycle, age });
+        let (remote, age) = (age.is_some(), age.unwrap_or(0.0));
+        self.command = Some(Command { effort: std::array::from_fn(|i| effort[i]), at: self.cycle, age, remote });
         Ok(())
     }
 
@@ -514,10 +439,11 @@ impl LwrDriver {
     /// A command that arrived over the network from `writer` (`writers_matched`: how many writers the
     /// middleware matched on the topic): it names the session of the joint state it answers and is `age`
     /// seconds old by that joint state's stamp. One from a writer other than the session's pinned one is
-    /// refused and touches nothing; one from another session, or older than `max_command_age` (or stamped
-    /// as far in the future), is refused and the present command ages out as usual. A command taken keeps
-    /// ageing: it answers no measurement once its stamp is older than `max_command_age`, even within the
-    /// watchdog's cycles.
+    /// refused and touches nothing; one from another session, older than `max_command_age` or stamped in
+    /// the future (it answers no joint state yet measured), is refused and the present command ages out as
+    /// usual. A command taken keeps ageing: it answers no measurement once its stamp is older than
+    /// `max_command_age`, by the watchdog's cycles here and by the driver's clock in
+    /// [`LwrDriver::expire_command`].
     pub fn set_remote_command(
         &mut self,
         effort: &[f64],
@@ -536,12 +462,22 @@ impl LwrDriver {
             return Err(DriverError::OtherSession(session, self.session));
         }
         let bound = self.config.max_command_age;
-        if !(age >= -bound && age <= bound) {
+        if !(age >= 0.0 && age <= bound) {
             self.counters.commands_refused += 1;
             self.counters.commands_too_old += 1;
             return Err(DriverError::TooOld(age, bound));
         }
-        self.take_command(effort, age.max(0.0))
+        self.take_command(effort, Some(age))
+    }
+
+    /// Drops a command from the network whose stamp is older than `max_command_age` by `age` (the
+    /// present command's age on the driver's clock, at the measurement about to be answered): a command
+    /// taken before a gap between measurements answers none after it. The in-process controller's
+    /// command, which answers the very measurement, is not aged here.
+    pub fn expire_command(&mut self, age: impl FnOnce() -> Option<f64>) {
+        if self.command.is_some_and(|c| c.remote) && !age().is_some_and(|a| a <= self.config.max_command_age) {
+            self.command = None;
+        }
     }
 
     fn check_plausible(&self, m: &fri::Measurement) -> Result<(), DriverError> {
@@ -623,20 +559,11 @@ impl LwrDriver {
         self.note_start(&m);
         let waiting = self.waiting_for(&m);
         self.note_torque_mode(waiting.is_none());
-        self.model.forward_kinematics(&mut self.data, &q);
-        let tool_pose = self.model.frame_pose(&self.data, self.tool);
-        self.model.frame_jacobian(&self.data, self.tool, Axes::World, &mut self.jacobian);
-        let mut tool_twist = Vector6::zeros();
-        for (j, v) in dq.iter().enumerate() {
-            tool_twist += self.jacobian.column(j) * *v;
-        }
         let output = DriverOutput {
             q,
             dq,
             effort: std::array::from_fn(|i| m.data.msr_jnt_trq[i] as f64),
             external_torque: std::array::from_fn(|i| m.data.est_ext_jnt_trq[i] as f64),
-            tool_pose,
-            tool_twist,
             state: m.intf.state,
             quality: m.intf.quality,
             holding: false,
@@ -805,41 +732,5 @@ impl LwrDriver {
             let inside = |x: f64| x >= lower + margin && x <= upper - margin;
             (!inside(q[i]) || !inside(ahead)).then_some(Fault::PositionLimit { joint: i + 1, position: q[i] })
         })
-    }
-}
-
-/// A command and its age: taken at cycle `at`, when its stamp was `age` seconds old.
-#[derive(Debug, Clone, Copy)]
-struct Command {
-    effort: [f64; 7],
-    at: u64,
-    age: f64,
-}
-
-impl Command {
-    /// Whether the command may still answer the measurement of `cycle`: at most `watchdog_cycles` after
-    /// it was taken, and its stamp then at most `max_command_age` old.
-    fn fresh(&self, cycle: u64, sample_time: f64, config: &Params) -> bool {
-        let cycles = cycle.saturating_sub(self.at);
-        cycles <= config.watchdog_cycles && self.age + cycles as f64 * sample_time <= config.max_command_age
-    }
-}
-
-/// Where a hold holds, since which cycle, and how the torque it took over is split: a set-point offset
-/// of the spring (kept) and the rest (fading).
-#[derive(Debug, Clone, Copy)]
-struct Hold {
-    q: [f64; 7],
-    since: u64,
-    preload: [f64; 7],
-    rest: [f64; 7],
-}
-
-impl Hold {
-    fn new(q: [f64; 7], since: u64, torque: &[f32; 7], config: &Params) -> Self {
-        let limit = config.hold_max_preload;
-        let preload = std::array::from_fn(|i| (torque[i] as f64 / config.hold_stiffness[i]).clamp(-limit, limit));
-        let rest = std::array::from_fn(|i| torque[i] as f64 - config.hold_stiffness[i] * preload[i]);
-        Self { q, since, preload, rest }
     }
 }

@@ -2,7 +2,7 @@
 //! over DDS and the in-process demo records them, so both say exactly the same thing.
 
 use nalgebra::Isometry3;
-use softcontact_dynamics::lwr4;
+use softcontact_dynamics::{FrameMotion, lwr4};
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::geometry_msgs::{
     Point, Pose, PoseStamped, Quaternion, Transform, TransformStamped, Twist, TwistStamped, Vector3, Wrench,
@@ -105,11 +105,12 @@ impl DriverSession {
 }
 
 impl DriverOutput {
-    pub fn messages(&self, joint_names: &[String], stamp: Time) -> DriverMessages {
+    /// The messages of one measurement, with the tool's motion (`tool`) computed for it.
+    pub fn messages(&self, joint_names: &[String], tool: &FrameMotion, stamp: Time) -> DriverMessages {
         let h = header("world", stamp);
         let session = DriverSession::of(self);
-        let (t, q) = pose_parts(&self.tool_pose);
-        let v = self.tool_twist;
+        let (t, q) = pose_parts(&tool.pose);
+        let v = tool.twist;
         DriverMessages {
             joint_state: JointState {
                 header: header(&session.to_frame_id(), stamp),

@@ -121,11 +121,7 @@ fn pressing_the_sponge_the_hand_moves_across_and_tilts_below_the_force_limit() {
     let config = SimConfig::above_surface(softcontact_sim::sponge(), 42);
     let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
     let mut cell = Cell::new(config, controller(), estimator).unwrap();
-    let mut cycles = 0;
-    while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
-        cycles += 1;
-        assert!(cycles < 10_000, "no contact");
-    }
+    until_contact(&mut cell);
     cell.controller.law.command_force(40.0, 1.0).unwrap();
     for _ in 0..1500 {
         cell.cycle().unwrap();
@@ -157,17 +153,23 @@ fn lab_sponge_cell(model: ContactModel) -> Cell {
     surface_cell(softcontact_sim::lab_sponge(), model)
 }
 
+/// Cycles the cell until the controller is in contact (within 10 s).
+fn until_contact(cell: &mut Cell) {
+    for _ in 0..10_000 {
+        if cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
+            return;
+        }
+    }
+    panic!("no contact within 10 000 cycles");
+}
+
 /// The cell above the surface `truth`, in contact, the controller with `model`.
 fn surface_cell(truth: ContactModel, model: ContactModel) -> Cell {
     let config = SimConfig::above_surface(truth, 43);
     let surface = config.surface.as_ref().unwrap().point;
     let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
     let mut cell = Cell::new(config, controller(), estimator).unwrap();
-    let mut cycles = 0;
-    while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
-        cycles += 1;
-        assert!(cycles < 10_000, "no contact");
-    }
+    until_contact(&mut cell);
     cell.controller.law.adopt_estimate(model, &surface, None).unwrap();
     cell
 }
@@ -384,11 +386,7 @@ fn friction_compensation_half_again_too_high_still_presses_in_place() {
     };
     let mut cell = friction_cell(truth, high);
     let start = cell.sim.tool_pose().translation.vector;
-    let mut cycles = 0;
-    while !cell.cycle().unwrap().is_some_and(|t| t.controller.in_contact) {
-        cycles += 1;
-        assert!(cycles < 10_000, "no contact");
-    }
+    until_contact(&mut cell);
     cell.controller.law.command_force(60.0, 1.0).unwrap();
     let (mut across, mut peak) = (0.0_f64, 0.0_f64);
     for _ in 0..5000 {

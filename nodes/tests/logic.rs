@@ -168,7 +168,8 @@ fn commands_older_than_the_watchdog_by_their_stamp_are_refused() {
 
 #[test]
 fn a_held_command_answers_no_measurement_once_its_stamp_is_older_than_max_command_age() {
-    // Commands arriving 15–19 ms old were reused for the watchdog's 5 cycles: applied at 24 ms old.
+    // Commands arriving 15–19 ms old were reused for the watchdog's 5 cycles: applied at 24 ms old; one
+    // taken before a 30 ms stall of the measurements was applied after it at 37 ms.
     let mut d = LwrDriver::new(DriverParams::default());
     d.accept_sender("127.0.0.1:40000".parse().unwrap(), f64::INFINITY);
     d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
@@ -188,8 +189,28 @@ fn a_held_command_answers_no_measurement_once_its_stamp_is_older_than_max_comman
         let expected = ((0.020 - arrival_age) / 0.001).floor() as usize;
         assert_eq!(applied, expected, "a command {arrival_age} s old at arrival");
     }
-    // The in-process controller's own command (age 0) is applied for the whole watchdog.
+    // Stamped in the future: it answers no joint state yet measured.
+    for ahead in [-0.019, -0.001] {
+        assert!(matches!(d.set_remote_command(&[5.0; 7], s, ahead, CONTROLLER, || 1), Err(DriverError::TooOld(..))));
+    }
+    // A gap between measurements (the KRC or the link stalled): by the driver's clock the command taken
+    // 12 ms old before it is 30 ms old after it, though one cycle has passed.
+    d.set_remote_command(&[5.0; 7], s, 0.012, CONTROLLER, || 1).unwrap();
+    d.expire_command(|| Some(0.019));
+    let seq = 2 + d.counters.measurements as u16;
+    assert!(!d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    d.expire_command(|| Some(0.030));
+    let seq = 2 + d.counters.measurements as u16;
+    assert!(d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    // A command from the network without a known stamp is dropped as well.
+    d.set_remote_command(&[5.0; 7], s, 0.001, CONTROLLER, || 1).unwrap();
+    d.expire_command(|| None);
+    let seq = 2 + d.counters.measurements as u16;
+    assert!(d.handle(&measurement(seq, InterfaceState::Command, Q, G)).unwrap().1.holding);
+    // The in-process controller's own command (age 0) is applied for the whole watchdog, and never
+    // expired by a clock: it answers the very measurement.
     d.set_command(&[5.0; 7]).unwrap();
+    d.expire_command(|| None);
     let held = (0..5)
         .filter(|_| {
             let seq = 2 + d.counters.measurements as u16;

@@ -73,7 +73,7 @@ impl Observer for Recorder {
         let ns = self.at(tick.time);
         let t = stamp(ns);
         let c = &self.channels;
-        let m = tick.driver.messages(&self.names, t);
+        let m = tick.driver.messages(&self.names, &tick.tool, t);
         self.writer.write(c.joint_states, ns, &m.joint_state)?;
         self.writer.write(c.ee_pose, ns, &m.ee_pose)?;
         self.writer.write(c.ee_twist, ns, &m.ee_twist)?;

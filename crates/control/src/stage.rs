@@ -15,7 +15,7 @@
 //! δ is measured from the tool's actual pose, never from the reference. Pure: no clock — `dt` is passed in.
 
 use nalgebra::{Dyn, Matrix6, Matrix6xX, OMatrix, U6, UnitQuaternion, Vector3, Vector6};
-use softcontact_dynamics::{Axes, Data, ExternalWrench, FrameId, Model};
+use softcontact_dynamics::{Axes, Data, ExternalWrench, FrameId, FrameMotion, Model};
 
 /// Why the stage refused a cycle (the caller holds the arm).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -67,6 +67,12 @@ impl PositionStage {
     pub fn tool_position(&mut self, q: &[f64; 7]) -> Vector3<f64> {
         self.model.forward_kinematics(&mut self.data, q);
         self.model.frame_pose(&self.data, self.tool).translation.vector
+    }
+
+    /// The tool's pose and twist at the measurement (q, q̇), on the stage's model: the kinematics its
+    /// update reuses at the same q.
+    pub fn tool_motion(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> FrameMotion {
+        self.model.frame_motion(&mut self.data, q, dq, self.tool)
     }
 
     /// The joint reference of the last cycle.

@@ -112,6 +112,26 @@ fn axis_rotation(axis: &Vector3<f64>, sin: f64, cos: f64) -> Matrix3<f64> {
     )
 }
 
+/// Where a frame is and how it moves: its pose in the world and its twist (world axes, linear then
+/// angular).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameMotion {
+    pub pose: Isometry3<f64>,
+    pub twist: Vector6<f64>,
+}
+
+impl FrameMotion {
+    /// The origin's linear velocity.
+    pub fn linear(&self) -> Vector3<f64> {
+        self.twist.fixed_rows::<3>(0).into_owned()
+    }
+
+    /// The frame's angular velocity.
+    pub fn angular(&self) -> Vector3<f64> {
+        self.twist.fixed_rows::<3>(3).into_owned()
+    }
+}
+
 impl Model {
     /// A workspace sized for this model.
     pub fn data(&self) -> Data {
@@ -239,6 +259,13 @@ impl Model {
         self.forward_kinematics(data, q);
         self.velocity_pass(data, dq, None, Vector3::zeros());
         self.frame_acceleration_from_pass(data, frame, Vector3::zeros())
+    }
+
+    /// A frame's pose and twist at (q, q̇): one kinematics pass, reused by whatever is asked of `data`
+    /// next at the same q.
+    pub fn frame_motion(&self, data: &mut Data, q: &[f64], dq: &[f64], frame: FrameId) -> FrameMotion {
+        let twist = self.frame_velocity(data, q, dq, frame);
+        FrameMotion { pose: self.frame_pose(data, frame), twist }
     }
 
     /// Spatial velocity of a frame's origin (world axes, linear then angular), i.e. J q̇.

@@ -24,7 +24,7 @@ pub mod planar;
 
 pub use arm_effects::{ArmEffects, JointFriction, Payload};
 pub use dynamics::{ControlTerms, ExternalWrench};
-pub use kinematics::{Axes, Data};
+pub use kinematics::{Axes, Data, FrameMotion};
 pub use model::{BodyInertia, Frame, FrameId, Joint, JointLimits, Model, fixed_subtree_inertia};
 pub use planar::{PlanarChain, PlanarLink};
 

@@ -47,7 +47,7 @@ fn main() -> anyhow::Result<()> {
     poll.registry().register(&mut wrenches, Token(0), Interest::READABLE)?;
     let mut events = Events::with_capacity(8);
 
-    let mut pairing = ForcePairing::new(ForcePairing::urdf_tool_to_sensor()?, normal, p.stale_after)
+    let mut pairing = ForcePairing::new(geometry::lwr4_tool_to_sensor().rotation, normal, p.stale_after)
         .ok_or_else(|| anyhow::anyhow!("normal must be a non-zero direction"))?;
     let start = Instant::now();
     ros::log(

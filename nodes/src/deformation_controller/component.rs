@@ -7,6 +7,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use softcontact_dynamics::FrameMotion;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
 
@@ -88,6 +89,11 @@ impl Commander for InProcessController {
         }
         self.last = Some((step, stamp, session));
         Answered { command_stamp: Some(stamp), ..Default::default() }
+    }
+
+    /// The law's kinematics of this cycle (already computed by its tick).
+    fn tool_motion(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> Option<FrameMotion> {
+        Some(self.control.law.tool_motion(q, dq))
     }
 
     /// After the answer went: the torque command and the state on their topics, the press's progress,

@@ -25,7 +25,6 @@
 
 use nalgebra::{Matrix3, Matrix6xX, Vector3};
 use softcontact_contact::ContactModel;
-use softcontact_dynamics::{Axes, Data, FrameId, Model, lwr4};
 
 use super::{
     ControlError, ControllerState, DeformationController, ModelUpdate, OVER_COMMAND, OVER_COMMAND_MIN, Params,
@@ -210,7 +209,6 @@ pub struct ControllerNode {
     /// The control law.
     pub law: DeformationController,
     policy: Policy,
-    kinematics: (Model, Data, FrameId),
     /// The newest force reading in the sensor frame and when it arrived (`now`).
     force: Option<(Vector3<f64>, f64)>,
     newest_force_stamp: f64,
@@ -235,10 +233,7 @@ pub struct ControllerNode {
 impl ControllerNode {
     /// The node with its parameters (checked by `Params::validate` when loaded) around `law`.
     pub fn new(params: &Params, law: DeformationController) -> Result<Self, ControlError> {
-        let model = lwr4::model();
-        let tool = model.frame_id(lwr4::TOOL_FRAME)?;
-        let data = model.data();
-        let jacobian = Matrix6xX::zeros(model.dof());
+        let jacobian = Matrix6xX::zeros(7);
         Ok(Self {
             law,
             policy: Policy {
@@ -247,7 +242,6 @@ impl ControllerNode {
                 model_update: params.model_update,
                 retarget_duration: params.retarget_duration,
             },
-            kinematics: (model, data, tool),
             force: None,
             newest_force_stamp: f64::NEG_INFINITY,
             newest_joint_state_stamp: f64::NEG_INFINITY,
@@ -441,11 +435,11 @@ impl ControllerNode {
             self.counters.no_fresh_force += 1;
             return Step { restarted, ..nothing(Silence::NoFreshForce, ControllerState::default()) };
         };
-        // The contact force on the hand in the world, through the arm's own kinematics.
-        let (model, data, tool) = &mut self.kinematics;
+        // The contact force on the hand in the world, through the arm's own kinematics (the law's: the
+        // one pass of the cycle).
         let force_world = if js.q.iter().all(|v| v.is_finite()) {
-            model.forward_kinematics(data, &js.q);
-            self.law.geometry().world_force(&model.frame_pose(data, *tool).rotation, &force_in_sensor)
+            let tool = self.law.tool_motion(&js.q, &js.dq).pose.rotation;
+            self.law.geometry().world_force(&tool, &force_in_sensor)
         } else {
             Vector3::repeat(f64::NAN)
         };
@@ -458,7 +452,7 @@ impl ControllerNode {
         };
         self.law.observe_arm_force(None);
         let checked = if force_world.iter().all(|v| v.is_finite()) {
-            model.frame_jacobian(data, *tool, Axes::World, &mut self.jacobian);
+            self.law.tool_jacobian(&js.q, &mut self.jacobian);
             // Near a singularity the torques say nothing of the force: no comparison, no disagreement.
             let arm = ForceCheck::arm_force(&self.jacobian, &arm_torque);
             self.law.observe_arm_force(arm.map(|a| self.law.geometry().normal_force(&a)));
@@ -649,6 +643,7 @@ impl Notices {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use softcontact_dynamics::{Axes, lwr4};
     use softcontact_sim::DEFAULT_Q;
 
     /// A force reading of the sensor at `stamp`, and the external torques the KRC estimates for that
@@ -662,9 +657,8 @@ mod tests {
     fn arm_torque(node: &mut ControllerNode, force_in_sensor: &Vector3<f64>) -> [f64; 7] {
         let tool = node_pose_rotation(node);
         let world = node.geometry().world_force(&tool, force_in_sensor);
-        let (model, data, frame) = &mut node.kinematics;
         let mut jacobian = Matrix6xX::zeros(7);
-        model.frame_jacobian(data, *frame, Axes::World, &mut jacobian);
+        node.law.tool_jacobian(&DEFAULT_Q, &mut jacobian);
         let tau = jacobian.fixed_rows::<3>(0).transpose() * world;
         std::array::from_fn(|i| if tau[i].is_finite() { tau[i] } else { 0.0 })
     }
@@ -746,9 +740,7 @@ mod tests {
 
     /// The tool's rotation at the start posture (the sample's q).
     fn node_pose_rotation(node: &mut ControllerNode) -> nalgebra::UnitQuaternion<f64> {
-        let (model, data, tool) = &mut node.kinematics;
-        model.forward_kinematics(data, &DEFAULT_Q);
-        model.frame_pose(data, *tool).rotation
+        node.law.tool_motion(&DEFAULT_Q, &[0.0; 7]).pose.rotation
     }
 
     #[test]
@@ -1204,7 +1196,7 @@ mod tests {
                 if !tick.controller.in_contact {
                     continue;
                 }
-                let p = tick.driver.tool_pose.translation.vector;
+                let p = tick.tool.pose.translation.vector;
                 let from = *start.get_or_insert(p);
                 slide = slide.max(((p - from) - (p - from).dot(&n) * n).norm());
                 if i % 800 == 0

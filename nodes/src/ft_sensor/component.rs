@@ -12,7 +12,6 @@ use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
 use softcontact_msgs::std_srvs::TriggerResponse;
 
 use super::{FtConfig, FtSensorNode, Params, StartupTare, calibration};
-use crate::contact_estimator::ForcePairing;
 use crate::geometry;
 use crate::handover::{ForceReading, Latest, ToolPose};
 use crate::liveness::{DeadStream, StreamWatch};
@@ -80,7 +79,7 @@ pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc
     let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
     let bias = ros::trigger_server(&mut node, ros::service_mapping(&p.service_mapping)?, &bias_name)?;
 
-    let tool_to_sensor = ForcePairing::urdf_tool_to_sensor()?;
+    let tool_to_sensor = crate::geometry::lwr4_tool_to_sensor().rotation;
 
     if let Err(e) = client.start() {
         ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));

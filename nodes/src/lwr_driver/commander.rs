@@ -6,6 +6,7 @@
 //! knows neither controller nor law.
 
 use ros2_client::{Node, Publisher, Subscription};
+use softcontact_dynamics::FrameMotion;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::topics;
@@ -38,6 +39,12 @@ pub trait Commander {
     /// torque, or a hold. `node` is the driver's.
     fn answer(&mut self, node: &Node, driver: &mut LwrDriver, out: &DriverOutput, stamp: Time) -> Answered;
 
+    /// The tool's pose and twist at (q, q̇) if the commander's own kinematics computed them this cycle
+    /// (the driver then computes none: one kinematics pass a cycle); `None`: the driver computes them.
+    fn tool_motion(&mut self, _q: &[f64; 7], _dq: &[f64; 7]) -> Option<FrameMotion> {
+        None
+    }
+
     /// After the answer went: what the commander publishes, with the measurement's external torque
     /// message first; returns the publish errors.
     fn publish(&mut self, stamp: Time, external_torque: JointState) -> u64;
@@ -51,6 +58,8 @@ pub trait Commander {
 pub struct TopicCommands {
     commands: Subscription<JointState>,
     external_torque: Publisher<JointState>,
+    /// The stamp of the command in force (the joint state it answers).
+    in_force: Option<f64>,
 }
 
 impl TopicCommands {
@@ -58,6 +67,7 @@ impl TopicCommands {
         Ok(Self {
             external_torque: ros::publisher(node, &topics::EXTERNAL_TORQUE, ros::sensor_qos())?,
             commands: ros::subscription(node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?,
+            in_force: None,
         })
     }
 }
@@ -74,6 +84,9 @@ impl Commander for TopicCommands {
     /// Only the session's pinned writer commands (crate::writer_pin).
     fn answer(&mut self, node: &Node, driver: &mut LwrDriver, _: &DriverOutput, stamp: Time) -> Answered {
         let mut answered = Answered::default();
+        // The command in force ages by the driver's clock: one taken before a gap between measurements
+        // answers none after it.
+        driver.expire_command(|| self.in_force.map(|s| stamp.as_secs_f64() - s));
         while let Ok(Some((cmd, info))) = self.commands.take() {
             let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
             let age = stamp.as_secs_f64() - cmd.header.stamp.as_secs_f64();
@@ -86,7 +99,19 @@ impl Commander for TopicCommands {
                 answered.sign_of_life = true;
             }
             match taken {
-                Ok(()) => answered.command_stamp = Some(cmd.header.stamp.as_secs_f64()),
+                Ok(()) => {
+                    answered.command_stamp = Some(cmd.header.stamp.as_secs_f64());
+                    self.in_force = answered.command_stamp;
+                }
+                // Refused for its values: the driver dropped the present command too.
+                Err(
+                    e @ (DriverError::NonFiniteCommand(_)
+                    | DriverError::BeyondLimit(..)
+                    | DriverError::CommandLength(_)),
+                ) => {
+                    self.in_force = None;
+                    answered.refused = Some(e);
+                }
                 Err(e) => answered.refused = Some(e),
             }
         }

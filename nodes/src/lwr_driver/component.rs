@@ -161,8 +161,7 @@ pub fn run<C: Commander>(
     let mut counted = DriverCounters::default();
     let mut all_refused_logged = false;
     let mut fault_logged = None;
-    let mut waiting_logged = None;
-    let mut next_waiting_log = Instant::now();
+    let mut waiting_log = WaitingLog { logged: None, next: Instant::now() };
     // Cycles answered with a held command once the controller first commanded (start-up excluded).
     let mut stale_at_first_command: Option<u64> = None;
     while !ros::stopping(&stop) {
@@ -186,16 +185,8 @@ pub fn run<C: Commander>(
         if sign_of_life {
             command_watch.seen(start.elapsed().as_secs_f64());
         }
-        // What the driver waits for, on each change (at most once a second: a flapping link logs no flood).
-        if let Some(out) = output.as_ref()
-            && out.waiting != waiting_logged
-            && Instant::now() >= next_waiting_log
-        {
-            waiting_logged = out.waiting;
-            next_waiting_log = Instant::now() + Duration::from_secs(1);
-            if let Some(w) = waiting_logged.filter(|w| !matches!(w, Waiting::Fault(_) | Waiting::Monitor(_))) {
-                ros::log(&node, LogLevel::Warn, &format!("no torque applied: {w}"));
-            }
+        if let Some(out) = output.as_ref() {
+            waiting_log.note(&node, out.waiting);
         }
         if client.driver.fault() != fault_logged {
             fault_logged = client.driver.fault();
@@ -212,8 +203,11 @@ pub fn run<C: Commander>(
         if let Some(out) = output {
             last_seen = Instant::now();
             let stamp = measured_at.unwrap_or_else(|| clock.now());
+            // The KRC is answered: the tool's motion for the messages, from the cycle's one kinematics pass.
+            let tool =
+                commander.tool_motion(&out.q, &out.dq).unwrap_or_else(|| client.driver.tool_motion(&out.q, &out.dq));
             if let Some(poses) = &poses {
-                poses.put(ToolPose { pose: out.tool_pose, measured: last_seen });
+                poses.put(ToolPose { pose: tool.pose, measured: last_seen });
             }
             let commanded = out.torque_mode() && !out.holding;
             if commanded {
@@ -221,10 +215,12 @@ pub fn run<C: Commander>(
             }
             lag.measured(stamp.as_secs_f64());
             if let Some(t) = command_stamp.filter(|_| commanded) {
-                command_age.record(clock.now().as_secs_f64() - t);
+                // By the stamp of the measurement it answered, as `max_command_age` is checked (the
+                // reply's own delay is the reply latency's).
+                command_age.record(stamp.as_secs_f64() - t);
                 lag.applied(t);
             }
-            let m = out.messages(&names, stamp);
+            let m = out.messages(&names, &tool, stamp);
             // The KRC is answered already; a middleware error is counted, never the end of the driver.
             // The commander's first: a controller of its own pairs the external torque with the joint
             // state by stamp.
@@ -234,7 +230,7 @@ pub fn run<C: Commander>(
                 ee_pose.publish(m.ee_pose).is_ok(),
                 ee_twist.publish(m.ee_twist).is_ok(),
             ];
-            arm_state.put(ArmState { stamp, tool_pose: out.tool_pose, q: out.q });
+            arm_state.put(ArmState { stamp, tool_pose: tool.pose, q: out.q });
             publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
@@ -394,6 +390,26 @@ fn spawn_slow_streams(
         }
         errors
     })
+}
+
+/// What the driver waits for, logged on each change — at most once a second: a flapping link logs no
+/// flood. A fault is logged on its own; monitor mode is no reason to log.
+struct WaitingLog {
+    logged: Option<Waiting>,
+    next: Instant,
+}
+
+impl WaitingLog {
+    fn note(&mut self, node: &ros2_client::Node, waiting: Option<Waiting>) {
+        if waiting == self.logged || Instant::now() < self.next {
+            return;
+        }
+        self.logged = waiting;
+        self.next = Instant::now() + Duration::from_secs(1);
+        if let Some(w) = waiting.filter(|w| !matches!(w, Waiting::Fault(_) | Waiting::Monitor(_))) {
+            ros::log(node, LogLevel::Warn, &format!("no torque applied: {w}"));
+        }
+    }
 }
 
 #[cfg(test)]

@@ -125,7 +125,7 @@ impl DeformationController {
         if !duration.is_finite() {
             return Err(ControlError::NonFinite("the move duration"));
         }
-        let n = self.config.normal;
+        let n = self.geometry.normal();
         let along = lateral.dot(&n);
         if along.abs() > ACROSS_NORMAL_TOLERANCE {
             return Err(ControlError::Across {

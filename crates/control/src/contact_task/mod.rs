@@ -37,9 +37,9 @@
 //! node then sends the driver a hold request, never an older torque. After the joint states were
 //! interrupted (a new KRC session) the controller forgets the contact and approaches again.
 
-use nalgebra::{DVector, UnitQuaternion, Vector3};
+use nalgebra::{DVector, Matrix6xX, UnitQuaternion, Vector3};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector};
-use softcontact_dynamics::{ArmEffects, Data, FrameId, Model, lwr4};
+use softcontact_dynamics::{ArmEffects, Axes, Data, FrameId, FrameMotion, Model, lwr4};
 
 use crate::{
     AugmentedInverse, DeformationGains, LimitError, Limits, Oscillation, Quintic, Reference, Segment, TaskTorque,
@@ -349,6 +349,18 @@ impl DeformationController {
     /// The contact's geometry: the normal of the configuration, the sensor mounted as on the LWR IV.
     pub fn geometry(&self) -> &ContactGeometry {
         &self.geometry
+    }
+
+    /// The tool's pose and twist at (q, q̇), from the law's own model: the one kinematics pass of the
+    /// cycle, which the tick (and [`Self::tool_jacobian`]) reuse at the same q whoever asks first.
+    pub fn tool_motion(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> FrameMotion {
+        self.model.frame_motion(&mut self.data, q, dq, self.tool)
+    }
+
+    /// The tool's Jacobian (world axes) at q into `out` (6 × 7), on the same kinematics pass.
+    pub fn tool_jacobian(&mut self, q: &[f64; 7], out: &mut Matrix6xX<f64>) {
+        self.model.forward_kinematics(&mut self.data, q);
+        self.model.frame_jacobian(&self.data, self.tool, Axes::World, out);
     }
 
     /// Where the undeformed surface is along n \[m\] (`None`: no contact found since the (re)start).

@@ -55,20 +55,19 @@ impl DeformationController {
         let surface_force = self.surface_force(normal_force, dt);
         let (hand, start) = self.hand(q, dq);
         self.find_contact(&hand, normal_force)?;
+        let forces = Forces { reading: normal_force, surface: surface_force, rate: force_rate, world: *contact_force };
         let mut state = ControllerState { f: normal_force, f_cmd: self.f_cmd, ..Default::default() };
         let z_accel = match self.contact_level {
             None => self.approach(&hand, &start),
-            Some(level) => {
-                let forces = Forces { reading: normal_force, surface: surface_force, rate: force_rate };
-                self.in_contact(level, &hand, &forces, dt, &mut state)?
-            }
+            Some(level) => self.in_contact(level, &hand, &forces, dt, &mut state)?,
         };
         state.f_cmd = self.f_cmd;
         state.contact_lost = self.contact_lost;
         state.force_limited = self.force_limited;
         state.over_command = self.force_limited && self.trip.is_some_and(|t| t.over_command);
         let acceleration = self.task_acceleration(z_accel, &hand, &start);
-        let tau = self.torques(q, dq, &start, &acceleration, contact_force, normal_force, surface_force, &state, dt)?;
+        self.posture_torque(q, dq, &start);
+        let tau = self.torques(q, dq, &acceleration, &forces, &state, dt)?;
         Ok((tau, state))
     }
 
@@ -99,14 +98,11 @@ impl DeformationController {
 
     /// The hand's pose and velocity (the kinematics, once) and its start, taken at the first tick.
     fn hand(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> (Hand, Start) {
-        self.model.forward_kinematics(&mut self.data, q);
-        let pose = self.model.frame_pose(&self.data, self.tool);
-        let r = pose.translation.vector;
-        let start = *self.start.get_or_insert((r, pose.rotation, *q));
+        let motion = self.tool_motion(q, dq);
+        let r = motion.pose.translation.vector;
+        let start = *self.start.get_or_insert((r, motion.pose.rotation, *q));
         self.origin.get_or_insert((start.0, start.1));
-        let twist = self.model.frame_velocity(&mut self.data, q, dq, self.tool);
-        let (v, w) = (twist.fixed_rows::<3>(0).into_owned(), twist.fixed_rows::<3>(3).into_owned());
-        (Hand { r, rotation: pose.rotation, v, w }, start)
+        (Hand { r, rotation: motion.pose.rotation, v: motion.linear(), w: motion.angular() }, start)
     }
 
     /// The onset detector on the hand's position along n: at contact the contact position d is fixed
@@ -211,7 +207,7 @@ impl DeformationController {
     /// holding the start, moved by `command_across` (its reference is ⊥ n; velocity and acceleration feed
     /// forward, so a move does not lag).
     fn task_acceleration(&self, z_accel: f64, hand: &Hand, start: &Start) -> Vector6<f64> {
-        let n = self.config.normal;
+        let n = self.geometry.normal();
         let across = self.across_reference();
         let (kp, kd) = self.config.lateral;
         let target = start.0 + across.lateral;
@@ -225,35 +221,36 @@ impl DeformationController {
         Vector6::new(linear.x, linear.y, linear.z, angular.x, angular.y, angular.z)
     }
 
-    /// The joint torques of eq. 15 with the posture's null-space impedance and the named friction fed
-    /// forward, through the limiter. A limiter that refuses them holds the hand where it is.
-    #[allow(clippy::too_many_arguments)]
-    fn torques(
-        &mut self,
-        q: &[f64; 7],
-        dq: &[f64; 7],
-        start: &Start,
-        acceleration: &Vector6<f64>,
-        contact_force: &Vector3<f64>,
-        normal_force: f64,
-        surface_force: f64,
-        state: &ControllerState,
-        dt: f64,
-    ) -> Result<[f64; 7], ControlError> {
-        let n = self.config.normal;
+    /// The posture's null-space impedance: a spring and damper per joint toward the posture at the
+    /// start, into `tau0`.
+    fn posture_torque(&mut self, q: &[f64; 7], dq: &[f64; 7], start: &Start) {
         for i in 0..7 {
             self.tau0[i] =
                 self.config.posture_stiffness[i] * (start.2[i] - q[i]) - self.config.posture_damping[i] * dq[i];
         }
+    }
+
+    /// The joint torques of eq. 15 with the posture's null-space torque (`tau0`) and the named friction fed
+    /// forward, through the limiter. A limiter that refuses them holds the hand where it is.
+    fn torques(
+        &mut self,
+        q: &[f64; 7],
+        dq: &[f64; 7],
+        acceleration: &Vector6<f64>,
+        forces: &Forces,
+        state: &ControllerState,
+        dt: f64,
+    ) -> Result<[f64; 7], ControlError> {
+        let n = self.geometry.normal();
         // The measured contact force is fed forward (eq. 15) — but backing off from the force limit,
         // only up to the model's force at the back-off's reference (at most max_force). A sensor that
         // reads a few per cent high feeds forward more than the surface pushes back, which the soft
         // deformation gains cannot hold: the force would run away to the limit, and with the reading fed
         // forward in full the back-off could not pull the hand out.
-        let mut feed_forward = *contact_force + (normal_force - surface_force) * n;
+        let mut feed_forward = forces.world + (forces.reading - forces.surface) * n;
         let cap = state.f_predicted.clamp(0.0, self.config.limits.max_force);
-        if self.force_limited && normal_force > cap {
-            feed_forward += (normal_force - cap) * n;
+        if self.force_limited && forces.reading > cap {
+            feed_forward += (forces.reading - cap) * n;
         }
         let wrench = Vector6::new(feed_forward.x, feed_forward.y, feed_forward.z, 0.0, 0.0, 0.0);
         let terms = self.model.control_terms(&mut self.data, q, dq, self.tool)?;
@@ -286,12 +283,14 @@ impl DeformationController {
     }
 }
 
-/// The measured normal force this tick: the reading, the surface's force without a named sensor bias
-/// or drift, and the reading's smoothed rate [N/s].
+/// The measured force this tick: along the normal the reading, the surface's force without a named sensor
+/// bias or drift, and the reading's smoothed rate \[N/s\]; the whole contact force on the hand in the
+/// world \[N\].
 struct Forces {
     reading: f64,
     surface: f64,
     rate: f64,
+    world: Vector3<f64>,
 }
 
 /// A tick's measurements must all be finite numbers: anything else is no torque this tick.
