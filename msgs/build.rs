@@ -110,17 +110,22 @@ fn definitions() -> std::collections::BTreeMap<String, String> {
     texts
 }
 
+/// A .msg comment as Rust doc text: its brackets (units, lists) escaped, or rustdoc reads them as links.
+fn doc_text(comment: &str) -> String {
+    comment.replace('[', "\\[").replace(']', "\\]")
+}
+
 /// The Rust struct of one message definition (its leading comment lines are its doc).
 fn rust_struct(out: &mut String, name: &str, text: &str) {
     let doc: Vec<&str> =
         text.lines().take_while(|l| l.starts_with('#')).map(|l| l.trim_start_matches('#').trim()).collect();
-    writeln!(out, "/// {}\n#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]\npub struct {name} {{", doc.join(" ")).unwrap();
+    writeln!(out, "/// {}\n#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]\npub struct {name} {{", doc_text(&doc.join(" "))).unwrap();
     for line in text.lines() {
         let (field, comment) = line.split_once('#').unwrap_or((line, ""));
         let mut parts = field.split_whitespace();
         let (Some(ty), Some(field_name)) = (parts.next(), parts.next()) else { continue };
         if !comment.trim().is_empty() {
-            writeln!(out, "    /// {}", comment.trim()).unwrap();
+            writeln!(out, "    /// {}", doc_text(comment.trim())).unwrap();
         }
         writeln!(out, "    pub {field_name}: {},", rust_type(ty)).unwrap();
     }
