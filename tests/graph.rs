@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use ros2_client::{Name, ServiceTypeName};
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 const INSIDE: &str = "SOFTCONTACT_GRAPH_CLIENT";
 const REPLAY_INSIDE: &str = "SOFTCONTACT_REPLAY_CLIENT";

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use softcontact_msgs::softcontact_msgs::ControllerState;
 use softcontact_msgs::topics;
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 /// Set inside the namespace: the peer to run there.
 const PEER: &str = "SOFTCONTACT_INTEROP_PEER";

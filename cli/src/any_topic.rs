@@ -5,7 +5,7 @@ use ros2_client::{Node, Publisher, Subscription};
 use softcontact_bag::{AnyMessage, Qos};
 use softcontact_msgs::RosType;
 use softcontact_msgs::topics;
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 /// The graph's recorded topics (`softcontact_msgs::topics::recorded`): name, type and the QoS their
 /// publishers offer.

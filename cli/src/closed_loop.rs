@@ -229,7 +229,7 @@ fn replay(
     // the hand settles).
     cell.estimator =
         ContactEstimatorNode::new(contact_estimator::EstimatorConfig { normal, ..params.estimator_config() })?
-            .with_refits(&params, cell.sim.time());
+            .with_refits(&params, cell.lockstep.sim.time());
     cell.controller.law.command_deformation(start.deformation.clamp(0.0, 0.07), 1.0)?;
     let mut newest = None;
     for _ in 0..(SETTLE / 1e-3) as usize {
@@ -263,7 +263,7 @@ fn replay(
             let geometry = cell.controller.geometry();
             out.t.push(t);
             out.force.push(geometry.normal_reading(&tick.force_world));
-            out.deformation.push(geometry.deformation(&cell.sim.tool_pose().translation.vector, &identified));
+            out.deformation.push(geometry.deformation(&cell.lockstep.sim.tool_pose().translation.vector, &identified));
             out.q.push(tick.driver.q);
         }
     }

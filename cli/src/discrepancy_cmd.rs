@@ -286,8 +286,8 @@ fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: b
 pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<Analysis> {
     let baseline = match &args.model {
         Some(path) => {
-            let text =
-                softcontact_nodes::params::read_small(path).with_context(|| format!("reading {}", path.display()))?;
+            let text = softcontact_nodes::runtime::params::read_small(path)
+                .with_context(|| format!("reading {}", path.display()))?;
             Some(ContactModel::from_yaml(&text).with_context(|| format!("{} is not a contact model", path.display()))?)
         }
         None => None,

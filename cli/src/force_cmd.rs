@@ -9,7 +9,7 @@ use ros2_client::ActionTypeName;
 use ros2_client::action::{ActionClient, ActionClientQosPolicies, GoalId, GoalStatusEnum};
 use softcontact_msgs::softcontact_msgs::{PressForceFeedback, PressForceGoal, PressForceResult};
 use softcontact_nodes::deformation_controller::PRESS_ACTION;
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 #[derive(Debug, clap::Args)]
 pub struct ForceArgs {

@@ -21,6 +21,7 @@ use rand_distr::{Distribution, Normal};
 use softcontact_contact::{ContactModel, LoadingPath};
 use softcontact_control::PositionStage;
 use softcontact_dynamics::lwr4;
+use softcontact_nodes::cell::Lockstep;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
 use softcontact_sim::{BenchRun, BenchSample, FtSensorConfig, SimConfig, Simulator, ZERO_THRESHOLD};
@@ -58,9 +59,7 @@ pub struct HiddenErrors {
 }
 
 struct Cell {
-    sim: Simulator,
-    driver: LwrDriver,
-    ft: FtSensorNode,
+    lockstep: Lockstep,
     stage: PositionStage,
     /// The sensor's orientation in the tool frame (the URDF's), and in the world at the last cycle.
     tool_to_sensor: UnitQuaternion<f64>,
@@ -100,9 +99,7 @@ impl Cell {
         let tool = model.frame_id(lwr4::TOOL_FRAME)?;
         let stage = PositionStage::new(lwr4::model(), tool, &config.initial_q, BANDWIDTH);
         Ok(Self {
-            sim: Simulator::new(config)?,
-            driver: LwrDriver::new(DriverParams::default()),
-            ft,
+            lockstep: Lockstep { sim: Simulator::new(config)?, driver: LwrDriver::new(DriverParams::default()), ft },
             stage,
             normal_sensor: sensor_rotation.inverse() * normal,
             along_sensor: sensor_rotation.inverse() * along,
@@ -115,50 +112,47 @@ impl Cell {
 
     /// One FRI cycle, read → update → write: the tool driven to `reference` moving at `velocity`.
     fn cycle(&mut self, reference: &Vector3<f64>, velocity: &Vector3<f64>) -> anyhow::Result<Seen> {
-        let record = self.sim.ft_record().encode();
-        let measured = self.driver.measure(&self.sim.measurement().encode())?;
-        let out = &measured.output;
-        // The cycle's kinematics, the stage's (its update reuses them).
-        let tool = self.stage.tool_motion(&out.q, &out.dq);
-        self.ft.observe_tool_pose(&tool.pose);
-        let orientation = tool.pose.rotation * self.tool_to_sensor;
-        self.sensor_orientation = orientation;
-        let ft = self.ft.handle(&record, Some(&orientation))?;
-        anyhow::ensure!(!(ft.invalid && ft.fresh), "the F/T sensor's reading is invalid (saturated?)");
-        let reading = match ft.compensated.filter(|_| self.ft.tared()) {
-            Some(c) => Vector3::new(c[0], c[1], c[2]),
-            None => Vector3::zeros(),
-        };
-        let commanding = out.state == InterfaceState::Command;
-        if commanding {
-            let (q, dq) = (out.q, out.dq);
-            let tau =
-                self.stage.update(&q, &dq, reference, velocity, &(orientation * reading), self.sim.krc_cycle())?;
-            self.driver.set_command(&tau)?;
-        }
-        let seen = Seen {
-            commanding,
-            position: tool.pose.translation.vector,
-            // The force on the hand, along the sensor's axes: the specimen pushes back.
-            normal: -reading.dot(&self.normal_sensor),
-            tangential: -reading.dot(&self.along_sensor),
-        };
-        let (reply, _) = self.driver.answer(measured);
+        let Self { lockstep, stage, tool_to_sensor, sensor_orientation, normal_sensor, along_sensor, .. } = self;
+        let dt = lockstep.sim.krc_cycle();
+        let (seen, _) = lockstep.cycle(|mut c| -> anyhow::Result<Seen> {
+            let (q, dq) = (c.measured.q, c.measured.dq);
+            // The cycle's kinematics, the stage's (its update reuses them).
+            let tool = stage.tool_motion(&q, &dq);
+            let orientation = tool.pose.rotation * *tool_to_sensor;
+            *sensor_orientation = orientation;
+            let ft = c.read_ft(&tool.pose, &orientation)?;
+            anyhow::ensure!(!(ft.invalid && ft.fresh), "the F/T sensor's reading is invalid (saturated?)");
+            let reading = match ft.compensated.filter(|_| c.ft.tared()) {
+                Some(f) => Vector3::new(f[0], f[1], f[2]),
+                None => Vector3::zeros(),
+            };
+            let commanding = c.measured.state == InterfaceState::Command;
+            if commanding {
+                let tau = stage.update(&q, &dq, reference, velocity, &(orientation * reading), dt)?;
+                c.driver.set_command(&tau)?;
+            }
+            Ok(Seen {
+                commanding,
+                position: tool.pose.translation.vector,
+                // The force on the hand, along the sensor's axes: the specimen pushes back.
+                normal: -reading.dot(normal_sensor),
+                tangential: -reading.dot(along_sensor),
+            })
+        })?;
+        let driver = &self.lockstep.driver;
         anyhow::ensure!(
-            self.driver.fault().is_none(),
+            driver.fault().is_none(),
             "the driver holds for a fault: {}",
-            self.driver.fault().map(|f| f.to_string()).unwrap_or_default()
+            driver.fault().map(|f| f.to_string()).unwrap_or_default()
         );
-        self.sim.command(&reply);
-        self.sim.step_cycle()?;
         Ok(seen)
     }
 
     /// Moves the reference in a straight line from `from` to `to` at `speed`; the positions seen.
     fn travel(&mut self, from: Vector3<f64>, to: Vector3<f64>, speed: f64) -> anyhow::Result<Seen> {
         let d = to - from;
-        let cycles = ((d.norm() / (speed * self.sim.krc_cycle())).ceil() as usize).max(1);
-        let velocity = d / (cycles as f64 * self.sim.krc_cycle());
+        let cycles = ((d.norm() / (speed * self.lockstep.sim.krc_cycle())).ceil() as usize).max(1);
+        let velocity = d / (cycles as f64 * self.lockstep.sim.krc_cycle());
         let mut last = None;
         for k in 1..=cycles {
             last = Some(self.cycle(&(from + d * (k as f64 / cycles as f64)), &velocity)?);
@@ -172,7 +166,7 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
     let mut cell = Cell::new(truth, hidden)?;
     let mut rng = SmallRng::seed_from_u64(hidden.seed ^ 0x05ee_d000);
     let creep = Normal::new(0.0, hidden.creep_sd).map_err(|e| anyhow::anyhow!("creep: {e}"))?;
-    let home = cell.stage.tool_position(cell.sim.q());
+    let home = cell.stage.tool_position(cell.lockstep.sim.q());
     // Until the KRC commands, then still for 0.3 s, then the F/T node tares with the hand free.
     let mut commanding = 0;
     for _ in 0..5000 {
@@ -182,15 +176,15 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
         }
     }
     anyhow::ensure!(commanding > 300, "the KRC did not enter command mode");
-    cell.ft.checked_tare(Some(&cell.sensor_orientation)).map_err(|e| anyhow::anyhow!("tare: {e}"))?;
+    cell.lockstep.ft.checked_tare(Some(&cell.sensor_orientation)).map_err(|e| anyhow::anyhow!("tare: {e}"))?;
     let (n, t) = (cell.normal, cell.along);
     let (mut runs, mut sum, mut count, mut worst) = (Vec::with_capacity(paths.len()), 0.0, 0usize, 0.0f64);
     for path in paths {
         let creep = creep.sample(&mut rng);
         // Down at 1 mm/s until the third reading above the threshold: the zero, where the tool is.
         let (mut reference, mut above, mut zero) = (home, 0, None);
-        let step = n * SPEED * cell.sim.krc_cycle();
-        for _ in 0..(3.0 * HOVER / (SPEED * cell.sim.krc_cycle())) as usize {
+        let step = n * SPEED * cell.lockstep.sim.krc_cycle();
+        for _ in 0..(3.0 * HOVER / (SPEED * cell.lockstep.sim.krc_cycle())) as usize {
             reference += step;
             let seen = cell.cycle(&reference, &(n * SPEED))?;
             above = if seen.normal > ZERO_THRESHOLD { above + 1 } else { 0 };
@@ -200,7 +194,7 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
             }
         }
         let zero = zero.ok_or_else(|| anyhow::anyhow!("the arm found no specimen within {} mm", 3e3 * HOVER))?;
-        let surface = cell.sim.surface.as_ref().expect("a surface").config().point;
+        let surface = cell.lockstep.sim.surface.as_ref().expect("a surface").config().point;
         let zero_error = (zero - surface).dot(&n);
         // Along the path from the zero, the zero creeping with the path's progress.
         let length = path.length();
@@ -209,13 +203,13 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
         let mut crept = 0.0;
         for w in &path.waypoints {
             let segment = (w[0] - from[0]).hypot(w[1] - from[1]);
-            let cycles = ((segment / (SPEED * cell.sim.krc_cycle())).ceil() as usize).max(1);
+            let cycles = ((segment / (SPEED * cell.lockstep.sim.krc_cycle())).ceil() as usize).max(1);
             let direction = (n * (w[0] - from[0]) + t * (w[1] - from[1])) / segment.max(1e-12);
             for k in 1..=cycles {
                 let u = k as f64 / cycles as f64;
                 let (dn, dt) = (from[0] + u * (w[0] - from[0]), from[1] + u * (w[1] - from[1]));
                 let progress = if length > 0.0 { (travelled + u * segment) / length } else { 1.0 };
-                let surface = cell.sim.surface.as_mut().expect("a surface");
+                let surface = cell.lockstep.sim.surface.as_mut().expect("a surface");
                 surface.creep(creep * progress - crept);
                 crept = creep * progress;
                 let target = start + n * dn + t * dt;
@@ -252,6 +246,6 @@ pub fn run(truth: &ContactModel, paths: &[LoadingPath], hidden: &HiddenErrors) -
         runs,
         tracking_rms: (sum / count.max(1) as f64).sqrt(),
         tracking_max: worst,
-        simulated: cell.sim.time(),
+        simulated: cell.lockstep.sim.time(),
     })
 }

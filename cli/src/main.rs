@@ -91,7 +91,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::LoadingPaths(args) => loading_paths_cmd::run(&args),
         Command::Climb(args) => climb_cmd::run(&args),
         Command::Params { node, markdown } => {
-            use softcontact_nodes::params::reference;
+            use softcontact_nodes::runtime::params::reference;
             if markdown {
                 print!("{}", reference::markdown_all());
                 return Ok(());
@@ -110,7 +110,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    softcontact_nodes::ros::init_logging("softcontact");
+    softcontact_nodes::runtime::ros::init_logging("softcontact");
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

@@ -1,7 +1,7 @@
 //! The range of every numeric command-line argument, checked as clap parses it: a value that is not a
 //! finite number within its range is refused with the range in the error, before anything runs.
 
-use softcontact_nodes::params::Shown;
+use softcontact_nodes::runtime::params::Shown;
 
 /// A real number within [low, high] (`unit` is printed after the range).
 pub fn real(low: f64, high: f64, unit: &'static str) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {

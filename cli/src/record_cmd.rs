@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use softcontact_bag::{AnyMessage, BagWriter, Qos, Recording};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 use crate::any_topic::{AnyPublisher, AnySubscription, graph_topics};
 

@@ -90,15 +90,18 @@ fn a_hidden_relaxation_is_named() {
     // The graph's overlay, read by the nodes' own loaders: the controller starts from the augmented model
     // with its surface placed, the estimator carries its effects with the surface held there (at 0.3 m).
     let overlay = report["overlay_file"].as_str().unwrap_or_else(|| panic!("overlay_file in {report}"));
-    let args = softcontact_nodes::params::ParamArgs { files: vec![overlay.into()], ..Default::default() };
-    let (controller, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
-        "deformation_controller",
+    let args = softcontact_nodes::runtime::params::ParamArgs { files: vec![overlay.into()], ..Default::default() };
+    let (controller, _) =
+        softcontact_nodes::runtime::params::load::<softcontact_nodes::deformation_controller::Params>(
+            "deformation_controller",
+            &args,
+        )
+        .unwrap();
+    let (estimator, _) = softcontact_nodes::runtime::params::load::<softcontact_nodes::contact_estimator::Params>(
+        "contact_estimator",
         &args,
     )
     .unwrap();
-    let (estimator, _) =
-        softcontact_nodes::params::load::<softcontact_nodes::contact_estimator::Params>("contact_estimator", &args)
-            .unwrap();
     assert_eq!(controller.initial_model, augmented);
     assert_eq!(estimator.augmented_model.as_ref(), Some(&augmented));
     let surface = controller.initial_surface.unwrap();
@@ -430,12 +433,13 @@ fn the_arms_own_effects_are_named_from_a_recording() {
         assert!(out.status.success(), "{}", text(&out));
         // The compensation file is the controller's parameter overlay, read as the node reads it.
         let overlay = folder.join("arm_effects.yaml");
-        let args = softcontact_nodes::params::ParamArgs { files: vec![overlay], ..Default::default() };
-        let (params, _) = softcontact_nodes::params::load::<softcontact_nodes::deformation_controller::Params>(
-            "deformation_controller",
-            &args,
-        )
-        .unwrap();
+        let args = softcontact_nodes::runtime::params::ParamArgs { files: vec![overlay], ..Default::default() };
+        let (params, _) =
+            softcontact_nodes::runtime::params::load::<softcontact_nodes::deformation_controller::Params>(
+                "deformation_controller",
+                &args,
+            )
+            .unwrap();
         let compensated = params.arm_effects;
         assert_eq!(compensated.joint_friction.is_some(), hidden);
         assert_eq!(compensated.payload.map(|p| (p.mass - 1.2).abs() < 0.03), hidden.then_some(true));

@@ -11,7 +11,7 @@ use softcontact_bag::{AnyMessage, BagWriter, Qos};
 use softcontact_msgs::geometry_msgs::{Vector3, Wrench, WrenchStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ForceCommand};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 const INNER: &str = "SOFTCONTACT_RECORDINGS_TEST_INNER";
 const T0: u64 = 1_700_000_000_000_000_000;

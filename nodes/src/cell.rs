@@ -5,16 +5,17 @@
 //! write on one thread: each FRI measurement is answered with the torque the controller computed for that
 //! very measurement (`LwrDriver::measure`, `set_command`, `answer`), from the F/T sensor's newest record.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use softcontact_dynamics::FrameMotion;
 use softcontact_sim::{SimConfig, SimError, Simulator};
+use softcontact_wire::WireError;
 
 use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
 use crate::deformation_controller::{
     self, ControlError, ControllerNode, ControllerState, DeformationController, JointSample, Reply,
 };
 use crate::ft_sensor::{self, FtConfig, FtOutput, FtSensorNode, StartupTare};
-use crate::lwr_driver::{DriverError, DriverOutput, LwrDriver, Measured, Params as DriverParams};
+use crate::lwr_driver::{DriverError, DriverOutput, LwrDriver, Params as DriverParams};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
@@ -53,13 +54,63 @@ pub struct Tick {
     pub estimator: ContactStateOut,
 }
 
+/// The simulated KRC and Net F/T box wired to the product's driver and F/T node, one 1 ms FRI cycle at
+/// a time, read → update → write: the one place the lockstep cycle is written. The controller's
+/// [`Cell`] and the CLI's loading-paths stage are its two updates; on the robot the same driver calls
+/// run in `udp::FriClient::cycle_with`.
+pub struct Lockstep {
+    pub sim: Simulator,
+    pub driver: LwrDriver,
+    pub ft: FtSensorNode,
+}
+
+/// One cycle as an update sees it: the measurement the driver read, the sensor's newest record, and the
+/// driver to hand the command to ([`LwrDriver::set_command`]; none set: the driver holds).
+pub struct Cycle<'a> {
+    /// Simulated time at the measurement \[s\].
+    pub time: f64,
+    pub measured: &'a DriverOutput,
+    pub driver: &'a mut LwrDriver,
+    pub ft: &'a mut FtSensorNode,
+    record: &'a [u8],
+}
+
+impl Cycle<'_> {
+    /// The F/T node's reading of this cycle's record, handed the tool's pose (/lwr/ee_pose, which its
+    /// tare checks for motion) and the sensor's orientation in the world (its tf lookup).
+    pub fn read_ft(&mut self, tool: &Isometry3<f64>, orientation: &UnitQuaternion<f64>) -> Result<FtOutput, WireError> {
+        self.ft.observe_tool_pose(tool);
+        self.ft.handle(self.record, Some(orientation))
+    }
+}
+
+impl Lockstep {
+    /// One cycle: the sensor's record and the KRC's measurement are read, `update` sets the command for
+    /// that very measurement, the driver's answer goes to the simulated KRC and the simulator moves one
+    /// cycle under it. An update's error leaves the measurement unanswered and the simulator where it
+    /// was. Returns the update's value and the driver's output as answered.
+    pub fn cycle<T, E>(&mut self, update: impl FnOnce(Cycle<'_>) -> Result<T, E>) -> Result<(T, DriverOutput), E>
+    where
+        E: From<DriverError> + From<SimError>,
+    {
+        let time = self.sim.time();
+        let record = self.sim.ft_record().encode();
+        let measured = self.driver.measure(&self.sim.measurement().encode())?;
+        let cycle =
+            Cycle { time, measured: &measured.output, driver: &mut self.driver, ft: &mut self.ft, record: &record };
+        let value = update(cycle)?;
+        let (reply, answered) = self.driver.answer(measured);
+        self.sim.command(&reply);
+        self.sim.step_cycle()?;
+        Ok((value, answered))
+    }
+}
+
 /// The simulated cell and the nodes, wired as `launch-scripts/sim.sh` wires them: the very node
 /// structs and policies of the graph (the controller's [`ControllerNode`], the F/T node's start-up tare),
 /// run on the simulator's clock.
 pub struct Cell {
-    pub sim: Simulator,
-    pub driver: LwrDriver,
-    pub ft: FtSensorNode,
+    pub lockstep: Lockstep,
     pub controller: ControllerNode,
     pub estimator: ContactEstimatorNode,
     orientation: Option<UnitQuaternion<f64>>,
@@ -83,9 +134,7 @@ impl Cell {
             ..Default::default()
         };
         Ok(Self {
-            sim: Simulator::new(sim)?,
-            driver: LwrDriver::new(DriverParams::default()),
-            ft,
+            lockstep: Lockstep { sim: Simulator::new(sim)?, driver: LwrDriver::new(DriverParams::default()), ft },
             controller: ControllerNode::new(&params, law)?,
             estimator,
             orientation: None,
@@ -98,85 +147,76 @@ impl Cell {
     /// Software tare now, as the /ft_sensor/bias service does it: refused (with the reason) when the
     /// hand is in contact or moving, or the reading is unsteady.
     pub fn tare(&mut self) -> Result<(), CellError> {
-        self.pending_tare = Some(self.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?);
+        let bias = self.lockstep.ft.checked_tare(self.orientation.as_ref()).map_err(CellError::Ft)?;
+        self.pending_tare = Some(bias);
         self.startup_tare.taken();
         Ok(())
     }
 
-    /// One 1 ms cycle through the wire formats, read → update → write as one process runs it: the F/T
-    /// node reads the sensor's newest record, the driver reads the KRC's measurement, the controller
-    /// node computes the torque for that very measurement and the driver answers with it (or holds); then
-    /// the simulator moves. `None` until the KRC commands.
+    /// One 1 ms cycle through the wire formats, as one process runs it: the F/T node reads the sensor's
+    /// newest record, the driver reads the KRC's measurement, the controller node computes the torque
+    /// for that very measurement and the driver answers with it (or holds); then the simulator moves.
+    /// `None` until the KRC commands.
     pub fn cycle(&mut self) -> Result<Option<Tick>, CellError> {
-        let time = self.sim.time();
-        let record = self.sim.ft_record().encode();
-        let measured = self.driver.measure(&self.sim.measurement().encode())?;
-        let out = &measured.output;
-        // The cycle's one kinematics pass, the law's (its tick reuses it).
-        let tool = self.controller.law.tool_motion(&out.q, &out.dq);
-        // /lwr/ee_pose, which the F/T node's tare checks for motion.
-        self.ft.observe_tool_pose(&tool.pose);
-        let orientation = self.controller.geometry().sensor_rotation(&tool.pose.rotation);
-        self.orientation = Some(orientation);
-        let ft = self.ft.handle(&record, Some(&orientation)).map_err(|e| CellError::Ft(e.to_string()))?;
-        if let Some(Ok(bias)) = self.startup_tare.poll(&mut self.ft, &orientation, time) {
-            self.pending_tare = Some(bias);
-        }
-        // /ft_sensor/wrench: published once tared, an invalid sample (saturated, an error bit) withheld.
-        match ft.compensated.filter(|_| self.startup_tare.tared() && !ft.invalid) {
-            Some(c) => self.controller.on_force(time, Vector3::new(c[0], c[1], c[2]), time),
-            None => self.controller.force_withheld(),
-        }
-        if self.driver.fault() != self.driver_fault {
-            self.driver_fault = self.driver.fault();
-            self.controller.on_driver_fault(self.driver_fault.map(|f| f.to_string()));
-        }
-        let commanding = out.torque_mode();
-        let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
-        self.controller.on_external_torque(time, &out.external_torque);
-        let step = self.controller.on_joint_state(&joint_state, time);
-        if !commanding {
-            self.write(measured)?;
-            return Ok(None);
-        }
-        let f = self.controller.geometry().normal_force(&step.force_world);
-        let estimator = self.estimator.update(time, &tool.pose.translation.vector, &tool.linear(), f)?;
-        // On the FRI thread nothing is late: anything but a torque for this measurement holds at once.
-        let (torque, refused) = match step.reply {
-            Reply::Torque(tau) => (Some(tau), None),
-            Reply::Hold(e) => (None, Some(e)),
-            Reply::Nothing(_) => (None, None),
-        };
-        match torque {
-            // A refused torque (not 7 finite values) clears the command: the driver holds.
-            Some(tau) => self.driver.set_command(&tau).map_or((), |_| ()),
-            None => self.driver.clear_command(),
-        }
-        let driver = self.write(measured)?;
-        if self.pending_tare.is_some() {
-            self.controller.law.sensor_tared();
-        }
-        Ok(Some(Tick {
-            time,
-            driver,
-            tool,
-            ft,
-            tared: self.startup_tare.tared(),
-            tare: self.pending_tare.take(),
-            force_world: step.force_world,
-            controller: ControllerState { f, ..step.state },
-            torque,
-            refused,
-            estimator,
-        }))
-    }
-
-    /// The driver's answer to the KRC, and the simulator's cycle under it.
-    fn write(&mut self, measured: Measured) -> Result<DriverOutput, CellError> {
-        let (reply, driver) = self.driver.answer(measured);
-        self.sim.command(&reply);
-        self.sim.step_cycle()?;
-        Ok(driver)
+        let Self { lockstep, controller, estimator, orientation, startup_tare, pending_tare, driver_fault } = self;
+        let (tick, answered) = lockstep.cycle(|mut c| -> Result<_, CellError> {
+            let (time, out) = (c.time, c.measured);
+            // The cycle's one kinematics pass, the law's (its tick reuses it).
+            let tool = controller.law.tool_motion(&out.q, &out.dq);
+            let sensor = controller.geometry().sensor_rotation(&tool.pose.rotation);
+            *orientation = Some(sensor);
+            let ft = c.read_ft(&tool.pose, &sensor).map_err(|e| CellError::Ft(e.to_string()))?;
+            if let Some(Ok(bias)) = startup_tare.poll(c.ft, &sensor, time) {
+                *pending_tare = Some(bias);
+            }
+            // /ft_sensor/wrench: published once tared, an invalid sample (saturated, an error bit) withheld.
+            match ft.compensated.filter(|_| startup_tare.tared() && !ft.invalid) {
+                Some(f) => controller.on_force(time, Vector3::new(f[0], f[1], f[2]), time),
+                None => controller.force_withheld(),
+            }
+            if c.driver.fault() != *driver_fault {
+                *driver_fault = c.driver.fault();
+                controller.on_driver_fault(driver_fault.map(|f| f.to_string()));
+            }
+            let commanding = out.torque_mode();
+            let joint_state = JointSample { stamp: time, session: Some(out.session), commanding, q: out.q, dq: out.dq };
+            controller.on_external_torque(time, &out.external_torque);
+            let step = controller.on_joint_state(&joint_state, time);
+            if !commanding {
+                return Ok(None);
+            }
+            let f = controller.geometry().normal_force(&step.force_world);
+            let estimate = estimator.update(time, &tool.pose.translation.vector, &tool.linear(), f)?;
+            // On the FRI thread nothing is late: anything but a torque for this measurement holds at once.
+            let (torque, refused) = match step.reply {
+                Reply::Torque(tau) => (Some(tau), None),
+                Reply::Hold(e) => (None, Some(e)),
+                Reply::Nothing(_) => (None, None),
+            };
+            match torque {
+                // A refused torque (not 7 finite values) clears the command: the driver holds.
+                Some(tau) => c.driver.set_command(&tau).map_or((), |_| ()),
+                None => c.driver.clear_command(),
+            }
+            if pending_tare.is_some() {
+                controller.law.sensor_tared();
+            }
+            Ok(Some(Tick {
+                time,
+                // Replaced by the output as answered (`holding` decided) below.
+                driver: out.clone(),
+                tool,
+                ft,
+                tared: startup_tare.tared(),
+                tare: pending_tare.take(),
+                force_world: step.force_world,
+                controller: ControllerState { f, ..step.state },
+                torque,
+                refused,
+                estimator: estimate,
+            }))
+        })?;
+        Ok(tick.map(|t| Tick { driver: answered, ..t }))
     }
 
     /// Cycles until the KRC commands and the F/T node has tared (at most `limit` cycles).

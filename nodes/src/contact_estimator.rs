@@ -328,8 +328,8 @@ impl Params {
     }
 }
 
-impl crate::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::params::Declarations) {
+impl crate::runtime::params::NodeParams for Params {
+    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
         d.direction("normal", self.normal, "contact direction n in the world");
         d.above(
             "sample_period",
@@ -382,7 +382,7 @@ impl crate::params::NodeParams for Params {
             (0.0, 10.0),
             "a pose older than this when a force arrives is not paired with it [s]",
         );
-        crate::liveness::declare_dead_after(
+        crate::runtime::liveness::declare_dead_after(
             d,
             self.dead_after,
             0.0,
@@ -653,7 +653,7 @@ mod tests {
 
     #[test]
     fn augmented_parameters_and_effects_from_the_wire_are_checked() {
-        use crate::params::NodeParams;
+        use crate::runtime::params::NodeParams;
         let bad = |p: Params| p.validate().unwrap_err();
         let lone = bad(Params { surface_position: Some([0.0, 0.0, 0.3]), ..Params::default() });
         assert!(lone.contains("there is none"), "{lone}");

@@ -616,8 +616,19 @@ impl Params {
     }
 }
 
-impl crate::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::params::Declarations) {
+impl crate::runtime::params::NodeParams for Params {
+    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
+        self.declare_box(d);
+        self.declare_stream(d);
+        self.declare_tare(d);
+        self.declare_node(d);
+        d.use_sim_time();
+    }
+}
+
+impl Params {
+    /// The box: where it is, and its calibration where its settings page is not read or is overridden.
+    fn declare_box(&self, d: &mut crate::runtime::params::Declarations) {
         d.any("sensor", "the Net F/T box's RDT address");
         d.integer(
             "http_port",
@@ -685,6 +696,10 @@ impl crate::params::NodeParams for Params {
             "calibration_override",
             "true: calibration parameters that are set win over the box's page where they differ (the node otherwise refuses to start)",
         );
+    }
+
+    /// The RDT stream: its rate, filter and staleness.
+    fn declare_stream(&self, d: &mut crate::runtime::params::Declarations) {
         // The Net F/T streams RDT at up to 7 kHz; below 100 Hz a force loop has nothing to run on.
         d.within("rate", self.rate, (100.0, 7000.0), "the box's RDT output rate [Hz]");
         let low_pass =
@@ -706,6 +721,10 @@ impl crate::params::NodeParams for Params {
             (2.0 / self.rate, 1.0),
             "data older than this is stale [s] (at least two records)",
         );
+    }
+
+    /// The tare: when, and the checks that refuse one taken in contact or in motion.
+    fn declare_tare(&self, d: &mut crate::runtime::params::Declarations) {
         let tare_after = if !self.tare_after.is_finite() || self.tare_after > 60.0 {
             Err(format!("must be finite and at most 60 s, not {}", self.tare_after))
         } else {
@@ -728,6 +747,10 @@ impl crate::params::NodeParams for Params {
             "a tare is refused when the tool travelled more than this over the window [m]",
         );
         d.within("bias_max_rotation", self.bias_max_rotation, (1e-4, 0.1), "... or turned more than this [rad]");
+    }
+
+    /// The node: its service mapping and liveness.
+    fn declare_node(&self, d: &mut crate::runtime::params::Declarations) {
         d.service_mapping(&self.service_mapping, "service mapping of the peers' middleware for /ft_sensor/bias");
         d.within(
             "exit_after_silence",
@@ -735,20 +758,19 @@ impl crate::params::NodeParams for Params {
             (0.0, 86_400.0),
             "stop after this long without a record (0: wait forever) [s]",
         );
-        crate::liveness::declare_dead_after(
+        crate::runtime::liveness::declare_dead_after(
             d,
             self.dead_after,
             0.0,
             "/lwr/ee_pose silent this long after it flowed: the hand's orientation is unknown, /ft_sensor/wrench is withheld and /diagnostics says ERROR until poses flow again [s]",
         );
-        d.use_sim_time();
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::NodeParams;
+    use crate::runtime::params::NodeParams;
     use rand::SeedableRng;
     use softcontact_dynamics::lwr4;
     use softcontact_sim::{FtSensor, FtSensorConfig, Surface, SurfaceConfig};

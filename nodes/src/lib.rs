@@ -1,5 +1,5 @@
 //! The product's nodes. Each node's logic is a plain struct driven by datagrams and messages
-//! ([`lwr_driver::LwrDriver`], [`ft_sensor::FtSensorNode`]); [`udp`] and [`sim_arm`] are the socket
+//! ([`lwr_driver::LwrDriver`], [`ft_sensor::FtSensorNode`]); [`runtime::udp`] and [`sim_arm`] are the socket
 //! ends, kept thin, so the same logic runs against the real KRC and Net F/T box or the simulator.
 // Safety checks are written `!(x <= limit)` on purpose: they are true for NaN, which must be refused.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -9,16 +9,8 @@ pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod geometry;
-pub mod handover;
 pub mod identify;
-pub mod liveness;
 pub mod lwr_driver;
 pub mod messages;
-pub mod names;
-pub mod params;
-pub mod realtime;
-pub mod ros;
+pub mod runtime;
 pub mod sim_arm;
-pub mod stats;
-pub mod udp;
-pub mod writer_pin;

@@ -48,7 +48,7 @@
 //!   controller sends an empty command when its tick failed); a command from another session, or older
 //!   than the watchdog by its stamp, is refused and the previous one ages out.
 //! - Commands over the network come from one writer: the first heard while it is the only one on the
-//!   topic, pinned for the KRC session ([`crate::writer_pin`]); any other writer's are refused and
+//!   topic, pinned for the KRC session ([`crate::runtime::writer_pin`]); any other writer's are refused and
 //!   counted, and the arm never answers to them.
 
 pub mod commander;
@@ -65,7 +65,7 @@ use softcontact_dynamics::{Data, FrameId, FrameMotion, Model, lwr4};
 use softcontact_wire::WireError;
 use softcontact_wire::fri::{self, ControlMode, InterfaceState, Quality, flags};
 
-use crate::writer_pin::{WriterId, WriterPin, WriterRefused};
+use crate::runtime::writer_pin::{WriterId, WriterPin, WriterRefused};
 use held::{Command, Hold};
 
 /// How far beyond its limit a measured joint position is still believed \[rad\] (the KRC's software
@@ -408,10 +408,10 @@ impl LwrDriver {
         self.take_command(effort, None)
     }
 
-    /// Takes a command, from the network `age` seconds old by the newest measurement's stamp (`None`:
-    /// the in-process controller's, for this very measurement), if it is 7 finite torques within the
-    /// effort limits.
-    fn take_command(&mut self, effort: &[f64], age: Option<f64>) -> Result<(), DriverError> {
+    /// Takes a command if it is 7 finite torques within the effort limits: from the network answering
+    /// the joint state stamped `stamp`, `age` seconds old by the newest measurement's stamp (`None`: the
+    /// in-process controller's, for this very measurement).
+    fn take_command(&mut self, effort: &[f64], stamped: Option<(f64, f64)>) -> Result<(), DriverError> {
         let refused = if effort.len() != 7 {
             Some(DriverError::CommandLength(effort.len()))
         } else if let Some(i) = effort.iter().position(|v| !v.is_finite()) {
@@ -425,8 +425,8 @@ impl LwrDriver {
             self.command = None;
             return Err(e);
         }
-        let (remote, age) = (age.is_some(), age.unwrap_or(0.0));
-        self.command = Some(Command { effort: std::array::from_fn(|i| effort[i]), at: self.cycle, age, remote });
+        let (stamp, age) = (stamped.map(|(stamp, _)| stamp), stamped.map_or(0.0, |(_, age)| age));
+        self.command = Some(Command { effort: std::array::from_fn(|i| effort[i]), at: self.cycle, age, stamp });
         Ok(())
     }
 
@@ -437,18 +437,20 @@ impl LwrDriver {
     }
 
     /// A command that arrived over the network from `writer` (`writers_matched`: how many writers the
-    /// middleware matched on the topic): it names the session of the joint state it answers and is `age`
-    /// seconds old by that joint state's stamp. One from a writer other than the session's pinned one is
-    /// refused and touches nothing; one from another session, older than `max_command_age` or stamped in
-    /// the future (it answers no joint state yet measured), is refused and the present command ages out as
-    /// usual. A command taken keeps ageing: it answers no measurement once its stamp is older than
+    /// middleware matched on the topic): it names the session of the joint state it answers and carries
+    /// that joint state's `stamp`; `now` is the stamp of the measurement about to be answered (both on
+    /// the driver's clock). One from a writer other than the session's pinned one is refused and touches
+    /// nothing; one from another session, older than `max_command_age` or stamped in the future (it
+    /// answers no joint state yet measured), is refused and the present command ages out as usual. A
+    /// command taken keeps ageing: it answers no measurement once its stamp is older than
     /// `max_command_age`, by the watchdog's cycles here and by the driver's clock in
     /// [`LwrDriver::expire_command`].
     pub fn set_remote_command(
         &mut self,
         effort: &[f64],
         session: Option<u32>,
-        age: f64,
+        stamp: f64,
+        now: f64,
         writer: WriterId,
         writers_matched: impl FnOnce() -> usize,
     ) -> Result<(), DriverError> {
@@ -461,21 +463,22 @@ impl LwrDriver {
             self.counters.commands_too_old += 1;
             return Err(DriverError::OtherSession(session, self.session));
         }
-        let bound = self.config.max_command_age;
+        let (age, bound) = (now - stamp, self.config.max_command_age);
         if !(age >= 0.0 && age <= bound) {
             self.counters.commands_refused += 1;
             self.counters.commands_too_old += 1;
             return Err(DriverError::TooOld(age, bound));
         }
-        self.take_command(effort, Some(age))
+        self.take_command(effort, Some((stamp, age)))
     }
 
-    /// Drops a command from the network whose stamp is older than `max_command_age` by `age` (the
-    /// present command's age on the driver's clock, at the measurement about to be answered): a command
-    /// taken before a gap between measurements answers none after it. The in-process controller's
-    /// command, which answers the very measurement, is not aged here.
-    pub fn expire_command(&mut self, age: impl FnOnce() -> Option<f64>) {
-        if self.command.is_some_and(|c| c.remote) && !age().is_some_and(|a| a <= self.config.max_command_age) {
+    /// Drops a command from the network whose stamp is older than `max_command_age` at `now`, the stamp
+    /// of the measurement about to be answered (the driver's clock): a command taken before a gap
+    /// between measurements answers none after it. The in-process controller's command, which answers
+    /// the very measurement, is not aged here.
+    pub fn expire_command(&mut self, now: f64) {
+        let bound = self.config.max_command_age;
+        if self.command.and_then(|c| c.stamp).is_some_and(|stamp| !(now - stamp <= bound)) {
             self.command = None;
         }
     }

@@ -58,7 +58,7 @@ pub struct DriverMessages {
     pub ee_twist: TwistStamped,
 }
 
-/// /tf: the tool in the world (published at most at [`crate::ros::TF_RATE`], off the 1 kHz loop).
+/// /tf: the tool in the world (published at most at [`crate::runtime::ros::TF_RATE`], off the 1 kHz loop).
 pub fn tool_tf(tool_pose: &Isometry3<f64>, stamp: Time) -> TFMessage {
     TFMessage { transforms: vec![transform("world", lwr4::TOOL_FRAME, tool_pose, stamp)] }
 }

@@ -171,50 +171,7 @@ impl SimArmServer {
             } else {
                 self.fri.send_to(&m.encode(), self.config.fri_remote)?;
             }
-            // Take answers until one for this measurement arrives or 0.9 of a cycle has passed since it
-            // was sent (measured from the send, so that one late cycle does not also cost the next).
-            let sent = Instant::now();
-            let on_time = sent + cycle.mul_f64(0.9);
-            let deadline = match self.config.pacing {
-                Pacing::RealTime { answer_wait } => on_time.max(sent + answer_wait),
-                Pacing::Lockstep { timeout } => sent + timeout,
-            };
-            // Past the deadline, what already arrived is still read (a few datagrams at most): when this
-            // process, not the remote, was late, the answer is in the socket and counts as on time.
-            let mut read_after_deadline = 0;
-            loop {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if left.is_zero() {
-                    read_after_deadline += 1;
-                    if read_after_deadline > READ_AFTER_DEADLINE_AT_MOST {
-                        break;
-                    }
-                }
-                if !crate::udp::wait_readable(&self.fri, left)? {
-                    break;
-                }
-                match self.fri.recv_from(&mut buf) {
-                    Ok((n, _)) => match fri::Command::decode(&buf[..n]) {
-                        Ok(cmd) => {
-                            if lossy && self.rng.random::<f64>() < self.config.command_loss {
-                                self.stats.commands_dropped += 1;
-                                continue;
-                            }
-                            let answered = cmd.header.refl_seq == m.header.send_seq;
-                            self.sim.command(&cmd);
-                            if answered {
-                                let late =
-                                    matches!(self.config.pacing, Pacing::RealTime { .. }) && Instant::now() > on_time;
-                                self.stats.late_answers += u64::from(late);
-                                break;
-                            }
-                        }
-                        Err(_) => self.stats.malformed += 1,
-                    },
-                    Err(e) if crate::udp::no_datagram(&e) => continue,
-                    Err(e) => return Err(e),
-                }
-            }
+            self.take_answer(&m, lossy, cycle, &mut buf)?;
             self.serve_rdt_requests();
             self.sim.step_cycle().map_err(std::io::Error::other)?;
             // The box streams on its own clock: in real time by the wall clock (a late cycle costs no
@@ -228,34 +185,7 @@ impl SimArmServer {
                 }
                 Pacing::Lockstep { .. } => self.sim.krc_cycle(),
             };
-            self.records_due = (self.records_due + self.config.rdt_rate * elapsed).min(RECORDS_DUE_AT_MOST);
-            while self.records_due >= 1.0 {
-                self.records_due -= 1.0;
-                let Some(to) = self.stream_to else { continue };
-                let record = self.sim.ft_record();
-                let last = self.remaining.as_mut().is_some_and(|left| {
-                    *left -= 1;
-                    *left == 0
-                });
-                let per_datagram = self.config.box_settings.rdt_buffer.unwrap_or(1) as usize;
-                match self.buffered.as_mut() {
-                    None => {
-                        self.rdt.send_to(&record.encode(), to)?;
-                        self.stats.records_sent += 1;
-                    }
-                    Some(pending) => {
-                        pending.push(record);
-                        if pending.len() == per_datagram || last {
-                            self.rdt.send_to(&rdt::Record::encode_buffered(pending), to)?;
-                            self.stats.records_sent += pending.len() as u64;
-                            pending.clear();
-                        }
-                    }
-                }
-                if last {
-                    self.stream_to = None;
-                }
-            }
+            self.stream_records(elapsed)?;
             self.stats.cycles += 1;
             if !observe(&mut self.sim) {
                 return Ok(self.stats);
@@ -275,12 +205,102 @@ impl SimArmServer {
             }
         }
     }
+
+    /// Takes the remote's answers until the one for `m` arrives or the pacing's deadline passes (0.9 of
+    /// a cycle from the send in real time): each is applied as the KRC applies it, a late one counted.
+    fn take_answer(
+        &mut self,
+        m: &fri::Measurement,
+        lossy: bool,
+        cycle: Duration,
+        buf: &mut [u8; 2048],
+    ) -> std::io::Result<()> {
+        // Take answers until one for this measurement arrives or 0.9 of a cycle has passed since it
+        // was sent (measured from the send, so that one late cycle does not also cost the next).
+        let sent = Instant::now();
+        let on_time = sent + cycle.mul_f64(0.9);
+        let deadline = match self.config.pacing {
+            Pacing::RealTime { answer_wait } => on_time.max(sent + answer_wait),
+            Pacing::Lockstep { timeout } => sent + timeout,
+        };
+        // Past the deadline, what already arrived is still read (a few datagrams at most): when this
+        // process, not the remote, was late, the answer is in the socket and counts as on time.
+        let mut read_after_deadline = 0;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                read_after_deadline += 1;
+                if read_after_deadline > READ_AFTER_DEADLINE_AT_MOST {
+                    break;
+                }
+            }
+            if !crate::runtime::udp::wait_readable(&self.fri, left)? {
+                break;
+            }
+            match self.fri.recv_from(&mut buf[..]) {
+                Ok((n, _)) => match fri::Command::decode(&buf[..n]) {
+                    Ok(cmd) => {
+                        if lossy && self.rng.random::<f64>() < self.config.command_loss {
+                            self.stats.commands_dropped += 1;
+                            continue;
+                        }
+                        let answered = cmd.header.refl_seq == m.header.send_seq;
+                        self.sim.command(&cmd);
+                        if answered {
+                            let late =
+                                matches!(self.config.pacing, Pacing::RealTime { .. }) && Instant::now() > on_time;
+                            self.stats.late_answers += u64::from(late);
+                            break;
+                        }
+                    }
+                    Err(_) => self.stats.malformed += 1,
+                },
+                Err(e) if crate::runtime::udp::no_datagram(&e) => continue,
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// The box's records due after `elapsed` seconds, sent to the streaming client (one a datagram, or
+    /// buffered as the box is set).
+    fn stream_records(&mut self, elapsed: f64) -> std::io::Result<()> {
+        self.records_due = (self.records_due + self.config.rdt_rate * elapsed).min(RECORDS_DUE_AT_MOST);
+        while self.records_due >= 1.0 {
+            self.records_due -= 1.0;
+            let Some(to) = self.stream_to else { continue };
+            let record = self.sim.ft_record();
+            let last = self.remaining.as_mut().is_some_and(|left| {
+                *left -= 1;
+                *left == 0
+            });
+            let per_datagram = self.config.box_settings.rdt_buffer.unwrap_or(1) as usize;
+            match self.buffered.as_mut() {
+                None => {
+                    self.rdt.send_to(&record.encode(), to)?;
+                    self.stats.records_sent += 1;
+                }
+                Some(pending) => {
+                    pending.push(record);
+                    if pending.len() == per_datagram || last {
+                        self.rdt.send_to(&rdt::Record::encode_buffered(pending), to)?;
+                        self.stats.records_sent += pending.len() as u64;
+                        pending.clear();
+                    }
+                }
+            }
+            if last {
+                self.stream_to = None;
+            }
+        }
+        Ok(())
+    }
 }
 
-/// Records the box sends at once after the cell stalled (a debugger, an overloaded machine): a stall's
-/// backlog beyond this is dropped, as a box's socket buffer would.
 /// Datagrams read after a cycle's answer deadline that were already waiting in the socket.
 const READ_AFTER_DEADLINE_AT_MOST: usize = 8;
+/// Records the box sends at once after the cell stalled (a debugger, an overloaded machine): a stall's
+/// backlog beyond this is dropped, as a box's socket buffer would.
 const RECORDS_DUE_AT_MOST: f64 = 50.0;
 
 /// Serves the box's settings page on its own thread for the server's life: `GET /netftapi2.xml` answers
@@ -429,7 +449,7 @@ impl Params {
         if self.surface == SurfaceKind::None {
             return Err("surface_model given with surface none".into());
         }
-        let text = crate::params::read_small(std::path::Path::new(&self.surface_model))
+        let text = crate::runtime::params::read_small(std::path::Path::new(&self.surface_model))
             .map_err(|e| format!("{}: {e}", self.surface_model))?;
         let model = ContactModel::from_yaml(&text).map_err(|e| format!("{}: {e}", self.surface_model))?;
         model.plausible().map_err(|e| format!("{}: {e}", self.surface_model))?;
@@ -437,8 +457,8 @@ impl Params {
     }
 }
 
-impl crate::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::params::Declarations) {
+impl crate::runtime::params::NodeParams for Params {
+    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
         d.any("fri_remote", "where the FRI driver listens (the KRC's FRIHOST:FRISOCK)");
         d.any("fri_bind", "the simulated KRC's own FRI address");
         d.any("rdt_bind", "the simulated Net F/T box's RDT address");
@@ -502,7 +522,7 @@ impl crate::params::NodeParams for Params {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::params::NodeParams;
+    use crate::runtime::params::NodeParams;
 
     #[test]
     fn a_surface_model_file_replaces_the_presets_law_and_a_bad_one_is_refused() {

@@ -49,7 +49,7 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
         }
     }
     let learned = l.0.estimator.refit().unwrap();
-    let surface_top = l.0.sim.surface.as_ref().unwrap().config().point.z;
+    let surface_top = l.0.lockstep.sim.surface.as_ref().unwrap().config().point.z;
     eprintln!(
         "learned: {:?} k {:.0} λ {:.0}, surface {:.2} mm from the onset, at z = {:.4} m (truth {surface_top:.4}); window {:.0} %",
         learned.model.kind,
@@ -86,8 +86,8 @@ fn force_commands_on_the_sponge_are_reached_within_five_percent() {
         eprintln!("command {command:.0} N: reached {f:.1} N ({:+.2} %)", (f - command) / command * 100.0);
     }
     assert!(errors.iter().all(|e| *e < 0.05), "relative errors {errors:?}");
-    assert_eq!(l.0.sim.krc.state(), InterfaceState::Command);
-    assert_eq!(l.0.driver.counters.overspeed_cycles, 0);
+    assert_eq!(l.0.lockstep.sim.krc.state(), InterfaceState::Command);
+    assert_eq!(l.0.lockstep.driver.counters.overspeed_cycles, 0);
 }
 
 #[test]
@@ -103,7 +103,7 @@ fn losing_the_surface_stops_the_push() {
         l.cycle();
     }
     // The dice is taken away.
-    l.0.sim.surface = None;
+    l.0.lockstep.sim.surface = None;
     let mut lost = None;
     for k in 0..1000 {
         let s = l.cycle().unwrap();
@@ -112,10 +112,14 @@ fn losing_the_surface_stops_the_push() {
         }
     }
     assert!(lost.is_some_and(|k| k < 50), "contact loss noticed: {lost:?}");
-    let tool = l.0.sim.tool_pose().translation.vector;
-    let drop = l.0.sim.contact().deformation;
+    let tool = l.0.lockstep.sim.tool_pose().translation.vector;
+    let drop = l.0.lockstep.sim.contact().deformation;
     assert_eq!(drop, 0.0);
-    assert!(l.0.sim.dq().iter().all(|v| v.abs() < 0.05), "holding, not falling: {:?} at {tool}", l.0.sim.dq());
+    assert!(
+        l.0.lockstep.sim.dq().iter().all(|v| v.abs() < 0.05),
+        "holding, not falling: {:?} at {tool}",
+        l.0.lockstep.sim.dq()
+    );
 }
 
 #[test]
@@ -173,7 +177,11 @@ fn a_model_far_too_soft_cannot_crush_the_surface() {
     }
     assert!(limited_at.is_some(), "the force limit was passed without a reaction (peak {peak:.1} N)");
     assert!(peak < force_limit + 10.0, "peak {peak:.1} N: the back-off came late (limit {force_limit} N)");
-    assert!(l.0.sim.dq().iter().all(|v| v.abs() < 0.05), "still after backing off: {:?}", l.0.sim.dq());
+    assert!(
+        l.0.lockstep.sim.dq().iter().all(|v| v.abs() < 0.05),
+        "still after backing off: {:?}",
+        l.0.lockstep.sim.dq()
+    );
     // A new command is taken (within the limit of this wrong model's deformations).
     l.0.controller.law.command_force(40.0, 1.0).unwrap();
     assert!(!l.cycle().unwrap().force_limited);
@@ -192,27 +200,27 @@ fn a_controller_that_stalls_while_pushing_does_not_kick_the_hand_back() {
     for _ in 0..3000 {
         l.cycle().unwrap();
     }
-    let before = l.0.sim.contact().normal_force;
+    let before = l.0.lockstep.sim.contact().normal_force;
     let cell = &mut l.0;
     let mut z = Vec::new();
     let mut held = 0;
     for _ in 0..20 {
         // The driver and the arm run on; nobody sets a new command.
-        let (reply, out) = cell.driver.handle(&cell.sim.measurement().encode()).unwrap();
-        cell.sim.command(&reply);
-        cell.sim.step_cycle().unwrap();
+        let (reply, out) = cell.lockstep.driver.handle(&cell.lockstep.sim.measurement().encode()).unwrap();
+        cell.lockstep.sim.command(&reply);
+        cell.lockstep.sim.step_cycle().unwrap();
         held += usize::from(out.holding);
-        z.push(cell.sim.contact().deformation);
+        z.push(cell.lockstep.sim.contact().deformation);
     }
     assert!(held >= 14, "the watchdog held ({held} cycles)");
     let moved = z.iter().fold(0.0f64, |m, v| m.max((v - z[0]).abs()));
-    let after = l.0.sim.contact().normal_force;
+    let after = l.0.lockstep.sim.contact().normal_force;
     assert!(moved < 2e-4, "the hand moved {:.3} mm during the stall", moved * 1e3);
     assert!((after - before).abs() < 0.05 * before, "force {before:.1} N before the stall, {after:.1} N after");
     for _ in 0..500 {
         l.cycle().unwrap();
     }
-    assert!((l.0.sim.contact().normal_force - 150.0).abs() < 7.5, "back at the command after the stall");
+    assert!((l.0.lockstep.sim.contact().normal_force - 150.0).abs() < 7.5, "back at the command after the stall");
 }
 
 /// Read → update → write in one process: after start-up (the KRC commands and the F/T node has tared),
@@ -228,7 +236,7 @@ fn every_measurement_is_answered_with_the_torque_computed_for_it() {
     l.0.start(5000).unwrap();
     let model = softcontact_dynamics::lwr4::model();
     let mut data = model.data();
-    let stale_at_start = l.0.driver.counters.stale_cycles;
+    let stale_at_start = l.0.lockstep.driver.counters.stale_cycles;
     let (mut answered, mut commands) = (0, 0);
     for i in 0..8000 {
         if i == 5000 {
@@ -239,7 +247,7 @@ fn every_measurement_is_answered_with_the_torque_computed_for_it() {
         let tau = tick.torque.unwrap_or_else(|| panic!("cycle {i}: no torque ({:?})", tick.refused));
         assert!(!tick.driver.holding, "cycle {i}: the driver held");
         // What the KRC received: this tick's torque (within the joint limits) less the KRC's own gravity.
-        let received = l.0.sim.krc.last_command().expect("a reply").add_jnt_trq;
+        let received = l.0.lockstep.sim.krc.last_command().expect("a reply").add_jnt_trq;
         let gravity = model.gravity_torques(&mut data, &tick.driver.q);
         for j in 0..7 {
             let limit = model.joints[j].limits.effort;
@@ -253,9 +261,9 @@ fn every_measurement_is_answered_with_the_torque_computed_for_it() {
         }
         answered += 1;
     }
-    assert_eq!(l.0.driver.counters.stale_cycles, stale_at_start, "cycles answered with a held command");
+    assert_eq!(l.0.lockstep.driver.counters.stale_cycles, stale_at_start, "cycles answered with a held command");
     assert!(answered == 8000 && commands == 1);
-    assert!(l.0.sim.contact().normal_force > 60.0, "the force command was carried out");
+    assert!(l.0.lockstep.sim.contact().normal_force > 60.0, "the force command was carried out");
 }
 
 #[test]
@@ -287,21 +295,21 @@ fn a_force_is_reached_and_held_at_every_fri_cycle_the_krc_offers_from_1_to_10_ms
         }
         let f = last.iter().sum::<f64>() / last.len() as f64;
         eprintln!("FRI cycle {ms} ms: 60 N held at {f:.2} N, peak {peak:.2} N");
-        assert!((l.0.driver.sample_time() - cycle).abs() < 1e-6, "the driver runs the KRC's cycle");
+        assert!((l.0.lockstep.driver.sample_time() - cycle).abs() < 1e-6, "the driver runs the KRC's cycle");
         assert!((f - 60.0).abs() < 0.05 * 60.0 && peak < 1.05 * 60.0, "{ms} ms: {f:.2} N, peak {peak:.2} N");
-        assert_eq!(l.0.sim.krc.state(), InterfaceState::Command);
+        assert_eq!(l.0.lockstep.sim.krc.state(), InterfaceState::Command);
     }
     // A KRL program that opens FRI at 20 ms gets no torque: the hand stays where it is.
     let mut config = SimConfig::above_surface(softcontact_sim::dice(), 12);
     (config.cycle, config.krc.cycle) = (0.020, 0.020);
     let controller = DeformationController::new(ControllerConfig::lwr4(120.0, 0.08), softcontact_sim::dice()).unwrap();
     let mut l = Loop::new(config, controller);
-    let start = l.0.sim.q()[1];
+    let start = l.0.lockstep.sim.q()[1];
     for _ in 0..250 {
         assert!(l.cycle().is_none(), "no controller tick at 20 ms");
     }
-    assert!((l.0.sim.q()[1] - start).abs() < 1e-3, "joint 2 moved {} rad", l.0.sim.q()[1] - start);
-    let measured = l.0.driver.measure(&l.0.sim.measurement().encode()).unwrap();
+    assert!((l.0.lockstep.sim.q()[1] - start).abs() < 1e-3, "joint 2 moved {} rad", l.0.lockstep.sim.q()[1] - start);
+    let measured = l.0.lockstep.driver.measure(&l.0.lockstep.sim.measurement().encode()).unwrap();
     let waiting = measured.output.waiting.map(|w| w.to_string()).unwrap_or_default();
     assert!(waiting.contains("FRI cycle 20 ms"), "{waiting}");
 }

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use softcontact_nodes::params::{NodeParams, ParamArgs, load};
+use softcontact_nodes::runtime::params::{NodeParams, ParamArgs, load};
 
 fn config(file: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../config").join(file)
@@ -68,7 +68,7 @@ fn dead_after_outside_its_range_is_refused_by_every_node_that_has_it() {
 /// default, range or description changed in code and not regenerated fails here.
 #[test]
 fn shipped_parameter_files_and_the_reference_page_are_generated_from_the_declarations() {
-    use softcontact_nodes::params::reference;
+    use softcontact_nodes::runtime::params::reference;
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     for node in reference::nodes() {
         let shipped = std::fs::read_to_string(config(&format!("{}.yaml", node.node))).unwrap();

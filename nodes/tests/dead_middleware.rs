@@ -17,7 +17,7 @@ use common::{INNER, in_isolated_namespace};
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::{ContactState, ControllerState};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 /// The nodes' `dead_after` in this test [s], and how late past it a node may notice.
 const DEAD_AFTER: f64 = 1.0;

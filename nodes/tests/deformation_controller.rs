@@ -27,7 +27,7 @@ fn free_cell() -> Cell {
 fn hand_error(cell: &mut Cell, lateral: &Vector3<f64>, tilt: &Vector3<f64>) -> (f64, f64) {
     let (r0, rot0) = cell.controller.law.start_pose().unwrap();
     let n = cell.controller.law.config().normal;
-    let pose = cell.sim.tool_pose();
+    let pose = cell.lockstep.sim.tool_pose();
     let d = pose.translation.vector - r0;
     let across = d - d.dot(&n) * n;
     let expected = UnitQuaternion::from_scaled_axis(*tilt) * rot0;
@@ -60,7 +60,7 @@ fn restarts_cannot_walk_the_hand_beyond_the_limits_from_the_first_start() {
         for _ in 0..100 {
             cell.cycle().unwrap();
         }
-        let turned = cell.sim.tool_pose().rotation.angle_to(&first);
+        let turned = cell.lockstep.sim.tool_pose().rotation.angle_to(&first);
         assert!(turned < MAX_TILT + 0.01, "turned {turned} rad from the first start");
     }
     assert_eq!(refused, 3, "only the first tilt fits within MAX_TILT of the first start");
@@ -126,17 +126,17 @@ fn pressing_the_sponge_the_hand_moves_across_and_tilts_below_the_force_limit() {
     for _ in 0..1500 {
         cell.cycle().unwrap();
     }
-    let before = cell.sim.contact().normal_force;
+    let before = cell.lockstep.sim.contact().normal_force;
     let (lateral, tilt) = (Vector3::new(0.0, 0.008, 0.0), Vector3::new(0.0, -0.04, 0.0));
     cell.controller.law.command_across(lateral, tilt, 1.5).unwrap();
     let mut peak: f64 = 0.0;
     for _ in 0..2500 {
         let tick = cell.cycle().unwrap().unwrap();
         assert!(tick.refused.is_none() && !tick.controller.force_limited, "{tick:?}");
-        peak = peak.max(cell.sim.contact().normal_force);
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
     }
     let (p, o) = hand_error(&mut cell, &lateral, &tilt);
-    let f = cell.sim.contact().normal_force;
+    let f = cell.lockstep.sim.contact().normal_force;
     eprintln!(
         "in contact: {:.2} mm, {o:.4} rad from the reference; {before:.1} N before, {f:.1} N after \
          (peak {peak:.1} N)",
@@ -182,12 +182,12 @@ fn press_and_hold(cell: &mut Cell, force: f64, hold: f64) -> (f64, f64, f64) {
         let tick = cell.cycle().unwrap().unwrap();
         assert!(tick.refused.is_none(), "{tick:?}");
     }
-    let end = cell.sim.contact().normal_force;
+    let end = cell.lockstep.sim.contact().normal_force;
     let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
     for _ in 0..(hold * 1e3) as usize {
         let tick = cell.cycle().unwrap().unwrap();
         assert!(tick.refused.is_none() && !tick.controller.force_limited, "{tick:?}");
-        let f = cell.sim.contact().normal_force;
+        let f = cell.lockstep.sim.contact().normal_force;
         (low, high) = (low.min(f), high.max(f));
     }
     (end, low, high)
@@ -207,9 +207,9 @@ fn a_stranger_model_a_quarter_as_stiff_as_the_surface_is_stopped_at_the_commands
         assert!(tick.refused.is_none(), "{tick:?}");
         tripped |= tick.controller.over_command;
         assert!(!tick.controller.force_limited || tick.controller.over_command, "{tick:?}");
-        peak = peak.max(cell.sim.contact().normal_force);
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
     }
-    let end = cell.sim.contact().normal_force;
+    let end = cell.lockstep.sim.contact().normal_force;
     eprintln!("a model 4× too soft: peak {peak:.1} N, {end:.1} N after the back-off (bound {bound} N)");
     assert!(tripped, "the command's bound never tripped");
     assert!(peak < bound + 10.0, "peak {peak} N over the bound of {bound} N");
@@ -239,7 +239,7 @@ fn re_planned_through_ever_softer_models_the_standing_commands_bound_holds() {
             for _ in 0..50 {
                 let tick = cell.cycle().unwrap().unwrap();
                 tripped |= tick.controller.over_command;
-                peak = peak.max(cell.sim.contact().normal_force);
+                peak = peak.max(cell.lockstep.sim.contact().normal_force);
             }
         }
     }
@@ -262,7 +262,7 @@ fn re_planned_once_through_a_model_a_quarter_as_stiff_the_press_stops_at_the_com
     let (mut peak, mut tripped): (f64, bool) = (0.0, false);
     for _ in 0..2000 {
         tripped |= cell.cycle().unwrap().unwrap().controller.over_command;
-        peak = peak.max(cell.sim.contact().normal_force);
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
     }
     eprintln!("80 N re-planned through a model ¼ as stiff in 0.5 s: peak {peak:.1} N (bound {bound} N)");
     assert!(tripped && peak < bound + 10.0, "peak {peak} N, bound {bound} N, tripped {tripped}");
@@ -345,10 +345,10 @@ fn a_plausible_but_wrong_augmented_model_keeps_the_force_within_its_margin() {
         if k > 2100 {
             lead = lead.max(tick.controller.z_cmd - tick.controller.z);
         }
-        peak = peak.max(cell.sim.contact().normal_force);
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
         assert!(tick.controller.z_cmd <= limits.max_deformation + 1e-12, "{tick:?}");
     }
-    let end = cell.sim.contact().normal_force;
+    let end = cell.lockstep.sim.contact().normal_force;
     eprintln!(
         "a wrong augmented model: true force at most {peak:.1} N for 150 N (the move's end; limit {} N), \
          {end:.1} N after 40 s; the reference at most {:.2} mm ahead of the hand",
@@ -385,18 +385,18 @@ fn friction_compensation_half_again_too_high_still_presses_in_place() {
         coulomb: truth.coulomb.map(|c| 1.5 * c),
     };
     let mut cell = friction_cell(truth, high);
-    let start = cell.sim.tool_pose().translation.vector;
+    let start = cell.lockstep.sim.tool_pose().translation.vector;
     until_contact(&mut cell);
     cell.controller.law.command_force(60.0, 1.0).unwrap();
     let (mut across, mut peak) = (0.0_f64, 0.0_f64);
     for _ in 0..5000 {
         let tick = cell.cycle().unwrap().unwrap();
         assert!(!tick.driver.holding && tick.refused.is_none(), "{tick:?}");
-        let away = cell.sim.tool_pose().translation.vector - start;
+        let away = cell.lockstep.sim.tool_pose().translation.vector - start;
         across = across.max((away - away.dot(&Vector3::z()) * Vector3::z()).norm());
-        peak = peak.max(cell.sim.contact().normal_force);
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
     }
-    let f = cell.sim.contact().normal_force;
+    let f = cell.lockstep.sim.contact().normal_force;
     eprintln!("friction compensated half again too high: {:.2} mm across, {f:.1} N (peak {peak:.1} N)", across * 1e3);
     // (The uncompensated viscous and wrist friction and what Coulomb friction is left cost a few per cent.)
     assert!(across < 5e-3 && (f - 60.0).abs() < 6.0 && peak < 66.0, "{across} m, {f} N, peak {peak} N");
@@ -430,22 +430,26 @@ fn compensation_at_its_bounds_on_an_arm_without_the_effects_keeps_it_slow_and_in
         .unwrap();
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
         let mut cell = Cell::new(config, controller, estimator).unwrap();
-        let start = cell.sim.tool_pose().translation.vector;
+        let start = cell.lockstep.sim.tool_pose().translation.vector;
         let (mut speed, mut across, mut contact) = (0.0_f64, 0.0_f64, None);
         for k in 0..8000 {
             let Some(tick) = cell.cycle().unwrap() else { continue };
-            assert!(cell.driver.fault().is_none(), "the driver faulted at {k}: {:?}", cell.driver.fault());
+            assert!(
+                cell.lockstep.driver.fault().is_none(),
+                "the driver faulted at {k}: {:?}",
+                cell.lockstep.driver.fault()
+            );
             for (v, j) in tick.driver.dq.iter().zip(&model.joints) {
                 speed = speed.max(v.abs() / j.limits.velocity);
             }
-            let away = cell.sim.tool_pose().translation.vector - start;
+            let away = cell.lockstep.sim.tool_pose().translation.vector - start;
             across = across.max((away - away.dot(&Vector3::z()) * Vector3::z()).norm());
             if tick.controller.in_contact && contact.is_none() {
                 contact = Some(k);
                 cell.controller.law.command_force(60.0, 1.0).unwrap();
             }
         }
-        let f = cell.sim.contact().normal_force;
+        let f = cell.lockstep.sim.contact().normal_force;
         eprintln!(
             "compensation at its bounds {most:?}:\n  joints at most {:.1} % of their velocity limits, \
              the hand {:.2} mm across, {f:.1} N for 60 N",

@@ -17,7 +17,7 @@ use common::{INNER, in_isolated_namespace, signal};
 use nalgebra::Vector3;
 use softcontact_dynamics::lwr4;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
-use softcontact_nodes::udp::RdtClient;
+use softcontact_nodes::runtime::udp::RdtClient;
 use softcontact_wire::rdt::{Calibration, RdtCommand, Record, Request, Status};
 
 /// The fake box serves no settings page: the node starts from the Gamma's calibration given by hand.

@@ -11,8 +11,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_dynamics::{Axes, lwr4};
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params as DriverParams};
+use softcontact_nodes::runtime::udp::{FriClient, RdtClient};
 use softcontact_nodes::sim_arm::{SimArmConfig, SimArmServer, SimArmStats};
-use softcontact_nodes::udp::{FriClient, RdtClient};
 use softcontact_sim::{FtSensorConfig, SimConfig, Simulator};
 use softcontact_wire::fri::InterfaceState;
 

@@ -14,7 +14,7 @@ use softcontact_msgs::geometry_msgs::{PoseStamped, WrenchStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_msgs::tf2_msgs::TFMessage;
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 #[test]
 fn driver_and_ft_nodes_serve_the_graph_over_dds() {

@@ -66,14 +66,14 @@ fn violation_within(sim: &Simulator, force_bound: f64) -> Option<String> {
 
 /// Runs `cycles` cycles checking the invariants; the largest distance of the hand from where it was.
 fn run(cell: &mut Cell, cycles: usize) -> f64 {
-    let start = cell.sim.tool_pose().translation.vector;
+    let start = cell.lockstep.sim.tool_pose().translation.vector;
     let mut farthest: f64 = 0.0;
     for k in 0..cycles {
         cell.cycle().unwrap();
-        if let Some(v) = violation(&cell.sim) {
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("cycle {k}: {v}");
         }
-        farthest = farthest.max((cell.sim.tool_pose().translation.vector - start).norm());
+        farthest = farthest.max((cell.lockstep.sim.tool_pose().translation.vector - start).norm());
     }
     farthest
 }
@@ -112,7 +112,7 @@ fn implausible_models_are_refused_and_a_command_through_them_does_not_crush() {
     // Class 8: a model placing the surface 5 cm too low turned a 50 N command into 302 N; a contact
     // position of 1e300 made the hand jump.
     let mut cell = pressing(22);
-    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let surface = cell.lockstep.sim.surface.as_ref().unwrap().config().point;
     let sponge = softcontact_sim::sponge();
     let n = Vector3::new(0.0, 0.0, -1.0);
     for (model, at) in [
@@ -127,7 +127,7 @@ fn implausible_models_are_refused_and_a_command_through_them_does_not_crush() {
     assert_stays_put(&mut cell, "refused models");
     cell.controller.law.command_force(50.0, 1.0).unwrap();
     run(&mut cell, 2000);
-    let f = cell.sim.contact().normal_force;
+    let f = cell.lockstep.sim.contact().normal_force;
     assert!((f - 50.0).abs() < 5.0, "50 N commanded, {f:.1} N reached");
 }
 
@@ -135,7 +135,7 @@ fn implausible_models_are_refused_and_a_command_through_them_does_not_crush() {
 fn a_model_far_too_soft_and_misplaced_backs_off_below_max_force() {
     // Class 8: the back-off used the model's surface; with a misplaced one it left 277 N (max 250 N).
     let mut cell = pressing(23);
-    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let surface = cell.lockstep.sim.surface.as_ref().unwrap().config().point;
     let too_soft = ContactModel::new(Kind::AzadFeatherstone, 15_000.0, 0.0).unwrap();
     // Within the plausible offset, but the wrong way: the model thinks the hand is 9 mm shallower.
     cell.controller.law.adopt_estimate(too_soft, &(surface + Vector3::new(0.0, 0.0, -0.009)), None).unwrap();
@@ -143,11 +143,11 @@ fn a_model_far_too_soft_and_misplaced_backs_off_below_max_force() {
     let mut limited = false;
     for k in 0..4000 {
         limited |= cell.cycle().unwrap().is_some_and(|t| t.controller.force_limited);
-        if let Some(v) = violation(&cell.sim) {
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("cycle {k}: {v}");
         }
     }
-    let f = cell.sim.contact().normal_force;
+    let f = cell.lockstep.sim.contact().normal_force;
     assert!(limited, "the force limit was reached");
     assert!(f <= MAX_FORCE, "after the back-off {f:.1} N, max {MAX_FORCE} N");
 }
@@ -159,15 +159,15 @@ fn a_restarted_krc_session_makes_the_controller_approach_again() {
     let mut cell = pressing(24);
     let mut config = SimConfig::above_surface(softcontact_sim::sponge(), 25);
     config.sensor = softcontact_sim::FtSensorConfig::gamma();
-    cell.sim = Simulator::new(config).unwrap();
-    cell.driver.begin_session();
+    cell.lockstep.sim = Simulator::new(config).unwrap();
+    cell.lockstep.driver.begin_session();
     let mut deepest: f64 = 0.0;
     for k in 0..8000 {
         cell.cycle().unwrap();
-        if let Some(v) = violation(&cell.sim) {
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("cycle {k}: {v}");
         }
-        deepest = deepest.max(cell.sim.contact().deformation);
+        deepest = deepest.max(cell.lockstep.sim.contact().deformation);
     }
     // A gentle approach stops within a few millimetres of the 1 N onset.
     assert!(deepest < 5e-3, "the hand went {:.1} mm into the sponge", deepest * 1e3);
@@ -198,7 +198,7 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
     let cases: usize = std::env::var("SOFTCONTACT_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
     let mut rng = SmallRng::seed_from_u64(0xF022);
     let mut cell = pressing(26);
-    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let surface = cell.lockstep.sim.surface.as_ref().unwrap().config().point;
     let (mut accepted, mut refused) = (0, 0);
     let mut recent = std::collections::VecDeque::new();
     for case in 0..cases {
@@ -233,12 +233,12 @@ fn fuzzed_commands_and_models_from_contact_never_break_the_limits() {
         // Each input is followed by 50 ms of control, invariants checked every cycle.
         for k in 0..50 {
             let tick = cell.cycle().unwrap();
-            if let Some(v) = violation(&cell.sim) {
+            if let Some(v) = violation(&cell.lockstep.sim) {
                 let state = tick.map(|t| t.controller);
                 panic!("case {case} ({result:?}), cycle {k}: {v}\nbefore: {recent:#?}\nnow: {state:?}");
             }
         }
-        recent.push_back(format!("case {case}: {result:?}; then {:.1} N", cell.sim.contact().normal_force));
+        recent.push_back(format!("case {case}: {result:?}; then {:.1} N", cell.lockstep.sim.contact().normal_force));
         if recent.len() > 4 {
             recent.pop_front();
         }
@@ -254,21 +254,21 @@ fn a_new_session_while_pressing_places_the_surface_by_the_force_read() {
     let mut cell = pressing(27);
     cell.controller.law.command_force(200.0, 2.0).unwrap();
     run(&mut cell, 2500);
-    cell.driver.begin_session();
+    cell.lockstep.driver.begin_session();
     let moved = run(&mut cell, 1000);
     assert!(moved < 5e-3, "the new session moved the hand {:.1} mm", moved * 1e3);
     cell.controller.law.command_force(10.0, 2.0).unwrap();
     run(&mut cell, 3000);
-    let f = cell.sim.contact().normal_force;
+    let f = cell.lockstep.sim.contact().normal_force;
     assert!((f - 10.0).abs() < 5.0, "10 N commanded after the new session, {f:.1} N held");
 }
 
 /// One cycle with the controller stalled: the KRC's measurement is answered by the driver alone.
 fn stalled_cycle(cell: &mut Cell) {
-    let m = cell.sim.measurement().encode();
-    let (reply, _) = cell.driver.handle(&m).unwrap();
-    cell.sim.command(&reply);
-    cell.sim.step_cycle().unwrap();
+    let m = cell.lockstep.sim.measurement().encode();
+    let (reply, _) = cell.lockstep.driver.handle(&m).unwrap();
+    cell.lockstep.sim.command(&reply);
+    cell.lockstep.sim.step_cycle().unwrap();
 }
 
 #[test]
@@ -278,16 +278,16 @@ fn a_controller_stalled_while_pressing_leaves_the_hand_in_place() {
     let mut cell = pressing(28);
     cell.controller.law.command_force(200.0, 2.0).unwrap();
     run(&mut cell, 2500);
-    let f0 = cell.sim.contact().normal_force;
-    let start = cell.sim.tool_pose().translation.vector;
+    let f0 = cell.lockstep.sim.contact().normal_force;
+    let start = cell.lockstep.sim.tool_pose().translation.vector;
     let (mut moved, mut f_min, mut f_max): (f64, f64, f64) = (0.0, f0, f0);
     for k in 0..3000 {
         stalled_cycle(&mut cell);
-        if let Some(v) = violation(&cell.sim) {
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("stalled cycle {k}: {v}");
         }
-        moved = moved.max((cell.sim.tool_pose().translation.vector - start).norm());
-        let f = cell.sim.contact().normal_force;
+        moved = moved.max((cell.lockstep.sim.tool_pose().translation.vector - start).norm());
+        let f = cell.lockstep.sim.contact().normal_force;
         (f_min, f_max) = (f_min.min(f), f_max.max(f));
     }
     eprintln!("stall at {f0:.1} N: hand moved {:.2} mm, force {f_min:.1}..{f_max:.1} N", moved * 1e3);
@@ -305,18 +305,18 @@ fn a_surface_vanishing_in_a_stall_moves_no_joint_farther_than_the_holds_preload(
     for _ in 0..6 {
         stalled_cycle(&mut cell);
     }
-    let held = *cell.sim.q();
-    cell.sim.surface = None;
+    let held = *cell.lockstep.sim.q();
+    cell.lockstep.sim.surface = None;
     let preload = softcontact_nodes::lwr_driver::Params::default().hold_max_preload;
     let mut farthest: f64 = 0.0;
     for k in 0..3000 {
         stalled_cycle(&mut cell);
-        if let Some(v) = violation(&cell.sim) {
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("stalled cycle {k}: {v}");
         }
-        farthest = cell.sim.q().iter().zip(&held).fold(farthest, |m, (q, h)| m.max((q - h).abs()));
+        farthest = cell.lockstep.sim.q().iter().zip(&held).fold(farthest, |m, (q, h)| m.max((q - h).abs()));
     }
-    let last: Vec<f64> = cell.sim.q().iter().zip(&held).map(|(q, h)| q - h).collect();
+    let last: Vec<f64> = cell.lockstep.sim.q().iter().zip(&held).map(|(q, h)| q - h).collect();
     eprintln!(
         "surface gone in a stall: farthest joint {farthest:.4} rad from the held position, at the end {last:.4?}"
     );
@@ -333,7 +333,7 @@ fn a_tare_while_pressing_is_refused_and_the_force_read_stays_true() {
     let err = cell.tare().expect_err("tare in contact");
     assert!(err.to_string().contains("tare refused"), "{err}");
     let f_read = (0..100).filter_map(|_| cell.cycle().unwrap()).last().unwrap().controller.f;
-    let f_true = cell.sim.contact().normal_force;
+    let f_true = cell.lockstep.sim.contact().normal_force;
     assert!((f_read - f_true).abs() < 3.0, "read {f_read:.1} N, true {f_true:.1} N");
 }
 
@@ -349,10 +349,10 @@ fn an_approach_that_finds_no_surface_stops_after_max_approach() {
     let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
     let mut cell = Cell::new(config, controller, estimator).unwrap();
     cell.start(2000).unwrap();
-    let start = cell.sim.tool_pose().translation.vector;
+    let start = cell.lockstep.sim.tool_pose().translation.vector;
     // 8 s at 1 cm/s would be 8 cm.
     run(&mut cell, 8000);
-    let travelled = (cell.sim.tool_pose().translation.vector - start).norm();
+    let travelled = (cell.lockstep.sim.tool_pose().translation.vector - start).norm();
     assert!(cell.controller.law.approach_exhausted());
     assert!(travelled < 0.031, "the approach went {:.1} mm, max_approach 30 mm", travelled * 1e3);
     let still = run(&mut cell, 1000);
@@ -424,7 +424,7 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
     // deformation command (SOFTCONTACT_FUZZ_CASES / 200 accepted sets run, at least 6).
     use softcontact_nodes::deformation_controller::Params as ControllerParams;
     use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
-    use softcontact_nodes::params::NodeParams;
+    use softcontact_nodes::runtime::params::NodeParams;
     let cases: usize = std::env::var("SOFTCONTACT_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(1000);
     let wanted = (cases / 200).max(6);
     let mut rng = SmallRng::seed_from_u64(0x9A7A);
@@ -447,12 +447,12 @@ fn fuzzed_node_parameters_are_refused_or_keep_the_arm_within_its_limits() {
         let controller = DeformationController::new(cp.controller_config(), cp.initial_model.clone()).unwrap();
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
         let mut cell = Cell::new(config, controller, estimator).unwrap();
-        cell.driver = LwrDriver::new(dp.clone());
+        cell.lockstep.driver = LwrDriver::new(dp.clone());
         let bound = 1.2 * cp.force_limit;
         let check = |cell: &mut Cell, cycles: usize, what: &str| {
             for k in 0..cycles {
                 cell.cycle().unwrap();
-                if let Some(v) = violation_within(&cell.sim, bound) {
+                if let Some(v) = violation_within(&cell.lockstep.sim, bound) {
                     panic!("set {set} ({what}), cycle {k}: {v}\ncontroller {cp:?}\ndriver {dp:?}");
                 }
             }
@@ -473,7 +473,7 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
     // Found by the 10 000-case fuzz: the guard waited 0.2 s from the start of the newest plan, not of
     // the back-off, so a deep deformation command just after a back-off pushed on, unguarded, to 301 N.
     let mut cell = pressing(32);
-    let surface = cell.sim.surface.as_ref().unwrap().config().point;
+    let surface = cell.lockstep.sim.surface.as_ref().unwrap().config().point;
     // A model far too soft, within the plausible offset: a force command overshoots into the guard.
     let too_soft = ContactModel::new(Kind::AzadFeatherstone, 18_000.0, 0.0).unwrap();
     cell.controller.law.adopt_estimate(too_soft, &surface, None).unwrap();
@@ -490,8 +490,8 @@ fn a_deformation_command_right_after_a_back_off_is_still_guarded() {
     let mut peak: f64 = 0.0;
     for k in 0..2000 {
         cell.cycle().unwrap();
-        peak = peak.max(cell.sim.contact().normal_force);
-        if let Some(v) = violation(&cell.sim) {
+        peak = peak.max(cell.lockstep.sim.contact().normal_force);
+        if let Some(v) = violation(&cell.lockstep.sim) {
             panic!("cycle {k}: {v}");
         }
     }

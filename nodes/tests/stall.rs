@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use common::{INNER, Processes, in_isolated_namespace, signal, spawn};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::ContactState;
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::ros;
 
 /// Joint states (the driver publishing) and estimator states (the estimator receiving the F/T node's
 /// wrenches and the driver's poses, and publishing) received in `window`.

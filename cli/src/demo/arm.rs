@@ -105,7 +105,7 @@ fn press(spec: &SurfaceSpec, sim: SimConfig, arm: ArmEffects) -> anyhow::Result<
     }
     cell.controller.law.adopt_estimate(spec.truth.clone(), &surface, None)?;
     let normal = cell.controller.law.config().normal;
-    let start = cell.sim.tool_pose().translation.vector;
+    let start = cell.lockstep.sim.tool_pose().translation.vector;
     let (mut deformation, mut lateral, mut n, mut worst) = (0.0, 0.0, 0.0, 0.0_f64);
     for ratio in RATIOS[0] {
         let command = ratio * 0.8 * spec.max_force;
@@ -114,12 +114,12 @@ fn press(spec: &SurfaceSpec, sim: SimConfig, arm: ArmEffects) -> anyhow::Result<
             let tick = cell.cycle()?.context("the KRC left command mode")?;
             anyhow::ensure!(tick.refused.is_none(), "refused: {:?}", tick.refused);
             let c = &tick.controller;
-            let away: Vector3<f64> = cell.sim.tool_pose().translation.vector - start;
+            let away: Vector3<f64> = cell.lockstep.sim.tool_pose().translation.vector - start;
             deformation += (c.z - c.z_cmd).powi(2);
             lateral += (away - away.dot(&normal) * normal).norm_squared();
             n += 1.0;
         }
-        worst = worst.max((cell.sim.contact().normal_force - command).abs() / command);
+        worst = worst.max((cell.lockstep.sim.contact().normal_force - command).abs() / command);
     }
     Ok(Tracking {
         deformation_rms: (deformation / n).sqrt(),

@@ -476,7 +476,7 @@ fn run_control<O: Observer>(
             k += 1;
             if j + 10 >= cycles {
                 end.push(t.controller.f);
-                end_true.push(r.cell.sim.contact().normal_force);
+                end_true.push(r.cell.lockstep.sim.contact().normal_force);
             }
         }
         // The force at the end of the move (the last 10 ms, one sample of the force-control paper's 100 Hz).

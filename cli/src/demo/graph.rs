@@ -22,8 +22,9 @@ use nalgebra::Vector3;
 use softcontact_msgs::geometry_msgs::WrenchStamped;
 use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
 use softcontact_msgs::std_srvs::TriggerRequest;
+use softcontact_nodes::deformation_controller;
 use softcontact_nodes::geometry::ContactGeometry;
-use softcontact_nodes::{deformation_controller, ros};
+use softcontact_nodes::runtime::ros;
 
 use super::experiment::{CommandResult, ModelUse, Plan, SurfaceSpec};
 use super::report::{Discrepancy, Fitness, Identified, Report, SurfaceReport};

@@ -15,10 +15,10 @@ use nalgebra::Vector3;
 use softcontact_msgs::std_msgs::Header;
 use softcontact_nodes::contact_estimator::{ForcePairing, Params};
 use softcontact_nodes::geometry;
-use softcontact_nodes::liveness::{StreamWatch, first_dead};
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::ros::{self, LogLevel};
-use softcontact_nodes::writer_pin::WriterPin;
+use softcontact_nodes::runtime::liveness::{StreamWatch, first_dead};
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros::{self, LogLevel};
+use softcontact_nodes::runtime::writer_pin::WriterPin;
 
 #[derive(Parser)]
 #[command(
@@ -63,7 +63,7 @@ fn main() -> anyhow::Result<()> {
     let mut pose_watch = StreamWatch::new(topics::EE_POSE.name, 1000.0, p.dead_after);
     let mut dead = None;
     // Poses, twists and wrenches each from one writer, the first heard while it is the only one
-    // (softcontact_nodes::writer_pin): a stranger's zero wrenches once kept the estimator from publishing
+    // (softcontact_nodes::runtime::writer_pin): a stranger's zero wrenches once kept the estimator from publishing
     // any model.
     let (mut pin_poses, mut pin_twists, mut pin_wrenches) = <(WriterPin, WriterPin, WriterPin)>::default();
     while !ros::stopping(&stop) {

@@ -8,7 +8,7 @@
 //! error naming the stream, and the launch script stops the graph.
 //!
 //! Joint states, wrenches and external torques are each taken from one DDS writer, the first heard while
-//! it is the only one on its topic (`softcontact_nodes::writer_pin`): a stranger's joint states stamped
+//! it is the only one on its topic (`softcontact_nodes::runtime::writer_pin`): a stranger's joint states stamped
 //! ahead once silenced this controller, and a stranger's wrenches would steer its force.
 
 use softcontact_msgs::topics;
@@ -19,11 +19,11 @@ use mio::{Events, Interest, Poll, Token};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_nodes::deformation_controller::{ControllerInterface, ControllerNode, JointSample, Params};
 use softcontact_nodes::geometry;
-use softcontact_nodes::liveness::StreamWatch;
 use softcontact_nodes::messages::DriverSession;
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::ros::{self, LogLevel};
-use softcontact_nodes::writer_pin::WriterPin;
+use softcontact_nodes::runtime::liveness::StreamWatch;
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros::{self, LogLevel};
+use softcontact_nodes::runtime::writer_pin::WriterPin;
 
 #[derive(Parser)]
 #[command(
@@ -138,7 +138,7 @@ fn admit(
     pin: &mut WriterPin,
     info: &ros2_client::MessageInfo,
     writers_matched: impl FnOnce() -> usize,
-) -> Result<(), softcontact_nodes::writer_pin::WriterRefused> {
+) -> Result<(), softcontact_nodes::runtime::writer_pin::WriterRefused> {
     pin.admit(info.publisher_gid().to_bytes16(), writers_matched)
 }
 

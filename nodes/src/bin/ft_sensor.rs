@@ -8,8 +8,8 @@
 
 use clap::Parser;
 use softcontact_nodes::ft_sensor::{Params, component};
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros;
 
 #[derive(Parser)]
 #[command(version, about = "ATI Net F/T over RDT, as a ROS 2 node (parameters: config/ft_sensor.yaml)")]

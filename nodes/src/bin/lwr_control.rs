@@ -17,9 +17,10 @@ use std::sync::atomic::Ordering;
 use anyhow::Context;
 use clap::Parser;
 use softcontact_nodes::deformation_controller::{self, InProcessController};
-use softcontact_nodes::handover::Latest;
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::{ft_sensor, lwr_driver, ros};
+use softcontact_nodes::runtime::handover::Latest;
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros;
+use softcontact_nodes::{ft_sensor, lwr_driver};
 
 #[derive(Parser)]
 #[command(version, about = "lwr_driver, ft_sensor and deformation_controller composed in one process (the 1 kHz path)")]

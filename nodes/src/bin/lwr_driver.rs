@@ -8,8 +8,8 @@
 use clap::Parser;
 use softcontact_nodes::lwr_driver::commander::TopicCommands;
 use softcontact_nodes::lwr_driver::{Params, component};
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros;
 
 #[derive(Parser)]
 #[command(

@@ -11,8 +11,8 @@ use clap::Parser;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::rosgraph_msgs::Clock;
 use softcontact_nodes::messages;
-use softcontact_nodes::params::{self, ParamArgs};
-use softcontact_nodes::ros;
+use softcontact_nodes::runtime::params::{self, ParamArgs};
+use softcontact_nodes::runtime::ros;
 use softcontact_nodes::sim_arm::{Pacing, Params, SimArmConfig, SimArmServer, SurfaceKind};
 use softcontact_sim::{SimConfig, Simulator};
 

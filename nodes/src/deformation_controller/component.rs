@@ -12,11 +12,11 @@ use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
 
 use super::{ControllerInterface, ControllerNode, JointSample, Params, Reply, Step};
-use crate::handover::{ForceReading, Latest};
 use crate::lwr_driver::commander::{Answered, Commander};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
 use crate::messages::DriverSession;
-use crate::ros::LogLevel;
+use crate::runtime::handover::{ForceReading, Latest};
+use crate::runtime::ros::LogLevel;
 use ros2_client::Node;
 use softcontact_msgs::sensor_msgs::JointState;
 
@@ -36,7 +36,7 @@ impl InProcessController {
     /// node puts its readings in `forces`.
     pub fn new(
         p: &Params,
-        declared: crate::params::Declared,
+        declared: crate::runtime::params::Declared,
         forces: Arc<Latest<ForceReading>>,
     ) -> anyhow::Result<Self> {
         let control = ControllerNode::from_params(p)?;

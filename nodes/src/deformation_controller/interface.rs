@@ -36,8 +36,8 @@ use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use super::{ControlError, ControllerNode, Notices, Params, Press, PressProgress, Reply, Retare, Silence, Step};
 use crate::contact_estimator::{ModelMsg, model_from_msg};
 use crate::messages;
-use crate::ros::{self, LogLevel};
-use crate::writer_pin::WriterPin;
+use crate::runtime::ros::{self, LogLevel};
+use crate::runtime::writer_pin::WriterPin;
 
 /// The action's name.
 pub use softcontact_msgs::topics::PRESS_ACTION;
@@ -89,7 +89,7 @@ pub struct ControllerInterface {
     commands: Subscription<ForceCommand>,
     models: Subscription<ModelMsg>,
     /// Models come from one estimator: the first writer heard while it is the only one
-    /// ([`crate::writer_pin`]); a stranger's models are refused (force commands and goals come from any
+    /// ([`crate::runtime::writer_pin`]); a stranger's models are refused (force commands and goals come from any
     /// client: they are the user's).
     model_writer: WriterPin,
     server: PressServer,
@@ -110,7 +110,7 @@ pub struct ControllerInterface {
 
 impl ControllerInterface {
     /// The node "deformation_controller", serving its `declared` parameters, with its topics and action.
-    pub fn new(p: &Params, declared: crate::params::Declared) -> anyhow::Result<Self> {
+    pub fn new(p: &Params, declared: crate::runtime::params::Declared) -> anyhow::Result<Self> {
         let mut node = ros::node_with_parameters("deformation_controller", declared)?;
         let commands = ros::subscription(&mut node, &topics::FORCE_COMMAND, ros::reliable_qos())?;
         let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;

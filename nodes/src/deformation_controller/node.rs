@@ -30,7 +30,7 @@ use super::{
     ControlError, ControllerState, DeformationController, ModelUpdate, OVER_COMMAND, OVER_COMMAND_MIN, Params,
 };
 use crate::geometry::ContactGeometry;
-use crate::ros::LogLevel;
+use crate::runtime::ros::LogLevel;
 
 /// A joint state as the driver measured it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -438,7 +438,7 @@ impl ControllerNode {
         // The contact force on the hand in the world, through the arm's own kinematics (the law's: the
         // one pass of the cycle).
         let force_world = if js.q.iter().all(|v| v.is_finite()) {
-            let tool = self.law.tool_motion(&js.q, &js.dq).pose.rotation;
+            let tool = self.law.tool_pose(&js.q).rotation;
             self.law.geometry().world_force(&tool, &force_in_sensor)
         } else {
             Vector3::repeat(f64::NAN)
@@ -740,7 +740,7 @@ mod tests {
 
     /// The tool's rotation at the start posture (the sample's q).
     fn node_pose_rotation(node: &mut ControllerNode) -> nalgebra::UnitQuaternion<f64> {
-        node.law.tool_motion(&DEFAULT_Q, &[0.0; 7]).pose.rotation
+        node.law.tool_pose(&DEFAULT_Q).rotation
     }
 
     #[test]
@@ -835,7 +835,7 @@ mod tests {
         assert!((done_at - 0.5).abs() < 1.5e-3, "done {done_at} s after the command");
         assert!((moving as f64 - 500.0).abs() <= 2.0, "{moving} ticks moving");
         // The true force of the simulated sponge at the end agrees with the sensor's (tared) reading.
-        let truth = cell.sim.contact().normal_force;
+        let truth = cell.lockstep.sim.contact().normal_force;
         assert!((reached - truth).abs() < 0.05 * 60.0, "reached {reached} N, the surface pushes {truth} N");
     }
 
@@ -850,7 +850,7 @@ mod tests {
         for _ in 0..600 {
             cell.cycle().unwrap();
         }
-        let truth = cell.sim.contact().normal_force;
+        let truth = cell.lockstep.sim.contact().normal_force;
         (cell, truth, refused)
     }
 
@@ -901,7 +901,7 @@ mod tests {
         for _ in 0..3000 {
             cell.cycle().unwrap();
         }
-        cell.sim.contact().normal_force
+        cell.lockstep.sim.contact().normal_force
     }
 
     #[test]
@@ -919,7 +919,7 @@ mod tests {
         let mut cell = pressing_cell();
         let n = cell.controller.law.config().normal;
         let level = cell.controller.law.contact_level().unwrap();
-        let before = cell.sim.contact().normal_force;
+        let before = cell.lockstep.sim.contact().normal_force;
         // A soft model with a sensor bias, its surface 9.5 mm below the onset: 250 N would need more
         // than max_deformation, so the command is refused.
         let model = ContactModel {
@@ -933,7 +933,7 @@ mod tests {
         let (mut low, mut high) = (f64::INFINITY, f64::NEG_INFINITY);
         for _ in 0..7000 {
             cell.cycle().unwrap();
-            let f = cell.sim.contact().normal_force;
+            let f = cell.lockstep.sim.contact().normal_force;
             (low, high) = (low.min(f), high.max(f));
         }
         assert!(before - low < 1.0 && high - before < 1.0, "{before} N before, then {low}..{high} N");
@@ -993,9 +993,13 @@ mod tests {
         }
         // Free (the simulated surface pushes nothing) and still, 1.5 s after the request.
         assert!((lifting as f64 - 1500.0).abs() < 5.0, "{lifting} ticks lifting and settling");
-        assert_eq!(cell.sim.contact().normal_force, 0.0, "the hand is off the surface");
+        assert_eq!(cell.lockstep.sim.contact().normal_force, 0.0, "the hand is off the surface");
         // Still enough for the F/T node's checked tare (which refuses a moving hand).
-        assert!(cell.sim.dq().iter().all(|v| v.abs() < 5e-3), "the arm is still: {:?}", cell.sim.dq());
+        assert!(
+            cell.lockstep.sim.dq().iter().all(|v| v.abs() < 5e-3),
+            "the arm is still: {:?}",
+            cell.lockstep.sim.dq()
+        );
         cell.tare().unwrap();
         cell.controller.on_tared(true);
         assert_eq!(cell.controller.retare(), None);
@@ -1021,7 +1025,7 @@ mod tests {
         let mut cell = pressing_cell();
         cell.controller.request_retare().unwrap();
         // A new session restarts the node: the retreat is over (its host answers "interrupted").
-        let t = cell.sim.time();
+        let t = cell.lockstep.sim.time();
         feed(&mut cell.controller, t + 1.0, Vector3::zeros(), t + 1.0);
         let step = cell.controller.on_joint_state(&sample(t + 1.0, 99), t + 1.0);
         assert!(step.restarted);
@@ -1167,7 +1171,7 @@ mod tests {
                 .unwrap();
         let estimator = ContactEstimatorNode::new(EstimatorConfig::default()).unwrap();
         let mut cell = crate::cell::Cell::new(config, law, estimator).unwrap();
-        cell.ft = FtSensorNode::new(FtConfig {
+        cell.lockstep.ft = FtSensorNode::new(FtConfig {
             calibration,
             tool: lwr4::tool_load(),
             gravity: Vector3::new(0.0, 0.0, -9.81),
@@ -1223,7 +1227,7 @@ mod tests {
             let (mut most, mut pressing, mut limited_at) = (0.0f64, false, None);
             for i in 0..12_000 {
                 let tick = cell.cycle().unwrap().unwrap();
-                most = most.max(cell.sim.contact().normal_force);
+                most = most.max(cell.lockstep.sim.contact().normal_force);
                 if tick.controller.in_contact && !pressing {
                     cell.controller.on_force_command(50.0, 1.0).1.unwrap();
                     pressing = true;
@@ -1235,7 +1239,7 @@ mod tests {
                     limited_at.get_or_insert(i);
                 }
             }
-            let now = cell.sim.contact().normal_force;
+            let now = cell.lockstep.sim.contact().normal_force;
             eprintln!("reads {reads}: peak {most:.1} N, now {now:.1} N, force limited at {limited_at:?}");
             assert!(most <= limits.force_limit, "reads {reads}: {most} N (limit {})", limits.force_limit);
             assert!(now <= limits.max_force, "reads {reads}: {now} N after the back-off");
@@ -1256,7 +1260,7 @@ mod tests {
             let (mut most, mut pressing) = (0.0f64, false);
             for _ in 0..15_000 {
                 let tick = cell.cycle().unwrap().unwrap();
-                most = most.max(cell.sim.contact().normal_force);
+                most = most.max(cell.lockstep.sim.contact().normal_force);
                 if tick.controller.in_contact && !pressing && cell.controller.force_check().is_none() {
                     pressing = cell.controller.on_force_command(commanded, 1.0).1.is_ok();
                 }
@@ -1274,7 +1278,7 @@ mod tests {
                 for _ in 0..1000 {
                     cell.cycle().unwrap();
                 }
-                let after = cell.sim.contact().normal_force;
+                let after = cell.lockstep.sim.contact().normal_force;
                 assert!(after <= most + 1.0, "scale {scale}: {after} N a second after the hold ({most} N)");
             } else {
                 assert!(pressing && most < 0.5 * commanded, "scale {scale}: {most} N on the sponge");

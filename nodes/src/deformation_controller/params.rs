@@ -1,5 +1,5 @@
 //! The `deformation_controller` node's parameters (config/deformation_controller.yaml), declared once in
-//! [`NodeParams::declare`](crate::params::NodeParams), and the law's configuration made from them.
+//! [`NodeParams::declare`](crate::runtime::params::NodeParams), and the law's configuration made from them.
 
 use nalgebra::Vector3;
 use softcontact_contact::{ContactModel, OnsetConfig};
@@ -127,9 +127,9 @@ impl Params {
     }
 }
 
-impl crate::params::NodeParams for Params {
+impl crate::runtime::params::NodeParams for Params {
     /// Every number has a physical range: a value outside it refuses to start the node.
-    fn declare(&self, d: &mut crate::params::Declarations) {
+    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
         self.declare_law(d);
         self.declare_limits(d);
         self.declare_node(d);
@@ -140,7 +140,7 @@ impl crate::params::NodeParams for Params {
 
 impl Params {
     /// The parameters of the law: its gains, the approach and the onset.
-    fn declare_law(&self, d: &mut crate::params::Declarations) {
+    fn declare_law(&self, d: &mut crate::runtime::params::Declarations) {
         d.direction(
             "normal",
             self.normal,
@@ -177,7 +177,7 @@ impl Params {
     }
 
     /// The parameters of the limits every command and torque is checked against.
-    fn declare_limits(&self, d: &mut crate::params::Declarations) {
+    fn declare_limits(&self, d: &mut crate::runtime::params::Declarations) {
         d.above("torque_rate", self.torque_rate, (0.0, 1e5), "largest torque rate commanded [N·m/s]");
         d.above("max_force", self.max_force, (0.0, 500.0), "largest force a command may ask for [N]");
         d.above("max_deformation", self.max_deformation, (0.0, 0.2), "largest deformation commanded [m]");
@@ -221,7 +221,7 @@ impl Params {
     }
 
     /// The parameters of the node: its rates, staleness, the force check, liveness and the model policy.
-    fn declare_node(&self, d: &mut crate::params::Declarations) {
+    fn declare_node(&self, d: &mut crate::runtime::params::Declarations) {
         d.above("state_rate", self.state_rate, (0.0, 1000.0), "/deformation_controller/state rate [Hz]");
         d.above(
             "stale_after",
@@ -244,7 +244,7 @@ impl Params {
             (0.0, 5.0),
             "the disagreement beyond, summed over time, holds the arm at this impulse until a new KRC session [N·s]",
         );
-        crate::liveness::declare_dead_after(
+        crate::runtime::liveness::declare_dead_after(
             d,
             self.dead_after,
             self.restart_after,
@@ -258,7 +258,7 @@ impl Params {
     }
 
     /// The parameters of the models it starts with: the contact model, the surface, the arm's effects.
-    fn declare_models(&self, d: &mut crate::params::Declarations) {
+    fn declare_models(&self, d: &mut crate::runtime::params::Declarations) {
         let e = self.initial_model.exponents;
         let model = if [e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
             self.initial_model.plausible().map_err(|e| e.to_string())

@@ -13,11 +13,11 @@ use softcontact_msgs::std_srvs::TriggerResponse;
 
 use super::{FtConfig, FtSensorNode, Params, StartupTare, calibration};
 use crate::geometry;
-use crate::handover::{ForceReading, Latest, ToolPose};
-use crate::liveness::{DeadStream, StreamWatch};
 use crate::messages;
-use crate::ros::{self, LogLevel};
-use crate::udp::RdtClient;
+use crate::runtime::handover::{ForceReading, Latest, ToolPose};
+use crate::runtime::liveness::{DeadStream, StreamWatch};
+use crate::runtime::ros::{self, LogLevel};
+use crate::runtime::udp::RdtClient;
 
 /// What the node shares with the components of its process, when composed (`lwr_control`): the tool
 /// pose comes from the driver in memory instead of /lwr/ee_pose, and the compensated force goes to the
@@ -30,7 +30,12 @@ pub struct Links {
 
 /// The node until `stop` is set (or it exits after a silence): the binary's `main`, and a thread of
 /// `lwr_control`.
-pub fn run(p: Params, declared: crate::params::Declared, links: Links, stop: Arc<AtomicBool>) -> anyhow::Result<()> {
+pub fn run(
+    p: Params,
+    declared: crate::runtime::params::Declared,
+    links: Links,
+    stop: Arc<AtomicBool>,
+) -> anyhow::Result<()> {
     // The box's calibration before anything else: without it no count means a force.
     let page = match p.settings_page() {
         Some(http) => Some(

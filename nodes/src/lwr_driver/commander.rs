@@ -13,7 +13,7 @@ use softcontact_msgs::topics;
 
 use super::{DriverError, DriverOutput, LwrDriver};
 use crate::messages::DriverSession;
-use crate::ros;
+use crate::runtime::ros;
 
 /// What a commander did with one measurement.
 #[derive(Debug, Default)]
@@ -58,8 +58,6 @@ pub trait Commander {
 pub struct TopicCommands {
     commands: Subscription<JointState>,
     external_torque: Publisher<JointState>,
-    /// The stamp of the command in force (the joint state it answers).
-    in_force: Option<f64>,
 }
 
 impl TopicCommands {
@@ -67,7 +65,6 @@ impl TopicCommands {
         Ok(Self {
             external_torque: ros::publisher(node, &topics::EXTERNAL_TORQUE, ros::sensor_qos())?,
             commands: ros::subscription(node, &topics::JOINT_TORQUE_COMMAND, ros::reliable_qos())?,
-            in_force: None,
         })
     }
 }
@@ -81,38 +78,32 @@ impl Commander for TopicCommands {
     /// previous measurement has had the whole cycle to arrive. A bad one is refused and counted, the
     /// previous one stays. A command must answer a joint state of the present KRC session, within the
     /// watchdog's age by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
-    /// Only the session's pinned writer commands (crate::writer_pin).
+    /// Only the session's pinned writer commands (crate::runtime::writer_pin).
     fn answer(&mut self, node: &Node, driver: &mut LwrDriver, _: &DriverOutput, stamp: Time) -> Answered {
         let mut answered = Answered::default();
+        let now = stamp.as_secs_f64();
         // The command in force ages by the driver's clock: one taken before a gap between measurements
         // answers none after it.
-        driver.expire_command(|| self.in_force.map(|s| stamp.as_secs_f64() - s));
+        driver.expire_command(now);
         while let Ok(Some((cmd, info))) = self.commands.take() {
             let session = DriverSession::from_frame_id(&cmd.header.frame_id).map(|s| s.session);
-            let age = stamp.as_secs_f64() - cmd.header.stamp.as_secs_f64();
+            let answers = cmd.header.stamp.as_secs_f64();
             let writer = info.publisher_gid().to_bytes16();
             let writers = || self.commands.get_publisher_count(node);
-            let taken = driver.set_remote_command(&cmd.effort, session, age, writer, writers);
-            // A backlog delivered after a stall, another session's commands, or a stranger's, are no
-            // sign of life.
-            if !matches!(taken, Err(DriverError::TooOld(..) | DriverError::OtherSession(..) | DriverError::Writer(_))) {
-                answered.sign_of_life = true;
-            }
-            match taken {
+            match driver.set_remote_command(&cmd.effort, session, answers, now, writer, writers) {
                 Ok(()) => {
-                    answered.command_stamp = Some(cmd.header.stamp.as_secs_f64());
-                    self.in_force = answered.command_stamp;
+                    answered.sign_of_life = true;
+                    answered.command_stamp = Some(answers);
                 }
-                // Refused for its values: the driver dropped the present command too.
-                Err(
-                    e @ (DriverError::NonFiniteCommand(_)
-                    | DriverError::BeyondLimit(..)
-                    | DriverError::CommandLength(_)),
-                ) => {
-                    self.in_force = None;
+                // A backlog delivered after a stall, another session's commands, or a stranger's, are no
+                // sign of life.
+                Err(e @ (DriverError::TooOld(..) | DriverError::OtherSession(..) | DriverError::Writer(_))) => {
+                    answered.refused = Some(e)
+                }
+                Err(e) => {
+                    answered.sign_of_life = true;
                     answered.refused = Some(e);
                 }
-                Err(e) => answered.refused = Some(e),
             }
         }
         answered

@@ -13,13 +13,13 @@ use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 
 use super::commander::Commander;
 use super::{DriverCounters, DriverOutput, Params, Refusals, Waiting};
-use crate::handover::{Latest, ToolPose};
-use crate::liveness::{DeadStream, StreamWatch};
 use crate::messages;
-use crate::realtime;
-use crate::ros::{self, LogLevel};
-use crate::stats::Histogram;
-use crate::udp::FriClient;
+use crate::runtime::handover::{Latest, ToolPose};
+use crate::runtime::liveness::{DeadStream, StreamWatch};
+use crate::runtime::realtime;
+use crate::runtime::ros::{self, LogLevel};
+use crate::runtime::stats::Histogram;
+use crate::runtime::udp::FriClient;
 
 /// The driver's status: a fault, then a dead controller, then datagrams all refused, then any refused or
 /// commands from strangers, then holding.
@@ -103,7 +103,7 @@ fn diagnostics(
 /// newest tool pose for the F/T node, when composed.
 pub fn run<C: Commander>(
     p: Params,
-    declared: crate::params::Declared,
+    declared: crate::runtime::params::Declared,
     commander: impl FnOnce(&mut ros2_client::Node) -> anyhow::Result<C>,
     poses: Option<Arc<Latest<ToolPose>>>,
     stop: Arc<AtomicBool>,

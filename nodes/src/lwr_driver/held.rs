@@ -3,14 +3,15 @@
 
 use super::Params;
 
-/// A command and its age: taken at cycle `at`, when its stamp was `age` seconds old; `remote`: from the
-/// network (an in-process controller's answers the very measurement).
+/// A command and its age: taken at cycle `at`, when its stamp was `age` seconds old; `stamp`: the stamp
+/// of the joint state a command from the network answers (`None`: the in-process controller's, which
+/// answers the very measurement).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Command {
     pub effort: [f64; 7],
     pub at: u64,
     pub age: f64,
-    pub remote: bool,
+    pub stamp: Option<f64>,
 }
 
 impl Command {

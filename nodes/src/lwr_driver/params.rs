@@ -1,4 +1,4 @@
-//! The `lwr_driver` node's parameters, declared once in [`NodeParams::declare`](crate::params::NodeParams).
+//! The `lwr_driver` node's parameters, declared once in [`NodeParams::declare`](crate::runtime::params::NodeParams).
 
 use std::net::IpAddr;
 
@@ -52,8 +52,8 @@ impl Default for Params {
     }
 }
 
-impl crate::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::params::Declarations) {
+impl crate::runtime::params::NodeParams for Params {
+    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
         let bind = if self.fri_bind.ip().is_unspecified() {
             Err("listens on every network: give this PC's address on the robot network".to_string())
         } else {
@@ -141,7 +141,7 @@ impl crate::params::NodeParams for Params {
             (0.0, 86_400.0),
             "stop after this long without a measurement (0: wait forever) [s]",
         );
-        crate::liveness::declare_dead_after(
+        crate::runtime::liveness::declare_dead_after(
             d,
             self.dead_after,
             0.0,

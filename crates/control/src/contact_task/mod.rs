@@ -37,7 +37,7 @@
 //! node then sends the driver a hold request, never an older torque. After the joint states were
 //! interrupted (a new KRC session) the controller forgets the contact and approaches again.
 
-use nalgebra::{DVector, Matrix6xX, UnitQuaternion, Vector3};
+use nalgebra::{DVector, Isometry3, Matrix6xX, UnitQuaternion, Vector3};
 use softcontact_contact::{ContactModel, OnsetConfig, OnsetDetector};
 use softcontact_dynamics::{ArmEffects, Axes, Data, FrameId, FrameMotion, Model, lwr4};
 
@@ -355,6 +355,12 @@ impl DeformationController {
     /// cycle, which the tick (and [`Self::tool_jacobian`]) reuse at the same q whoever asks first.
     pub fn tool_motion(&mut self, q: &[f64; 7], dq: &[f64; 7]) -> FrameMotion {
         self.model.frame_motion(&mut self.data, q, dq, self.tool)
+    }
+
+    /// The tool's pose at q, on the same kinematics pass (for whoever needs no twist).
+    pub fn tool_pose(&mut self, q: &[f64; 7]) -> Isometry3<f64> {
+        self.model.forward_kinematics(&mut self.data, q);
+        self.model.frame_pose(&self.data, self.tool)
     }
 
     /// The tool's Jacobian (world axes) at q into `out` (6 × 7), on the same kinematics pass.

@@ -185,7 +185,7 @@ mod tests {
 
     #[test]
     fn a_generated_parameter_file_reads_back_as_the_defaults_of_every_node() {
-        use crate::params::{ParamArgs, load};
+        use crate::runtime::params::{ParamArgs, load};
         fn check<P: NodeParams + Default + PartialEq + std::fmt::Debug>(node: &str) {
             let path = std::env::temp_dir().join(format!("softcontact-reference-{node}-{}.yaml", std::process::id()));
             std::fs::write(&path, yaml::<P>(node, "a test")).unwrap();

@@ -17,7 +17,7 @@ use serde::de::DeserializeOwned;
 use softcontact_msgs::RosType;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
-use crate::params::Declared;
+use crate::runtime::params::Declared;
 
 /// Sends the `log` records of the middleware (RustDDS, ros2-client) and of our crates to stderr, each
 /// line prefixed with `node`: warnings and errors by default (RustDDS's errors only: its warnings are
@@ -46,7 +46,7 @@ pub fn node(name: &str) -> anyhow::Result<Node> {
 /// A tool's node whose topics and services are those of a graph started in `namespace` (`-r __ns:=/NS`).
 pub fn node_in_namespace(name: &str, namespace: &str) -> anyhow::Result<Node> {
     let remapping =
-        crate::names::Remapping::parse(name, &[format!("__ns:={namespace}")]).map_err(anyhow::Error::msg)?;
+        crate::runtime::names::Remapping::parse(name, &[format!("__ns:={namespace}")]).map_err(anyhow::Error::msg)?;
     node_with_parameters(name, Declared { remapping, ..Default::default() })
 }
 
@@ -171,10 +171,11 @@ pub fn latched_qos() -> QosProfile {
 }
 
 /// Each node's names as its command line set them (`-r`), by the node's fully qualified name.
-static REMAPPINGS: std::sync::Mutex<Vec<(String, crate::names::Remapping)>> = std::sync::Mutex::new(Vec::new());
+static REMAPPINGS: std::sync::Mutex<Vec<(String, crate::runtime::names::Remapping)>> =
+    std::sync::Mutex::new(Vec::new());
 
 /// The graph name of the topic or service declared as `declared` (absolute, as in
-/// `softcontact_msgs::topics`) for `node`: its namespace and remapping rules applied (crate::names).
+/// `softcontact_msgs::topics`) for `node`: its namespace and remapping rules applied (crate::runtime::names).
 pub fn resolve(node: &Node, declared: &str) -> anyhow::Result<Name> {
     let fqn = node.fully_qualified_name();
     let remappings = REMAPPINGS.lock().unwrap_or_else(|e| e.into_inner());

@@ -12,7 +12,12 @@ use std::ops::RangeInclusive;
 pub const DEAD_AFTER_RANGE: RangeInclusive<f64> = 0.1..=60.0;
 
 /// Declares a node's `dead_after` parameter: a liveness time within [`DEAD_AFTER_RANGE`], above `lowest`.
-pub fn declare_dead_after(d: &mut crate::params::Declarations, dead_after: f64, lowest: f64, description: &str) {
+pub fn declare_dead_after(
+    d: &mut crate::runtime::params::Declarations,
+    dead_after: f64,
+    lowest: f64,
+    description: &str,
+) {
     let (lo, hi) = (*DEAD_AFTER_RANGE.start(), *DEAD_AFTER_RANGE.end());
     if lowest < lo {
         d.within("dead_after", dead_after, (lo, hi), description);
@@ -193,7 +198,7 @@ mod tests {
     #[test]
     fn dead_after_is_bounded() {
         let check = |dead_after: f64, lowest: f64| {
-            let mut d = crate::params::Declarations::default();
+            let mut d = crate::runtime::params::Declarations::default();
             declare_dead_after(&mut d, dead_after, lowest, "silence");
             d.error().is_none()
         };

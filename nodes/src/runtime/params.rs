@@ -262,7 +262,7 @@ impl Declarations {
 
     /// The peers' service mapping (`service_mapping`), for the services the node serves and calls.
     pub fn service_mapping(&mut self, mapping: &str, description: &str) {
-        let check = crate::ros::service_mapping(mapping).map(|_| ()).map_err(|e| e.to_string());
+        let check = crate::runtime::ros::service_mapping(mapping).map(|_| ()).map_err(|e| e.to_string());
         self.rule("service_mapping", check, "cyclone, enhanced or basic", description);
     }
 
@@ -305,7 +305,7 @@ pub enum ParamError {
 pub struct Declared {
     pub values: Vec<(String, ParameterValue)>,
     pub specs: Vec<Spec>,
-    pub remapping: crate::names::Remapping,
+    pub remapping: crate::runtime::names::Remapping,
 }
 
 /// The largest parameter or model file read \[bytes\]: memory stays bounded whatever the path names.
@@ -371,7 +371,7 @@ pub fn check_nesting(text: &str) -> Result<(), String> {
 
 /// Reads the parameters of `node` from `args`, checks them, and returns them with what to declare.
 pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared), ParamError> {
-    let remapping = crate::names::Remapping::parse(node, &args.remaps).map_err(ParamError::Remap)?;
+    let remapping = crate::runtime::names::Remapping::parse(node, &args.remaps).map_err(ParamError::Remap)?;
     // A file's section for this node: `/**`, then its own name, then the name and the fully qualified
     // name `-r __node` and `-r __ns` gave it (later ones win), as ROS 2 reads them.
     let name = remapping.node_name(node);

@@ -13,7 +13,7 @@ use softcontact_wire::rdt::{RdtCommand, Request};
 
 use crate::ft_sensor::{FtOutput, FtSensorNode};
 use crate::lwr_driver::{DriverOutput, LwrDriver};
-use crate::stats::Histogram;
+use crate::runtime::stats::Histogram;
 
 /// A receive that ended without a datagram: the timeout passed, or a signal (shutdown) interrupted it.
 pub(crate) fn no_datagram(e: &std::io::Error) -> bool {
