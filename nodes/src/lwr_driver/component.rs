@@ -11,7 +11,7 @@ use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
 
-use super::commander::Commander;
+use super::commander::{Answered, Commander};
 use super::{DriverCounters, DriverOutput, Params, Refusals, Waiting};
 use crate::messages;
 use crate::runtime::handover::{Latest, ToolPose};
@@ -136,13 +136,8 @@ pub fn run<C: Commander>(
     let ready = format!("ready: FRI on {}, domain {}; {scheduling}", client.local_addr()?, node.domain_id());
     ros::log(&node, LogLevel::Info, &ready);
 
-    // How old the joint state behind the applied command is, each cycle it is applied (the controller
-    // stamps its command with the stamp of the joint state it answered; older ones are stale cycles).
-    let mut command_age = Histogram::new(1e-5, 100_000);
-    let mut command_stamp: Option<f64> = None;
-    let mut lag = CommandLag::default();
+    let mut commands = CommandStats::default();
     let mut last: Option<DriverOutput> = None;
-    let mut next_diagnostics = Instant::now();
     let mut last_seen = Instant::now();
     let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
@@ -155,35 +150,24 @@ pub fn run<C: Commander>(
     };
     let tf_thread = spawn_slow_streams(slow, arm_state.clone(), tf_done.clone())?;
     let start = Instant::now();
-    let mut command_watch = StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, p.dead_after);
-    let mut commands_dead: Option<DeadStream> = None;
-    // The counters at the last diagnostics, for what was refused since.
-    let mut counted = DriverCounters::default();
-    let mut all_refused_logged = false;
+    let mut command_watch = CommandWatch::new(p.dead_after);
+    let mut status = Status::default();
     let mut fault_logged = None;
     let mut waiting_log = WaitingLog { logged: None, next: Instant::now() };
-    // Cycles answered with a held command once the controller first commanded (start-up excluded).
-    let mut stale_at_first_command: Option<u64> = None;
     while !ros::stopping(&stop) {
         commander.take_inputs();
         // The measurement's stamp: the controller answers it, and the joint state carries it.
         let mut measured_at = None;
-        let mut sign_of_life = false;
-        let mut refused = None;
+        let mut answered = Answered::default();
         let output = client.cycle_with(Duration::from_millis(5), |driver, out| {
             // In lockstep the KRC's own clock is the loop's: /clock may not have caught up with the
             // datagram, and a repeated stamp would leave the measurement unanswered.
             let stamp = if p.use_sim_time { Time::from_secs_f64(out.krc_time) } else { clock.now() };
             measured_at = Some(stamp);
-            let answered = commander.answer(&node, driver, out, stamp);
-            sign_of_life = answered.sign_of_life;
-            refused = answered.refused;
-            if let Some(s) = answered.command_stamp {
-                command_stamp = Some(s);
-            }
+            answered = commander.answer(&node, driver, out, stamp);
         })?;
-        if sign_of_life {
-            command_watch.seen(start.elapsed().as_secs_f64());
+        if answered.sign_of_life {
+            command_watch.watch.seen(start.elapsed().as_secs_f64());
         }
         if let Some(out) = output.as_ref() {
             waiting_log.note(&node, out.waiting);
@@ -194,7 +178,7 @@ pub fn run<C: Commander>(
                 ros::log(&node, LogLevel::Error, &f.to_string());
             }
         }
-        if let Some(e) = refused
+        if let Some(e) = answered.refused.as_ref()
             && Instant::now() >= next_refusal_log
         {
             ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
@@ -209,17 +193,7 @@ pub fn run<C: Commander>(
             if let Some(poses) = &poses {
                 poses.put(ToolPose { pose: tool.pose, measured: last_seen });
             }
-            let commanded = out.torque_mode() && !out.holding;
-            if commanded {
-                stale_at_first_command.get_or_insert(client.driver.counters.stale_cycles);
-            }
-            lag.measured(stamp.as_secs_f64());
-            if let Some(t) = command_stamp.filter(|_| commanded) {
-                // By the stamp of the measurement it answered, as `max_command_age` is checked (the
-                // reply's own delay is the reply latency's).
-                command_age.record(stamp.as_secs_f64() - t);
-                lag.applied(t);
-            }
+            commands.answered(&out, stamp.as_secs_f64(), answered.command_stamp, client.driver.counters.stale_cycles);
             let m = out.messages(&names, &tool, stamp);
             // The KRC is answered already; a middleware error is counted, never the end of the driver.
             // The commander's first: a controller of its own pairs the external torque with the joint
@@ -238,47 +212,19 @@ pub fn run<C: Commander>(
             break;
         }
         // Commands are due while the KRC commands; silence beyond dead_after is reported, never an exit.
-        let now = start.elapsed().as_secs_f64();
         let krc_commands =
             last.as_ref().is_some_and(|o| o.torque_mode()) && last_seen.elapsed().as_secs_f64() <= p.new_session_after;
-        if !krc_commands || commander.in_process() {
-            command_watch.not_due(now);
-        }
-        match (command_watch.dead(now), &commands_dead) {
-            (Some(d), None) => {
-                ros::log(&node, LogLevel::Error, &format!("{d}; holding the arm while the KRC commands"));
-                commands_dead = Some(d);
-            }
-            (Some(d), Some(_)) => commands_dead = Some(d),
-            // Only commands end the report: a KRC that pauses commanding (a new session after the
-            // stall) does not bring the controller back, and its next silence is the same outage.
-            (None, Some(_)) if sign_of_life => {
-                ros::log(&node, LogLevel::Info, "torque commands flow again");
-                commands_dead = None;
-            }
-            (None, _) => {}
-        }
-        if Instant::now() >= next_diagnostics {
-            let refusals = client.driver.counters.refusals_since(&counted);
-            if refusals.all_refused() && !all_refused_logged {
-                ros::log(&node, LogLevel::Error, &format!("{refusals} in the last second: the KRC is not answered"));
-            }
-            all_refused_logged = refusals.all_refused();
-            let strangers = client.driver.counters.commands_from_strangers - counted.commands_from_strangers;
-            counted = client.driver.counters;
-            let dead = commands_dead.as_ref();
-            let status = diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, strangers, clock.now());
-            publish_errors += u64::from(diag.publish(status).is_err());
-            next_diagnostics += Duration::from_secs(1);
+        let due = krc_commands && !commander.in_process();
+        command_watch.judge(&node, start.elapsed().as_secs_f64(), due, answered.sign_of_life);
+        if Instant::now() >= status.next {
+            let report = status.report(&node, &client, &commands.age, last.as_ref(), command_watch.dead.as_ref());
+            publish_errors += u64::from(diag.publish(report(clock.now())).is_err());
         }
     }
     tf_done.store(true, Ordering::Relaxed);
-    let tf_errors = tf_thread.join().unwrap_or(1);
-    publish_errors += tf_errors;
-    let refusals = client.driver.counters.refusals_since(&counted);
-    let strangers = client.driver.counters.commands_from_strangers - counted.commands_from_strangers;
-    let dead = commands_dead.as_ref();
-    diag.publish(diagnostics(&client, &command_age, last.as_ref(), dead, &refusals, strangers, clock.now()))?;
+    publish_errors += tf_thread.join().unwrap_or(1);
+    let report = status.report(&node, &client, &commands.age, last.as_ref(), command_watch.dead.as_ref());
+    diag.publish(report(clock.now()))?;
     // The exit report: tests and `launch-scripts/sim.sh` read these lines.
     eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
@@ -287,16 +233,130 @@ pub fn run<C: Commander>(
         client.reply_latency.fraction_within(200e-6) * 100.0
     );
     eprintln!("lwr_driver: send call {}", client.send_duration.summary(1e6, "us"));
-    let stale = client.driver.counters.stale_cycles;
-    let after_start = stale_at_first_command.map_or(0, |s| stale - s);
-    eprintln!(
-        "lwr_driver: command age {}; stale cycles {stale}, {after_start} after the first command",
-        command_age.summary(1e3, "ms")
-    );
-    eprintln!("lwr_driver: {lag}");
+    commands.exit_report(client.driver.counters.stale_cycles);
     commander.exit_report();
     eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
+}
+
+/// The applied commands: how old the joint state behind each was when applied (the controller stamps
+/// its command with the stamp of the joint state it answered; older ones are stale cycles), how many
+/// measurements behind, and the stale cycles once the controller first commanded.
+struct CommandStats {
+    age: Histogram,
+    /// The stamp of the joint state the command in force answers.
+    stamp: Option<f64>,
+    lag: CommandLag,
+    stale_at_first_command: Option<u64>,
+}
+
+impl Default for CommandStats {
+    fn default() -> Self {
+        Self {
+            age: Histogram::new(1e-5, 100_000),
+            stamp: None,
+            lag: CommandLag::default(),
+            stale_at_first_command: None,
+        }
+    }
+}
+
+impl CommandStats {
+    /// The measurement stamped `stamp` was answered with `out`; `command_stamp`: a command set for it.
+    fn answered(&mut self, out: &DriverOutput, stamp: f64, command_stamp: Option<f64>, stale_cycles: u64) {
+        if command_stamp.is_some() {
+            self.stamp = command_stamp;
+        }
+        let commanded = out.torque_mode() && !out.holding;
+        if commanded {
+            self.stale_at_first_command.get_or_insert(stale_cycles);
+        }
+        self.lag.measured(stamp);
+        if let Some(t) = self.stamp.filter(|_| commanded) {
+            // By the stamp of the measurement it answered, as `max_command_age` is checked (the
+            // reply's own delay is the reply latency's).
+            self.age.record(stamp - t);
+            self.lag.applied(t);
+        }
+    }
+
+    fn exit_report(&self, stale: u64) {
+        let after_start = self.stale_at_first_command.map_or(0, |s| stale - s);
+        eprintln!(
+            "lwr_driver: command age {}; stale cycles {stale}, {after_start} after the first command",
+            self.age.summary(1e3, "ms")
+        );
+        eprintln!("lwr_driver: {}", self.lag);
+    }
+}
+
+/// /lwr/joint_torque_command watched while commands are due (the KRC commands and no controller answers
+/// in process): silence beyond `dead_after` is logged and reported, never an exit.
+struct CommandWatch {
+    watch: StreamWatch,
+    dead: Option<DeadStream>,
+}
+
+impl CommandWatch {
+    fn new(dead_after: f64) -> Self {
+        Self { watch: StreamWatch::new(topics::JOINT_TORQUE_COMMAND.name, 1000.0, dead_after), dead: None }
+    }
+
+    fn judge(&mut self, node: &ros2_client::Node, now: f64, due: bool, sign_of_life: bool) {
+        if !due {
+            self.watch.not_due(now);
+        }
+        match (self.watch.dead(now), &self.dead) {
+            (Some(d), None) => {
+                ros::log(node, LogLevel::Error, &format!("{d}; holding the arm while the KRC commands"));
+                self.dead = Some(d);
+            }
+            (Some(d), Some(_)) => self.dead = Some(d),
+            // Only commands end the report: a KRC that pauses commanding (a new session after the
+            // stall) does not bring the controller back, and its next silence is the same outage.
+            (None, Some(_)) if sign_of_life => {
+                ros::log(node, LogLevel::Info, "torque commands flow again");
+                self.dead = None;
+            }
+            (None, _) => {}
+        }
+    }
+}
+
+/// /diagnostics once a second, with what was refused since the last.
+struct Status {
+    next: Instant,
+    /// The counters at the last report.
+    counted: DriverCounters,
+    all_refused_logged: bool,
+}
+
+impl Default for Status {
+    fn default() -> Self {
+        Self { next: Instant::now(), counted: DriverCounters::default(), all_refused_logged: false }
+    }
+}
+
+impl Status {
+    /// The report (to be stamped), logging once when everything is refused.
+    fn report<'a>(
+        &mut self,
+        node: &ros2_client::Node,
+        client: &'a FriClient,
+        command_age: &'a Histogram,
+        last: Option<&'a DriverOutput>,
+        dead: Option<&'a DeadStream>,
+    ) -> impl FnOnce(Time) -> DiagnosticArray + 'a {
+        let refusals = client.driver.counters.refusals_since(&self.counted);
+        if refusals.all_refused() && !self.all_refused_logged {
+            ros::log(node, LogLevel::Error, &format!("{refusals} in the last second: the KRC is not answered"));
+        }
+        self.all_refused_logged = refusals.all_refused();
+        let strangers = client.driver.counters.commands_from_strangers - self.counted.commands_from_strangers;
+        self.counted = client.driver.counters;
+        self.next += Duration::from_secs(1);
+        move |stamp| diagnostics(client, command_age, last, dead, &refusals, strangers, stamp)
+    }
 }
 
 /// How far behind the KRC the applied commands are, in measurements: 0 when the command answers this very
@@ -348,8 +408,6 @@ impl std::fmt::Display for CommandLag {
     }
 }
 
-/// Publishes the newest tool pose on /tf, at most `ros::TF_RATE` times a second, until `done`; returns
-/// the publish errors. A new pose only: a stalled loop publishes nothing new.
 /// What the reliable streams of the slow thread are made of: the newest measurement's stamp, tool pose
 /// and joint positions.
 #[derive(Clone, Copy)]
@@ -366,6 +424,8 @@ struct SlowStreams {
     joint_states: Option<(ros2_client::Publisher<softcontact_msgs::sensor_msgs::JointState>, Vec<String>)>,
 }
 
+/// Publishes the newest tool pose (and joint positions) at most `ros::TF_RATE` times a second, until
+/// `done`; returns the publish errors. A new pose only: a stalled loop publishes nothing new.
 fn spawn_slow_streams(
     streams: SlowStreams,
     arm: Arc<Latest<ArmState>>,
