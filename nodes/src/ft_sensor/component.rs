@@ -36,30 +36,7 @@ pub fn run(
     links: Links,
     stop: Arc<AtomicBool>,
 ) -> anyhow::Result<()> {
-    // The box's calibration before anything else: without it no count means a force.
-    let page = match p.settings_page() {
-        Some(http) => Some(
-            calibration::fetch_settings_patiently(http, Duration::from_secs_f64(p.http_timeout), || {
-                !ros::stopping(&stop)
-            })
-            .map_err(|e| match e {
-                calibration::FetchError::NoPage(_) => anyhow::anyhow!(
-                    "{e} within {} s; set http_port:=0 and every calibration parameter to start without it",
-                    p.http_timeout
-                ),
-                calibration::FetchError::Refused(_) => anyhow::anyhow!("{e}"),
-            })?,
-        ),
-        None => None,
-    };
-    let (calibration, calibration_source) = calibration::resolve(&p, page.as_ref()).map_err(anyhow::Error::msg)?;
-    let config = FtConfig {
-        calibration,
-        tool: lwr4::tool_load(),
-        gravity: Vector3::new(0.0, 0.0, -9.81),
-        low_pass: (p.low_pass > 0.0).then_some(p.low_pass),
-        sample_rate: p.rate,
-    };
+    let (config, calibration_source) = config(&p, &stop)?;
     let ft = FtSensorNode::new(config).map_err(anyhow::Error::msg)?.with_tare_policy(p.tare_policy());
     let mut client = RdtClient::connect(p.sensor, ft)?;
     client.new_stream_after = Duration::from_secs_f64(p.stale_after);
@@ -84,59 +61,26 @@ pub fn run(
     let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
     let bias = ros::trigger_server(&mut node, ros::service_mapping(&p.service_mapping)?, &bias_name)?;
 
-    let tool_to_sensor = crate::geometry::lwr4_tool_to_sensor().rotation;
-
     if let Err(e) = client.start() {
         ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));
     }
     ros::log(&node, LogLevel::Info, &calibration_source);
     ros::log(&node, LogLevel::Info, &format!("ready: streaming from {}, domain {}", p.sensor, node.domain_id()));
-    let mut orientation: Option<UnitQuaternion<f64>> = None;
     let mut last_status = 0u32;
     let mut last_saturated = false;
     let mut next_diagnostics = Instant::now();
     let mut logged_network_errors = 0;
     let mut startup_tare = StartupTare::new(p.tare_after);
     let start = Instant::now();
-    let mut pose_watch = StreamWatch::new(topics::EE_POSE.name, 1000.0, p.dead_after);
-    let mut poses_dead: Option<DeadStream> = None;
-    let mut newest_shared_pose = None;
+    let mut hand = Hand::new(p.dead_after);
     while !ros::stopping(&stop) {
-        while let Some(Ok(Some((pose, _)))) = poses.as_ref().map(|s| s.take()) {
-            pose_watch.seen(start.elapsed().as_secs_f64());
-            let (position, rotation) = geometry::pose_of(&pose.pose);
-            client.node.observe_tool_pose(&Isometry3::from_parts(position.into(), rotation));
-            orientation = Some(rotation * tool_to_sensor);
-        }
-        if let Some(pose) =
-            links.poses.as_ref().and_then(|s| s.get()).filter(|p| Some(p.measured) != newest_shared_pose)
+        hand.take(poses.as_ref(), links.poses.as_deref(), &mut client.node, start);
+        if hand.watch_poses(&node, start.elapsed().as_secs_f64())
+            && let Some(forces) = &links.forces
         {
-            newest_shared_pose = Some(pose.measured);
-            pose_watch.seen(pose.measured.duration_since(start).as_secs_f64());
-            client.node.observe_tool_pose(&pose.pose);
-            orientation = Some(pose.pose.rotation * tool_to_sensor);
+            forces.withdraw();
         }
-        // Poses stopped (the driver or the middleware is dead): the hand may turn unseen, so the
-        // compensated wrench is withheld until they flow again.
-        match (pose_watch.dead(start.elapsed().as_secs_f64()), &poses_dead) {
-            (Some(d), None) => {
-                if let Some(forces) = &links.forces {
-                    forces.withdraw();
-                }
-                ros::log(&node, LogLevel::Error, &format!("{d}; /ft_sensor/wrench withheld"));
-                orientation = None;
-                poses_dead = Some(d);
-            }
-            (Some(d), Some(_)) => {
-                orientation = None;
-                poses_dead = Some(d);
-            }
-            (None, Some(_)) => {
-                ros::log(&node, LogLevel::Info, "/lwr/ee_pose flows again: /ft_sensor/wrench resumes");
-                poses_dead = None;
-            }
-            (None, None) => {}
-        }
+        let orientation = hand.orientation;
         if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
             last_status = out.status.0;
             last_saturated = out.saturated;
@@ -205,30 +149,8 @@ pub fn run(
         }
         if Instant::now() >= next_diagnostics {
             let c = client.node.counters;
-            let status = softcontact_wire::rdt::Status(last_status);
-            let (level, message) = if let Some(d) = &poses_dead {
-                (DiagnosticStatus::ERROR, format!("{d}: tool gravity unknown, /ft_sensor/wrench withheld"))
-            } else if silent > p.stale_after {
-                let why = if c.network_errors > 0 {
-                    format!(" ({} network errors: box not up or unreachable?)", c.network_errors)
-                } else {
-                    String::new()
-                };
-                (DiagnosticStatus::STALE, format!("no fresh record for {silent:.3} s{why}"))
-            } else if status.is_error() || last_saturated {
-                let mut what = status.describe();
-                if last_saturated && !status.is_saturated() {
-                    what.push("reading at or beyond the calibrated range");
-                }
-                (DiagnosticStatus::ERROR, what.join(", "))
-            } else if orientation.is_none() {
-                (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
-            } else if !startup_tare.tared() {
-                let why = startup_tare.refusal.as_deref().unwrap_or("waiting for tare_after");
-                (DiagnosticStatus::WARN, format!("not tared yet ({why}): /ft_sensor/wrench waits"))
-            } else {
-                (DiagnosticStatus::OK, "streaming".into())
-            };
+            let seen = Seen { status: softcontact_wire::rdt::Status(last_status), saturated: last_saturated, silent };
+            let (level, message) = seen.status(&p, &c, hand.poses_dead.as_ref(), orientation.is_some(), &startup_tare);
             diag.publish(ros::diagnostics(
                 clock.now(),
                 "ft_sensor: RDT",
@@ -255,4 +177,149 @@ pub fn run(
     let _ = client.stop();
     eprintln!("ft_sensor: exit: {:?}; peak RSS {:.1} MB", client.node.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
     Ok(())
+}
+
+/// The node's configuration: the box's calibration (its settings page, asked for patiently, and the
+/// parameters) before anything else — without it no count means a force — and the hand's tool load.
+/// Also says where the calibration came from.
+fn config(p: &Params, stop: &AtomicBool) -> anyhow::Result<(FtConfig, String)> {
+    let page = match p.settings_page() {
+        Some(http) => Some(
+            calibration::fetch_settings_patiently(http, Duration::from_secs_f64(p.http_timeout), || {
+                !ros::stopping(stop)
+            })
+            .map_err(|e| match e {
+                calibration::FetchError::NoPage(_) => anyhow::anyhow!(
+                    "{e} within {} s; set http_port:=0 and every calibration parameter to start without it",
+                    p.http_timeout
+                ),
+                calibration::FetchError::Refused(_) => anyhow::anyhow!("{e}"),
+            })?,
+        ),
+        None => None,
+    };
+    let (calibration, source) = calibration::resolve(p, page.as_ref()).map_err(anyhow::Error::msg)?;
+    let config = FtConfig {
+        calibration,
+        tool: lwr4::tool_load(),
+        gravity: Vector3::new(0.0, 0.0, -9.81),
+        low_pass: (p.low_pass > 0.0).then_some(p.low_pass),
+        sample_rate: p.rate,
+    };
+    Ok((config, source))
+}
+
+/// What the node last saw of the stream: the box's status word, a reading at or beyond the range, and
+/// how long no fresh record came \[s\].
+struct Seen {
+    status: softcontact_wire::rdt::Status,
+    saturated: bool,
+    silent: f64,
+}
+
+impl Seen {
+    /// The node's status: dead poses, then a stale stream, then the box's errors, then no pose yet or
+    /// no tare yet.
+    fn status(
+        &self,
+        p: &Params,
+        c: &super::FtCounters,
+        poses_dead: Option<&DeadStream>,
+        posed: bool,
+        startup_tare: &StartupTare,
+    ) -> (u8, String) {
+        let (status, silent) = (self.status, self.silent);
+        if let Some(d) = poses_dead {
+            (DiagnosticStatus::ERROR, format!("{d}: tool gravity unknown, /ft_sensor/wrench withheld"))
+        } else if silent > p.stale_after {
+            let why = if c.network_errors > 0 {
+                format!(" ({} network errors: box not up or unreachable?)", c.network_errors)
+            } else {
+                String::new()
+            };
+            (DiagnosticStatus::STALE, format!("no fresh record for {silent:.3} s{why}"))
+        } else if status.is_error() || self.saturated {
+            let mut what = status.describe();
+            if self.saturated && !status.is_saturated() {
+                what.push("reading at or beyond the calibrated range");
+            }
+            (DiagnosticStatus::ERROR, what.join(", "))
+        } else if !posed {
+            (DiagnosticStatus::WARN, "no /lwr/ee_pose yet: tool gravity not compensated".into())
+        } else if !startup_tare.tared() {
+            let why = startup_tare.refusal.as_deref().unwrap_or("waiting for tare_after");
+            (DiagnosticStatus::WARN, format!("not tared yet ({why}): /ft_sensor/wrench waits"))
+        } else {
+            (DiagnosticStatus::OK, "streaming".into())
+        }
+    }
+}
+
+/// The hand's pose as the node knows it: from /lwr/ee_pose, or from the driver in memory when composed;
+/// the sensor's orientation from it, unknown while the poses are dead.
+struct Hand {
+    orientation: Option<UnitQuaternion<f64>>,
+    tool_to_sensor: UnitQuaternion<f64>,
+    watch: StreamWatch,
+    poses_dead: Option<DeadStream>,
+    newest_shared: Option<Instant>,
+}
+
+impl Hand {
+    fn new(dead_after: f64) -> Self {
+        Self {
+            orientation: None,
+            tool_to_sensor: crate::geometry::lwr4_tool_to_sensor().rotation,
+            watch: StreamWatch::new(topics::EE_POSE.name, 1000.0, dead_after),
+            poses_dead: None,
+            newest_shared: None,
+        }
+    }
+
+    /// The poses that arrived, handed to the F/T node (its tare checks for motion).
+    fn take(
+        &mut self,
+        topic: Option<&ros2_client::Subscription<softcontact_msgs::geometry_msgs::PoseStamped>>,
+        shared: Option<&Latest<ToolPose>>,
+        ft: &mut FtSensorNode,
+        start: Instant,
+    ) {
+        while let Some(Ok(Some((pose, _)))) = topic.map(|s| s.take()) {
+            self.watch.seen(start.elapsed().as_secs_f64());
+            let (position, rotation) = geometry::pose_of(&pose.pose);
+            ft.observe_tool_pose(&Isometry3::from_parts(position.into(), rotation));
+            self.orientation = Some(rotation * self.tool_to_sensor);
+        }
+        if let Some(pose) = shared.and_then(|s| s.get()).filter(|p| Some(p.measured) != self.newest_shared) {
+            self.newest_shared = Some(pose.measured);
+            self.watch.seen(pose.measured.duration_since(start).as_secs_f64());
+            ft.observe_tool_pose(&pose.pose);
+            self.orientation = Some(pose.pose.rotation * self.tool_to_sensor);
+        }
+    }
+
+    /// Poses stopped (the driver or the middleware is dead): the hand may turn unseen, so the
+    /// orientation is forgotten and the compensated wrench withheld until they flow again. True when
+    /// they have just been found dead.
+    fn watch_poses(&mut self, node: &ros2_client::Node, now: f64) -> bool {
+        match (self.watch.dead(now), &self.poses_dead) {
+            (Some(d), None) => {
+                ros::log(node, LogLevel::Error, &format!("{d}; /ft_sensor/wrench withheld"));
+                self.orientation = None;
+                self.poses_dead = Some(d);
+                true
+            }
+            (Some(d), Some(_)) => {
+                self.orientation = None;
+                self.poses_dead = Some(d);
+                false
+            }
+            (None, Some(_)) => {
+                ros::log(node, LogLevel::Info, "/lwr/ee_pose flows again: /ft_sensor/wrench resumes");
+                self.poses_dead = None;
+                false
+            }
+            (None, None) => false,
+        }
+    }
 }
