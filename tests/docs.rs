@@ -357,7 +357,6 @@ const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
     ("crates/dynamics/src/model.rs", "from_urdf", 117),
     ("cli/src/loading_paths_cmd.rs", "experiments", 159),
     ("cli/src/loading_paths_cmd.rs", "run", 105),
-    ("cli/src/model_cmd.rs", "run", 134),
     ("cli/src/demo/corpus.rs", "cases", 246),
 ];
 

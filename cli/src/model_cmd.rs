@@ -103,36 +103,13 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
     let ddq = state_vector("ddq", args.ddq, n)?;
     let frame_name = match args.frame {
         Some(f) => f,
-        None if model.frame_id(lwr4::TOOL_FRAME).is_ok() => lwr4::TOOL_FRAME.to_string(),
-        None => model
-            .frames
-            .iter()
-            .rev()
-            .find(|f| f.joint == Some(n - 1))
-            .map(|f| f.name.clone())
-            .context("no frame on the last joint")?,
+        None => default_frame(&model)?,
     };
     let frame = model.frame_id(&frame_name)?;
 
     let mut data = model.data();
     model.forward_kinematics(&mut data, &q);
-    let frames: BTreeMap<String, FrameJson> = model
-        .frames
-        .iter()
-        .enumerate()
-        .map(|(i, f)| {
-            let pose = model.frame_pose(&data, softcontact_dynamics::FrameId(i));
-            let r = pose.rotation.to_rotation_matrix().into_inner();
-            let t = pose.translation.vector;
-            (
-                f.name.clone(),
-                FrameJson {
-                    translation: [t.x, t.y, t.z],
-                    rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
-                },
-            )
-        })
-        .collect();
+    let frames = frames_json(&model, &data);
     let mut jac = Matrix6xX::zeros(n);
     model.frame_jacobian(&data, frame, Axes::World, &mut jac);
     let jacobian = DMatrix::from_column_slice(6, n, jac.as_slice());
@@ -146,46 +123,8 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
         model.moving_mass(),
         model.frames.len()
     );
-    println!(
-        "{:<16} {:>9} {:>9} {:>10} {:>9} {:>9} {:>8}  body COM [m] in joint frame",
-        "joint", "lower°", "upper°", "vel [r/s]", "eff [Nm]", "q [rad]", "mass kg"
-    );
-    for (i, j) in model.joints.iter().enumerate() {
-        let c = j.body().com();
-        println!(
-            "{:<16} {:>9.2} {:>9.2} {:>10.4} {:>9.1} {:>9.4} {:>8.4}  ({:.4}, {:.4}, {:.4})",
-            j.name,
-            j.limits.lower.to_degrees(),
-            j.limits.upper.to_degrees(),
-            j.limits.velocity,
-            j.limits.effort,
-            q[i],
-            j.body().mass,
-            c.x,
-            c.y,
-            c.z
-        );
-        if q[i] < j.limits.lower || q[i] > j.limits.upper {
-            println!("  warning: q of {} is outside its limits", j.name);
-        }
-    }
-    println!("frames in world at q (translation [m], roll-pitch-yaw [deg]), with the joint that carries each:");
-    for (i, f) in model.frames.iter().enumerate() {
-        let pose = model.frame_pose(&data, softcontact_dynamics::FrameId(i));
-        let (r, p, y) = pose.rotation.euler_angles();
-        let t = pose.translation.vector;
-        let carrier = f.joint.map(|j| model.joints[j].name.as_str()).unwrap_or("world");
-        println!(
-            "  {:<16} ({:>8.4}, {:>8.4}, {:>8.4})  ({:>8.2}, {:>8.2}, {:>8.2})  on {carrier}",
-            f.name,
-            t.x,
-            t.y,
-            t.z,
-            r.to_degrees(),
-            p.to_degrees(),
-            y.to_degrees()
-        );
-    }
+    print_joints(&model, &q);
+    print_frames(&model, &data);
     print_matrix(&format!("Jacobian of {frame_name} (rows: vx vy vz wx wy wz, world axes)"), &jacobian);
     print_matrix("mass matrix M [kg m²]", &mass_matrix);
     println!("gravity g [Nm]     {}", gravity.iter().map(|x| format!("{x:>10.4}")).collect::<Vec<_>>().join(" "));
@@ -225,4 +164,83 @@ pub fn run(args: ModelArgs) -> anyhow::Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// The tool frame where the model has one, else the last frame the last joint carries.
+fn default_frame(model: &Model) -> anyhow::Result<String> {
+    if model.frame_id(lwr4::TOOL_FRAME).is_ok() {
+        return Ok(lwr4::TOOL_FRAME.to_string());
+    }
+    let last = model.dof() - 1;
+    let frame = model.frames.iter().rev().find(|f| f.joint == Some(last));
+    frame.map(|f| f.name.clone()).context("no frame on the last joint")
+}
+
+/// Each frame's pose in the world at the data's q.
+fn frames_json(model: &Model, data: &softcontact_dynamics::Data) -> BTreeMap<String, FrameJson> {
+    model
+        .frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let pose = model.frame_pose(data, softcontact_dynamics::FrameId(i));
+            let r = pose.rotation.to_rotation_matrix().into_inner();
+            let t = pose.translation.vector;
+            (
+                f.name.clone(),
+                FrameJson {
+                    translation: [t.x, t.y, t.z],
+                    rotation: std::array::from_fn(|i| std::array::from_fn(|j| r[(i, j)])),
+                },
+            )
+        })
+        .collect()
+}
+
+/// The joints' limits, the state and each body's mass and centre of mass.
+fn print_joints(model: &Model, q: &[f64]) {
+    println!(
+        "{:<16} {:>9} {:>9} {:>10} {:>9} {:>9} {:>8}  body COM [m] in joint frame",
+        "joint", "lower°", "upper°", "vel [r/s]", "eff [Nm]", "q [rad]", "mass kg"
+    );
+    for (i, j) in model.joints.iter().enumerate() {
+        let c = j.body().com();
+        println!(
+            "{:<16} {:>9.2} {:>9.2} {:>10.4} {:>9.1} {:>9.4} {:>8.4}  ({:.4}, {:.4}, {:.4})",
+            j.name,
+            j.limits.lower.to_degrees(),
+            j.limits.upper.to_degrees(),
+            j.limits.velocity,
+            j.limits.effort,
+            q[i],
+            j.body().mass,
+            c.x,
+            c.y,
+            c.z
+        );
+        if q[i] < j.limits.lower || q[i] > j.limits.upper {
+            println!("  warning: q of {} is outside its limits", j.name);
+        }
+    }
+}
+
+/// Each frame's pose in the world at the data's q, with the joint that carries it.
+fn print_frames(model: &Model, data: &softcontact_dynamics::Data) {
+    println!("frames in world at q (translation [m], roll-pitch-yaw [deg]), with the joint that carries each:");
+    for (i, f) in model.frames.iter().enumerate() {
+        let pose = model.frame_pose(data, softcontact_dynamics::FrameId(i));
+        let (r, p, y) = pose.rotation.euler_angles();
+        let t = pose.translation.vector;
+        let carrier = f.joint.map(|j| model.joints[j].name.as_str()).unwrap_or("world");
+        println!(
+            "  {:<16} ({:>8.4}, {:>8.4}, {:>8.4})  ({:>8.2}, {:>8.2}, {:>8.2})  on {carrier}",
+            f.name,
+            t.x,
+            t.y,
+            t.z,
+            r.to_degrees(),
+            p.to_degrees(),
+            y.to_degrees()
+        );
+    }
 }
