@@ -355,8 +355,6 @@ const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
     ("crates/discrepancy/src/arm.rs", "name_arm_effects", 136),
     ("crates/discrepancy/src/loading_paths.rs", "name_path_effects", 115),
     ("crates/dynamics/src/model.rs", "from_urdf", 117),
-    ("cli/src/loading_paths_cmd.rs", "experiments", 159),
-    ("cli/src/loading_paths_cmd.rs", "run", 105),
     ("cli/src/demo/corpus.rs", "cases", 246),
 ];
 

@@ -233,84 +233,8 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
         linear_tangential.iter().map(|&(dn, dt, f)| (dn.max(0.0).sqrt() * dt, f)).collect();
     let table_ii_tangential = stats(&tangential, |x| k_t_linear * x)?;
 
-    // Table III: the spread of the measured forces at each convergence point, and the predictions of
-    // the laws fitted from the linear paths (Walton: none).
-    let mut fitted = ContactModel::new(Kind::HertzWalton, k_n_linear, 0.0)?;
-    // The spread each named error adds: the same experiments with the specimen's law alone, then with
-    // only the creep, then with only the misalignment (same seed), on the ideal stage (the arm's own
-    // share is its tracking error, reported beside).
-    let spread_of = |creep_um: f64, misalignment_deg: f64| -> anyhow::Result<Vec<f64>> {
-        let mut bench = SpecimenBench::new(SpecimenConfig {
-            creep_sd: creep_um * 1e-6,
-            misalignment: misalignment_deg.to_radians(),
-            ..SpecimenConfig::seed_000(truth.clone(), args.seed)
-        })?;
-        let runs = paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?;
-        (1..=3).map(|set| Ok(dispersion(&convergence_groups(&paths, &runs, set)?)?.total_error)).collect()
-    };
-    let law_alone = spread_of(0.0, 0.0)?;
-    let creep_only = spread_of(args.creep_um, 0.0)?;
-    let misalignment_only = spread_of(0.0, args.misalignment_deg)?;
-    let mut table_iii = Vec::new();
-    for set in 1..=3u8 {
-        let groups = convergence_groups(&paths, &runs, set)?;
-        let measured = dispersion(&groups)?;
-        fitted.tangential = Some(Tangential::walton(k_t_linear, f64::MAX));
-        let walton = predicted_dispersion(&fitted, &paths, set, 50)?;
-        fitted.tangential = Some(Tangential::mindlin_deresiewicz(k_t_linear, 1e9));
-        let md = predicted_dispersion(&fitted, &paths, set, 50)?;
-        let (paper_total, paper_mean_norm_pct) = PAPER_TABLE_III[set as usize - 1];
-        table_iii.push(SetRow {
-            set,
-            measured_total: measured.total_error,
-            measured_mean_norm_pct: 100.0 * measured.mean_normalized_error,
-            law_alone_total: law_alone[set as usize - 1],
-            creep_adds: creep_only[set as usize - 1] - law_alone[set as usize - 1],
-            misalignment_adds: misalignment_only[set as usize - 1] - law_alone[set as usize - 1],
-            walton_total: walton.total_error,
-            mindlin_deresiewicz_total: md.total_error,
-            mindlin_deresiewicz_mean_norm_pct: 100.0 * md.mean_normalized_error,
-            paper_total,
-            paper_mean_norm_pct,
-        });
-    }
-    // The tangential law from the linear and two-segment paths, as a recording would give it: δ from the
-    // found zero, deepened by the zero's depth fitted with Hertz's law to the linear paths, P from that fit.
-    let (k_n_zero, zero_depth) = fit_normal_stiffness_and_zero(&linear_normal, MAX_ZERO_DEPTH)?;
-    let measured: Vec<Vec<PathSample>> = paths
-        .iter()
-        .zip(&runs)
-        .filter(|(p, _)| p.family != Family::Normal)
-        .map(|(_, r)| {
-            let samples: Vec<PathSample> = r
-                .samples
-                .iter()
-                .map(|s| PathSample {
-                    normal_displacement: s.normal_displacement,
-                    tangential_displacement: s.tangential_displacement,
-                    normal_force: s.normal_force,
-                    tangential_force: s.tangential_force,
-                })
-                .collect();
-            thinned(&samples, 40e-6)
-        })
-        .collect();
-    let tangential_paths = with_hertz(&measured, k_n_zero, zero_depth);
-    let t = identify_tangential(&tangential_paths, 5)?;
-    let md = &t.mindlin_deresiewicz;
-    let tangential_law = TangentialLawRow {
-        selected: t.chosen.id(),
-        walton_k_t: t.walton.law.stiffness / PER_MM,
-        walton_cv_rms: t.walton.cv_rms,
-        mindlin_deresiewicz_k_t: md.law.stiffness / PER_MM,
-        mindlin_deresiewicz_friction: md.friction_identified.then_some(md.law.friction),
-        mindlin_deresiewicz_friction_at_least: md.friction_at_least,
-        mindlin_deresiewicz_cv_rms: md.cv_rms,
-        paths: t.paths,
-        samples: t.samples,
-        zero_depth_um: zero_depth * 1e6,
-        true_zero_depth_um: runs.iter().map(|r| r.zero_error).sum::<f64>() / runs.len() as f64 * 1e6,
-    };
+    let table_iii = table_iii(args, &truth, &paths, &runs, k_n_linear, k_t_linear)?;
+    let tangential_law = tangential_law(&paths, &runs, &linear_normal)?;
     let report = Report {
         comparison: "simulation vs the snake paper's bench (real rubber)",
         stage: match args.stage {
@@ -345,6 +269,169 @@ pub(crate) fn experiments(args: &LoadingPathsArgs) -> anyhow::Result<Outcome> {
         tangential_law,
     };
     Ok(Outcome { report, paths, runs })
+}
+
+/// Table III: the spread of the measured forces at each convergence point, what the specimen's law, the
+/// creep and the misalignment each add to it, and the predictions of the laws fitted from the linear paths.
+fn table_iii(
+    args: &LoadingPathsArgs,
+    truth: &ContactModel,
+    paths: &[LoadingPath],
+    runs: &[BenchRun],
+    k_n_linear: f64,
+    k_t_linear: f64,
+) -> anyhow::Result<Vec<SetRow>> {
+    // Walton predicts none.
+    let mut fitted = ContactModel::new(Kind::HertzWalton, k_n_linear, 0.0)?;
+    // The spread each named error adds: the same experiments with the specimen's law alone, then with
+    // only the creep, then with only the misalignment (same seed), on the ideal stage (the arm's own
+    // share is its tracking error, reported beside).
+    let spread_of = |creep_um: f64, misalignment_deg: f64| -> anyhow::Result<Vec<f64>> {
+        let mut bench = SpecimenBench::new(SpecimenConfig {
+            creep_sd: creep_um * 1e-6,
+            misalignment: misalignment_deg.to_radians(),
+            ..SpecimenConfig::seed_000(truth.clone(), args.seed)
+        })?;
+        let runs = paths.iter().map(|p| bench.run(p)).collect::<Result<Vec<_>, _>>()?;
+        (1..=3).map(|set| Ok(dispersion(&convergence_groups(paths, &runs, set)?)?.total_error)).collect()
+    };
+    let law_alone = spread_of(0.0, 0.0)?;
+    let creep_only = spread_of(args.creep_um, 0.0)?;
+    let misalignment_only = spread_of(0.0, args.misalignment_deg)?;
+    let mut table_iii = Vec::new();
+    for set in 1..=3u8 {
+        let groups = convergence_groups(paths, runs, set)?;
+        let measured = dispersion(&groups)?;
+        fitted.tangential = Some(Tangential::walton(k_t_linear, f64::MAX));
+        let walton = predicted_dispersion(&fitted, paths, set, 50)?;
+        fitted.tangential = Some(Tangential::mindlin_deresiewicz(k_t_linear, 1e9));
+        let md = predicted_dispersion(&fitted, paths, set, 50)?;
+        let (paper_total, paper_mean_norm_pct) = PAPER_TABLE_III[set as usize - 1];
+        table_iii.push(SetRow {
+            set,
+            measured_total: measured.total_error,
+            measured_mean_norm_pct: 100.0 * measured.mean_normalized_error,
+            law_alone_total: law_alone[set as usize - 1],
+            creep_adds: creep_only[set as usize - 1] - law_alone[set as usize - 1],
+            misalignment_adds: misalignment_only[set as usize - 1] - law_alone[set as usize - 1],
+            walton_total: walton.total_error,
+            mindlin_deresiewicz_total: md.total_error,
+            mindlin_deresiewicz_mean_norm_pct: 100.0 * md.mean_normalized_error,
+            paper_total,
+            paper_mean_norm_pct,
+        });
+    }
+    Ok(table_iii)
+}
+
+/// The tangential law from the linear and two-segment paths, as a recording would give it: δ from the
+/// found zero, deepened by the zero's depth fitted with Hertz's law to the linear paths, P from that fit.
+fn tangential_law(
+    paths: &[LoadingPath],
+    runs: &[BenchRun],
+    linear_normal: &[(f64, f64)],
+) -> anyhow::Result<TangentialLawRow> {
+    let (k_n_zero, zero_depth) = fit_normal_stiffness_and_zero(linear_normal, MAX_ZERO_DEPTH)?;
+    let measured: Vec<Vec<PathSample>> = paths
+        .iter()
+        .zip(runs)
+        .filter(|(p, _)| p.family != Family::Normal)
+        .map(|(_, r)| {
+            let samples: Vec<PathSample> = r
+                .samples
+                .iter()
+                .map(|s| PathSample {
+                    normal_displacement: s.normal_displacement,
+                    tangential_displacement: s.tangential_displacement,
+                    normal_force: s.normal_force,
+                    tangential_force: s.tangential_force,
+                })
+                .collect();
+            thinned(&samples, 40e-6)
+        })
+        .collect();
+    let tangential_paths = with_hertz(&measured, k_n_zero, zero_depth);
+    let t = identify_tangential(&tangential_paths, 5)?;
+    let md = &t.mindlin_deresiewicz;
+    Ok(TangentialLawRow {
+        selected: t.chosen.id(),
+        walton_k_t: t.walton.law.stiffness / PER_MM,
+        walton_cv_rms: t.walton.cv_rms,
+        mindlin_deresiewicz_k_t: md.law.stiffness / PER_MM,
+        mindlin_deresiewicz_friction: md.friction_identified.then_some(md.law.friction),
+        mindlin_deresiewicz_friction_at_least: md.friction_at_least,
+        mindlin_deresiewicz_cv_rms: md.cv_rms,
+        paths: t.paths,
+        samples: t.samples,
+        zero_depth_um: zero_depth * 1e6,
+        true_zero_depth_um: runs.iter().map(|r| r.zero_error).sum::<f64>() / runs.len() as f64 * 1e6,
+    })
+}
+
+/// Tables I, II and III beside the paper's.
+fn print_tables(r: &Report) {
+    let row = |name: &str, s: &Stats| {
+        println!(
+            "  {name:<18} {:>7.4} {:>9.4} N {:>8.3} % {:>8.4} N {:>8.4} N",
+            s.r_squared, s.mean_abs, s.mean_norm_pct, s.max, s.min
+        )
+    };
+    println!("TABLE I  normal loading path statistics");
+    println!("  {:<18} {:>7} {:>11} {:>10} {:>10} {:>10}", "", "R²", "mean abs", "mean norm", "max", "min");
+    row("simulation", &r.table_i);
+    row("paper", &PAPER_TABLE_I);
+    println!("\nTABLE II  linear loading path statistics, normal & tangential fits");
+    row("normal, simulation", &r.table_ii_normal);
+    row("normal, paper", &PAPER_TABLE_II[0]);
+    row("tan., simulation", &r.table_ii_tangential);
+    row("tan., paper", &PAPER_TABLE_II[1]);
+    println!("\nTABLE III  two-segment path dispersion at the convergence points (total N / mean norm %)");
+    println!("  set   simulation        law alone  +creep  +misalign.   Walton   Mindlin-Deresiewicz   paper");
+    for s in &r.table_iii {
+        println!(
+            "  {}   {:>6.2} N {:>5.2} %   {:>6.2} N {:>+6.2} N {:>+6.2} N     {:>5.2} N   {:>6.2} N {:>5.2} %      {:>5.2} N {:>4.1} %",
+            s.set,
+            s.measured_total,
+            s.measured_mean_norm_pct,
+            s.law_alone_total,
+            s.creep_adds,
+            s.misalignment_adds,
+            s.walton_total,
+            s.mindlin_deresiewicz_total,
+            s.mindlin_deresiewicz_mean_norm_pct,
+            s.paper_total,
+            s.paper_mean_norm_pct
+        );
+    }
+    println!(
+        "  (predictions from the linear-path fit alone: Walton's law has one force per point; Mindlin-Deresiewicz"
+    );
+    println!("   without microslip, an upper bound — friction is not identifiable on straight paths)");
+}
+
+/// The tangential law identified, each candidate's held-out error, and the one selected.
+fn print_tangential_law(r: &Report) {
+    let t = &r.tangential_law;
+    println!(
+        "\nTangential law identified from the {} linear and two-segment experiments ({} samples; no truth read), \
+         5-fold cross-validated over experiments:",
+        t.paths, t.samples
+    );
+    let mu = t
+        .mindlin_deresiewicz_friction
+        .map_or(format!("≥ {:.2}", t.mindlin_deresiewicz_friction_at_least), |m| format!("{m:.3}"));
+    println!(
+        "  walton                k_t {:.4} N/mm^1.5            held-out RMS {:.4} N",
+        t.walton_k_t, t.walton_cv_rms
+    );
+    println!(
+        "  mindlin_deresiewicz   k_t {:.4} N/mm^1.5, μ {mu:<8} held-out RMS {:.4} N",
+        t.mindlin_deresiewicz_k_t, t.mindlin_deresiewicz_cv_rms
+    );
+    println!(
+        "  selected: {} (the specimen's: {}); the found zero's depth fitted {:.1} µm (truth {:.1} µm)",
+        t.selected, r.specimen_law, t.zero_depth_um, t.true_zero_depth_um
+    );
 }
 
 /// The forces at the end of every two-segment path of `set`, grouped by convergence point.
@@ -390,64 +477,8 @@ pub fn run(args: &LoadingPathsArgs) -> anyhow::Result<()> {
     println!("  k_n, normal loadings           {:>10.3}   {:>6.3}", r.k_n_normal, r.paper_k_n_normal);
     println!("  k_n, linear paths              {:>10.3}   {:>6.3}", r.k_n_linear, r.paper_k_n_linear);
     println!("  k_t, linear paths              {:>10.4}   {:>6.4}\n", r.k_t_linear, r.paper_k_t_linear);
-    let row = |name: &str, s: &Stats| {
-        println!(
-            "  {name:<18} {:>7.4} {:>9.4} N {:>8.3} % {:>8.4} N {:>8.4} N",
-            s.r_squared, s.mean_abs, s.mean_norm_pct, s.max, s.min
-        )
-    };
-    println!("TABLE I  normal loading path statistics");
-    println!("  {:<18} {:>7} {:>11} {:>10} {:>10} {:>10}", "", "R²", "mean abs", "mean norm", "max", "min");
-    row("simulation", &r.table_i);
-    row("paper", &PAPER_TABLE_I);
-    println!("\nTABLE II  linear loading path statistics, normal & tangential fits");
-    row("normal, simulation", &r.table_ii_normal);
-    row("normal, paper", &PAPER_TABLE_II[0]);
-    row("tan., simulation", &r.table_ii_tangential);
-    row("tan., paper", &PAPER_TABLE_II[1]);
-    println!("\nTABLE III  two-segment path dispersion at the convergence points (total N / mean norm %)");
-    println!("  set   simulation        law alone  +creep  +misalign.   Walton   Mindlin-Deresiewicz   paper");
-    for s in &r.table_iii {
-        println!(
-            "  {}   {:>6.2} N {:>5.2} %   {:>6.2} N {:>+6.2} N {:>+6.2} N     {:>5.2} N   {:>6.2} N {:>5.2} %      {:>5.2} N {:>4.1} %",
-            s.set,
-            s.measured_total,
-            s.measured_mean_norm_pct,
-            s.law_alone_total,
-            s.creep_adds,
-            s.misalignment_adds,
-            s.walton_total,
-            s.mindlin_deresiewicz_total,
-            s.mindlin_deresiewicz_mean_norm_pct,
-            s.paper_total,
-            s.paper_mean_norm_pct
-        );
-    }
-    println!(
-        "  (predictions from the linear-path fit alone: Walton's law has one force per point; Mindlin-Deresiewicz"
-    );
-    println!("   without microslip, an upper bound — friction is not identifiable on straight paths)");
-    let t = &r.tangential_law;
-    println!(
-        "\nTangential law identified from the {} linear and two-segment experiments ({} samples; no truth read), \
-         5-fold cross-validated over experiments:",
-        t.paths, t.samples
-    );
-    let mu = t
-        .mindlin_deresiewicz_friction
-        .map_or(format!("≥ {:.2}", t.mindlin_deresiewicz_friction_at_least), |m| format!("{m:.3}"));
-    println!(
-        "  walton                k_t {:.4} N/mm^1.5            held-out RMS {:.4} N",
-        t.walton_k_t, t.walton_cv_rms
-    );
-    println!(
-        "  mindlin_deresiewicz   k_t {:.4} N/mm^1.5, μ {mu:<8} held-out RMS {:.4} N",
-        t.mindlin_deresiewicz_k_t, t.mindlin_deresiewicz_cv_rms
-    );
-    println!(
-        "  selected: {} (the specimen's: {}); the found zero's depth fitted {:.1} µm (truth {:.1} µm)",
-        t.selected, r.specimen_law, t.zero_depth_um, t.true_zero_depth_um
-    );
+    print_tables(&r);
+    print_tangential_law(&r);
     if let Some(out) = &args.out {
         std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
         let fits = loading_paths_figures::Fits {
