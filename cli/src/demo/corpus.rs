@@ -95,28 +95,61 @@ fn noisy(scale: f64) -> FtSensorConfig {
     s
 }
 
+/// A push plan's depth range \[m\] and largest force \[N\] on each of the force-control paper's laws.
+const SPONGE: ((f64, f64), f64) = ((0.01, 0.05), 300.0);
+const DICE: ((f64, f64), f64) = ((0.015, 0.07), 150.0);
+
 /// The corpus: every effect of the cell's surface and sensor alone on both the force-control paper's laws, two-effect cases,
 /// the demo's lab surfaces, an effect outside the library, and 40 nulls (two laws each: four noise levels,
 /// three seeds; with sway and tilt, two seeds; coloured noise, a slowly wandering offset and a sensor
 /// drifting slower than the tares follow, `slow_noise_seeds` seeds each, two in the committed table).
+/// Each case's seed follows from its place in the list: new cases go last.
 pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
-    let sponge = ((0.01, 0.05), 300.0);
-    let dice = ((0.015, 0.07), 150.0);
-    let mut out = vec![];
-    let mut seed = 100;
-    let mut case = |name: String,
-                    truth: ContactModel,
-                    sensor,
-                    (push, max_force): ((f64, f64), f64),
-                    expected,
-                    visible_in: &'static str| {
-        seed += 1;
+    let mut corpus = Corpus { out: vec![], seed: 100 };
+    for (law, base, geometry, k_m) in [("sponge", sponge_law(), SPONGE, 1500.0), ("dice", dice_law(), DICE, 300.0)] {
+        corpus.effects_of_the_surface(law, &base, geometry, k_m);
+        corpus.effects_of_the_sensor_and_hand(law, &base, geometry, k_m);
+    }
+    corpus.lab_surfaces_and_out_of_library();
+    corpus.one_long_hold();
+    corpus.nulls(slow_noise_seeds);
+    corpus.effects_added_later();
+    let mut out = corpus.out;
+    for c in out.iter_mut() {
+        if c.visible_in == ONE_HOLD {
+            c.hold = Some(40.0);
+            c.ambiguous = Some(["contact_offset_drift", "sensor_drift"]);
+        }
+        if c.visible_in == WANDERING {
+            c.may_name = Some("sensor_drift");
+        }
+    }
+    out
+}
+
+/// The cases in order, each with the next seed.
+struct Corpus {
+    out: Vec<Case>,
+    seed: u64,
+}
+
+impl Corpus {
+    fn case(
+        &mut self,
+        name: String,
+        truth: ContactModel,
+        sensor: FtSensorConfig,
+        (push, max_force): ((f64, f64), f64),
+        expected: Vec<&'static str>,
+        visible_in: &'static str,
+    ) {
+        self.seed += 1;
         let across = visible_in.contains("sway") || visible_in.contains("tilt");
         let out_of_library = visible_in.contains("out of library");
         // A tare taken touching: the hand starts pressed 2 mm (dice: 1 mm) and is never tared again.
         let start_pressed =
             visible_in.contains("tare taken touching").then_some(if max_force > 200.0 { 0.002 } else { 0.001 });
-        out.push(Case {
+        self.out.push(Case {
             name,
             truth,
             sensor,
@@ -130,12 +163,14 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             hold: None,
             ambiguous: None,
             may_name: None,
-            seed,
+            seed: self.seed,
         });
-    };
-    for (law, base, geometry, k_m) in [("sponge", sponge_law(), sponge, 1500.0), ("dice", dice_law(), dice, 300.0)] {
+    }
+
+    /// The surface's own effects on `base`, one at a time, then relaxation with hysteresis.
+    fn effects_of_the_surface(&mut self, law: &str, base: &ContactModel, geometry: ((f64, f64), f64), k_m: f64) {
         let g = FtSensorConfig::gamma;
-        case(
+        self.case(
             format!("{law}: relaxation k_m {k_m} N/m, τ 1 s"),
             with(base.clone(), &[Effect::ViscoelasticRelaxation { stiffness: k_m, time_constant: 1.0 }]),
             g(),
@@ -143,7 +178,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["viscoelastic_relaxation"],
             "holds after moves",
         );
-        case(
+        self.case(
             format!("{law}: hysteresis 3 % at 5 cm/s"),
             with(base.clone(), &[Effect::Hysteresis { fraction: 0.03, velocity_scale: 0.05 }]),
             g(),
@@ -151,7 +186,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["hysteresis"],
             "loading against unloading (pushes)",
         );
-        case(
+        self.case(
             format!("{law}: surface zero creeping 5 µm/s"),
             with(base.clone(), &[Effect::ContactOffsetDrift { rate: 5e-6 }]),
             g(),
@@ -163,7 +198,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
         // ~0.4 N (8 σ); the demo's own rate stays within 1.5 σ here (see the lab cases).
         let mut drifting = FtSensorConfig::gamma_drifting();
         drifting.drift.iter_mut().for_each(|d| *d *= 5.0);
-        case(
+        self.case(
             format!("{law}: sensor drifting 0.02 N/s"),
             base.clone(),
             drifting,
@@ -177,7 +212,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
         } else {
             (130.0 / 0.07f64.powf(1.25), 1.25, 60.0)
         };
-        case(
+        self.case(
             format!("{law}: force ∝ z^{a}"),
             ContactModel::general(k, damping, Exponents { a, b: 0.0, c: 1.0 }).expect("valid law"),
             g(),
@@ -185,10 +220,21 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["stiffness_exponent"],
             "pushes to several depths",
         );
+    }
+
+    /// The sensor's and the hand's effects, the delay, and two surface effects together.
+    fn effects_of_the_sensor_and_hand(
+        &mut self,
+        law: &str,
+        base: &ContactModel,
+        geometry: ((f64, f64), f64),
+        k_m: f64,
+    ) {
+        let g = FtSensorConfig::gamma;
         // The snake paper's named error: the sensor axis misaligned 1° with the pushing axis (about y), which
         // reads the tangential load along x into the normal channel (coupling n × ω).
         let misaligned = 1f64.to_radians();
-        case(
+        self.case(
             format!("{law}: sensor axis misaligned 1° (the snake paper)"),
             with(gripping(base.clone()), &[Effect::SensorCrosstalk { coupling: [misaligned, 0.0, 0.0] }]),
             g(),
@@ -196,7 +242,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["sensor_crosstalk"],
             "lateral sway at a held force",
         );
-        case(
+        self.case(
             format!("{law}: hand 0.6 kg heavier than its URDF"),
             with(gripping(base.clone()), &[Effect::ToolGravity { mass: 0.6 }]),
             g(),
@@ -204,7 +250,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["tool_gravity"],
             "tilts of the hand in free space",
         );
-        case(
+        self.case(
             format!("{law}: tare taken touching the surface"),
             base.clone(),
             g(),
@@ -212,7 +258,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["sensor_bias"],
             "free space (a tare taken touching)",
         );
-        case(
+        self.case(
             format!("{law}: force read 30 ms late"),
             with(base.clone(), &[Effect::TimeDelay { delay: 0.03 }]),
             g(),
@@ -220,7 +266,7 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             vec!["time_delay"],
             "stops and lift-offs",
         );
-        case(
+        self.case(
             format!("{law}: relaxation and hysteresis"),
             with(
                 base.clone(),
@@ -235,115 +281,133 @@ pub fn cases(slow_noise_seeds: usize) -> Vec<Case> {
             "holds; loading against unloading",
         );
     }
-    // The demo's surfaces: expected, what they hide. The demo's sensor drifts 0.004 N/s, under 1 σ
-    // between this short plan's tares (a sawtooth to 0.08 N): here a Gamma that does not drift, and the
-    // drift is named on the demo's own recordings (80 s between tares; cli/tests/demo.rs).
-    case(
-        "lab sponge (the demo's surface)".into(),
-        softcontact_sim::lab_sponge(),
-        FtSensorConfig::gamma(),
-        sponge,
-        vec!["hysteresis", "viscoelastic_relaxation"],
-        "holds, pushes",
-    );
-    case(
-        "lab dice (the demo's surface)".into(),
-        softcontact_sim::lab_dice(),
-        FtSensorConfig::gamma(),
-        dice,
-        vec!["hysteresis", "viscoelastic_relaxation"],
-        "holds, pushes",
-    );
-    // Out of the library: the rate term grows with ż² (the baseline kinds and the effects have it linear).
-    let mut quadratic = sponge_law();
-    quadratic.kind = softcontact_contact::Kind::General;
-    quadratic.exponents = Exponents { a: 1.5, b: 0.5, c: 2.0 };
-    quadratic.damping = 22_000.0;
-    case(
-        "sponge: damping ∝ ż² (out of library)".into(),
-        quadratic,
-        FtSensorConfig::gamma(),
-        sponge,
-        vec![],
-        "pushes at speed (out of library)",
-    );
-    // One long hold with no lift-off after it: a drifting sensor and a creeping surface both read as force
-    // growing linearly in time there, so the answer is "ambiguous", not a guess (the free approach before
-    // the hold is too short to tell them apart).
-    let mut drifting = FtSensorConfig::gamma_drifting();
-    drifting.drift.iter_mut().for_each(|d| *d *= 2.5);
-    for (name, law, sensor, geometry) in [
-        ("dice: sensor drifting 0.01 N/s through one 40 s hold", dice_law(), drifting, dice),
-        (
-            "sponge: surface zero creeping 5 µm/s through one 40 s hold",
-            with(sponge_law(), &[Effect::ContactOffsetDrift { rate: 5e-6 }]),
+
+    fn lab_surfaces_and_out_of_library(&mut self) {
+        // The demo's surfaces: expected, what they hide. The demo's sensor drifts 0.004 N/s, under 1 σ
+        // between this short plan's tares (a sawtooth to 0.08 N): here a Gamma that does not drift, and the
+        // drift is named on the demo's own recordings (80 s between tares; cli/tests/demo.rs).
+        self.case(
+            "lab sponge (the demo's surface)".into(),
+            softcontact_sim::lab_sponge(),
             FtSensorConfig::gamma(),
-            sponge,
-        ),
-    ] {
-        let hidden = if law.effects.is_empty() { "sensor_drift" } else { "contact_offset_drift" };
-        case(name.into(), law, sensor, geometry, vec![hidden], ONE_HOLD);
+            SPONGE,
+            vec!["hysteresis", "viscoelastic_relaxation"],
+            "holds, pushes",
+        );
+        self.case(
+            "lab dice (the demo's surface)".into(),
+            softcontact_sim::lab_dice(),
+            FtSensorConfig::gamma(),
+            DICE,
+            vec!["hysteresis", "viscoelastic_relaxation"],
+            "holds, pushes",
+        );
+        // Out of the library: the rate term grows with ż² (the baseline kinds and the effects have it linear).
+        let mut quadratic = sponge_law();
+        quadratic.kind = softcontact_contact::Kind::General;
+        quadratic.exponents = Exponents { a: 1.5, b: 0.5, c: 2.0 };
+        quadratic.damping = 22_000.0;
+        self.case(
+            "sponge: damping ∝ ż² (out of library)".into(),
+            quadratic,
+            FtSensorConfig::gamma(),
+            SPONGE,
+            vec![],
+            "pushes at speed (out of library)",
+        );
     }
-    for (law, base, geometry) in [("sponge", sponge_law(), sponge), ("dice", dice_law(), dice)] {
-        for seed in 0..2 {
-            let name = format!("null: {law} with sway and tilt ({})", seed + 1);
-            case(name, gripping(base.clone()), FtSensorConfig::gamma(), geometry, vec![], "- (sway, tilt)");
-        }
-        for scale in [0.5, 1.0, 2.0, 4.0] {
-            for _ in 0..3 {
-                case(format!("null: {law}, noise ×{scale}"), base.clone(), noisy(scale), geometry, vec![], "-");
-            }
-        }
-        // Noise that is not white, as large as the white noise: low-passed (50 ms), and a slow wander of
-        // the offset (20 s, which within a record may look like a steady drift of the reading, the only
-        // name it may get: see `may_name`). And a steady drift slow enough that between the plan's tares
-        // (about 20 s) it stays within the noise: the tares follow it.
-        let coloured = |time_constant| FtSensorConfig {
-            coloured_noise: FtSensorConfig::gamma().noise,
-            coloured_time_constant: time_constant,
-            ..FtSensorConfig::gamma()
-        };
-        let mut slow_drift = FtSensorConfig::gamma_drifting();
-        slow_drift.drift.iter_mut().for_each(|d| *d *= 0.25);
-        for (what, sensor, visible_in) in [
-            ("coloured noise (50 ms)", coloured(0.05), COLOURED),
-            ("offset wandering (20 s)", coloured(20.0), WANDERING),
-            ("sensor drifting 0.001 N/s", slow_drift, "- (a drift the tares follow)"),
+
+    fn one_long_hold(&mut self) {
+        // One long hold with no lift-off after it: a drifting sensor and a creeping surface both read as force
+        // growing linearly in time there, so the answer is "ambiguous", not a guess (the free approach before
+        // the hold is too short to tell them apart).
+        let mut drifting = FtSensorConfig::gamma_drifting();
+        drifting.drift.iter_mut().for_each(|d| *d *= 2.5);
+        for (name, law, sensor, geometry) in [
+            ("dice: sensor drifting 0.01 N/s through one 40 s hold", dice_law(), drifting, DICE),
+            (
+                "sponge: surface zero creeping 5 µm/s through one 40 s hold",
+                with(sponge_law(), &[Effect::ContactOffsetDrift { rate: 5e-6 }]),
+                FtSensorConfig::gamma(),
+                SPONGE,
+            ),
         ] {
-            for _ in 0..slow_noise_seeds {
-                case(format!("null: {law}, {what}"), base.clone(), sensor.clone(), geometry, vec![], visible_in);
+            let hidden = if law.effects.is_empty() { "sensor_drift" } else { "contact_offset_drift" };
+            self.case(name.into(), law, sensor, geometry, vec![hidden], ONE_HOLD);
+        }
+    }
+
+    /// Nothing hidden: white noise at four levels, sway and tilt, coloured noise, a wandering offset and
+    /// a drift the tares follow.
+    fn nulls(&mut self, slow_noise_seeds: usize) {
+        for (law, base, geometry) in [("sponge", sponge_law(), SPONGE), ("dice", dice_law(), DICE)] {
+            for seed in 0..2 {
+                let name = format!("null: {law} with sway and tilt ({})", seed + 1);
+                self.case(name, gripping(base.clone()), FtSensorConfig::gamma(), geometry, vec![], "- (sway, tilt)");
+            }
+            for scale in [0.5, 1.0, 2.0, 4.0] {
+                for _ in 0..3 {
+                    self.case(
+                        format!("null: {law}, noise ×{scale}"),
+                        base.clone(),
+                        noisy(scale),
+                        geometry,
+                        vec![],
+                        "-",
+                    );
+                }
+            }
+            // Noise that is not white, as large as the white noise: low-passed (50 ms), and a slow wander of
+            // the offset (20 s, which within a record may look like a steady drift of the reading, the only
+            // name it may get: see `may_name`). And a steady drift slow enough that between the plan's tares
+            // (about 20 s) it stays within the noise: the tares follow it.
+            let coloured = |time_constant| FtSensorConfig {
+                coloured_noise: FtSensorConfig::gamma().noise,
+                coloured_time_constant: time_constant,
+                ..FtSensorConfig::gamma()
+            };
+            let mut slow_drift = FtSensorConfig::gamma_drifting();
+            slow_drift.drift.iter_mut().for_each(|d| *d *= 0.25);
+            for (what, sensor, visible_in) in [
+                ("coloured noise (50 ms)", coloured(0.05), COLOURED),
+                ("offset wandering (20 s)", coloured(20.0), WANDERING),
+                ("sensor drifting 0.001 N/s", slow_drift, "- (a drift the tares follow)"),
+            ] {
+                for _ in 0..slow_noise_seeds {
+                    self.case(
+                        format!("null: {law}, {what}"),
+                        base.clone(),
+                        sensor.clone(),
+                        geometry,
+                        vec![],
+                        visible_in,
+                    );
+                }
             }
         }
     }
-    // Effects added to the library later, last: the cases before them keep their seeds.
-    for (law, base, geometry) in [("sponge", sponge_law(), sponge), ("dice", dice_law(), dice)] {
-        case(
-            format!("{law}: adhesion pulling 10 % of the peak force, letting go 2 mm beyond the surface"),
-            with(base.clone(), &[Effect::Adhesion { force: 0.1 * geometry.1, range: 0.002 }]),
-            FtSensorConfig::gamma(),
-            geometry,
-            vec!["adhesion"],
-            "unloading and lift-off (pushes)",
-        );
-        case(
-            format!("{law}: quasi-linear relaxation, 15 % of the elastic force, τ 1 s"),
-            with(base.clone(), &[Effect::QuasiLinearRelaxation { fraction: 0.15, time_constant: 1.0 }]),
-            FtSensorConfig::gamma(),
-            geometry,
-            vec!["quasi_linear_relaxation"],
-            "holds after moves to several depths",
-        );
-    }
-    for c in out.iter_mut() {
-        if c.visible_in == ONE_HOLD {
-            c.hold = Some(40.0);
-            c.ambiguous = Some(["contact_offset_drift", "sensor_drift"]);
-        }
-        if c.visible_in == WANDERING {
-            c.may_name = Some("sensor_drift");
+
+    fn effects_added_later(&mut self) {
+        // Effects added to the library later, last: the cases before them keep their seeds.
+        for (law, base, geometry) in [("sponge", sponge_law(), SPONGE), ("dice", dice_law(), DICE)] {
+            self.case(
+                format!("{law}: adhesion pulling 10 % of the peak force, letting go 2 mm beyond the surface"),
+                with(base.clone(), &[Effect::Adhesion { force: 0.1 * geometry.1, range: 0.002 }]),
+                FtSensorConfig::gamma(),
+                geometry,
+                vec!["adhesion"],
+                "unloading and lift-off (pushes)",
+            );
+            self.case(
+                format!("{law}: quasi-linear relaxation, 15 % of the elastic force, τ 1 s"),
+                with(base.clone(), &[Effect::QuasiLinearRelaxation { fraction: 0.15, time_constant: 1.0 }]),
+                FtSensorConfig::gamma(),
+                geometry,
+                vec!["quasi_linear_relaxation"],
+                "holds after moves to several depths",
+            );
         }
     }
-    out
 }
 
 const ONE_HOLD: &str = "one long hold (no lift-off after it)";
