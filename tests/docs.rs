@@ -354,7 +354,6 @@ const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
     ("nodes/src/bin/contact_estimator.rs", "main", 110),
     ("crates/discrepancy/src/arm.rs", "name_arm_effects", 136),
     ("crates/discrepancy/src/loading_paths.rs", "name_path_effects", 115),
-    ("crates/dynamics/src/model.rs", "from_urdf", 117),
 ];
 
 /// Each function of `lines` (a formatted Rust file) with its length in lines.

@@ -226,30 +226,7 @@ impl Model {
     /// Builds the model from a parsed URDF. The tree must be a single serial chain of revolute (or
     /// continuous) joints; fixed joints may branch off anywhere and become frames.
     pub fn from_urdf(robot: &urdf_rs::Robot) -> Result<Self, Error> {
-        let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
-        let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
-        let mut is_child: HashMap<&str, bool> = HashMap::new();
-        for joint in &robot.joints {
-            for link in [&joint.parent.link, &joint.child.link] {
-                if !links.contains_key(link.as_str()) {
-                    return Err(Error::MissingLink { joint: joint.name.clone(), link: link.clone() });
-                }
-            }
-            if is_child.insert(joint.child.link.as_str(), true).is_some() {
-                return Err(Error::NotATree { link: joint.child.link.clone() });
-            }
-            children.entry(joint.parent.link.as_str()).or_default().push(joint);
-        }
-        let roots: Vec<&str> =
-            robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child.contains_key(n)).collect();
-        let root = match roots.as_slice() {
-            [root] => *root,
-            [] => {
-                return Err(Error::NotATree { link: robot.links.first().map(|l| l.name.clone()).unwrap_or_default() });
-            }
-            _ => return Err(Error::ManyRoots(roots.iter().map(|s| s.to_string()).collect())),
-        };
-
+        let UrdfTree { links, children, root } = UrdfTree::of(robot)?;
         // Which links have a movable joint somewhere below them: decides the one branch the chain follows.
         fn movable_below(link: &str, children: &HashMap<&str, Vec<&urdf_rs::Joint>>) -> bool {
             children.get(link).is_some_and(|js| {
@@ -297,32 +274,7 @@ impl Model {
                 match joint.joint_type {
                     urdf_rs::JointType::Fixed => stack.push((joint.child.link.as_str(), owner, placement * origin)),
                     urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
-                        if joint.mimic.is_some() {
-                            return Err(Error::UnsupportedJoint { joint: joint.name.clone(), kind: "mimic".into() });
-                        }
-                        let axis = Vector3::from(joint.axis.xyz.0);
-                        let norm = axis.norm();
-                        if !(norm.is_finite() && norm > 1e-12) {
-                            return Err(Error::ZeroAxis { joint: joint.name.clone() });
-                        }
-                        let in_parent = placement * origin;
-                        let continuous = matches!(joint.joint_type, urdf_rs::JointType::Continuous);
-                        let l = &joint.limit;
-                        model.joints.push(Joint {
-                            name: joint.name.clone(),
-                            limits: JointLimits {
-                                lower: if continuous { f64::NEG_INFINITY } else { l.lower },
-                                upper: if continuous { f64::INFINITY } else { l.upper },
-                                velocity: l.velocity,
-                                effort: l.effort,
-                            },
-                            rotation: in_parent.rotation.to_rotation_matrix().into_inner(),
-                            rotation_is_identity: in_parent.rotation.to_rotation_matrix().into_inner()
-                                == Matrix3::identity(),
-                            translation: in_parent.translation.vector,
-                            axis: axis / norm,
-                            body: BodyInertia::ZERO,
-                        });
+                        model.joints.push(revolute_joint(joint, placement * origin)?);
                         stack.push((joint.child.link.as_str(), Some(model.joints.len() - 1), Isometry3::identity()));
                     }
                     ref other => {
@@ -382,5 +334,69 @@ impl Model {
     /// Total mass of the moving bodies.
     pub fn moving_mass(&self) -> f64 {
         self.joints.iter().map(|j| j.body.mass).sum()
+    }
+}
+
+/// A revolute or continuous joint placed at `in_parent` in its parent's frame, its body still empty.
+fn revolute_joint(joint: &urdf_rs::Joint, in_parent: Isometry3<f64>) -> Result<Joint, Error> {
+    if joint.mimic.is_some() {
+        return Err(Error::UnsupportedJoint { joint: joint.name.clone(), kind: "mimic".into() });
+    }
+    let axis = Vector3::from(joint.axis.xyz.0);
+    let norm = axis.norm();
+    if !(norm.is_finite() && norm > 1e-12) {
+        return Err(Error::ZeroAxis { joint: joint.name.clone() });
+    }
+    let continuous = matches!(joint.joint_type, urdf_rs::JointType::Continuous);
+    let l = &joint.limit;
+    Ok(Joint {
+        name: joint.name.clone(),
+        limits: JointLimits {
+            lower: if continuous { f64::NEG_INFINITY } else { l.lower },
+            upper: if continuous { f64::INFINITY } else { l.upper },
+            velocity: l.velocity,
+            effort: l.effort,
+        },
+        rotation: in_parent.rotation.to_rotation_matrix().into_inner(),
+        rotation_is_identity: in_parent.rotation.to_rotation_matrix().into_inner() == Matrix3::identity(),
+        translation: in_parent.translation.vector,
+        axis: axis / norm,
+        body: BodyInertia::ZERO,
+    })
+}
+
+/// A URDF's links by name, each link's child joints, and the one root link: checked to be a tree.
+struct UrdfTree<'a> {
+    links: HashMap<&'a str, &'a urdf_rs::Link>,
+    children: HashMap<&'a str, Vec<&'a urdf_rs::Joint>>,
+    root: &'a str,
+}
+
+impl<'a> UrdfTree<'a> {
+    fn of(robot: &'a urdf_rs::Robot) -> Result<Self, Error> {
+        let links: HashMap<&str, &urdf_rs::Link> = robot.links.iter().map(|l| (l.name.as_str(), l)).collect();
+        let mut children: HashMap<&str, Vec<&urdf_rs::Joint>> = HashMap::new();
+        let mut is_child: HashMap<&str, bool> = HashMap::new();
+        for joint in &robot.joints {
+            for link in [&joint.parent.link, &joint.child.link] {
+                if !links.contains_key(link.as_str()) {
+                    return Err(Error::MissingLink { joint: joint.name.clone(), link: link.clone() });
+                }
+            }
+            if is_child.insert(joint.child.link.as_str(), true).is_some() {
+                return Err(Error::NotATree { link: joint.child.link.clone() });
+            }
+            children.entry(joint.parent.link.as_str()).or_default().push(joint);
+        }
+        let roots: Vec<&str> =
+            robot.links.iter().map(|l| l.name.as_str()).filter(|n| !is_child.contains_key(n)).collect();
+        let root = match roots.as_slice() {
+            [root] => *root,
+            [] => {
+                return Err(Error::NotATree { link: robot.links.first().map(|l| l.name.clone()).unwrap_or_default() });
+            }
+            _ => return Err(Error::ManyRoots(roots.iter().map(|s| s.to_string()).collect())),
+        };
+        Ok(Self { links, children, root })
     }
 }
