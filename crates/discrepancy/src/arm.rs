@@ -136,6 +136,52 @@ fn unit_loads() -> [BodyInertia; 4] {
 /// Names the arm's own effects in free-space motion (see the module documentation).
 pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOptions) -> Result<ArmReport, ArmError> {
     let k = options.half_window.max(1);
+    check_samples(samples, k)?;
+    let Design { r, friction, payload, used } = design(model, samples, k)?;
+    let rows = r.len();
+    let n = rows as f64;
+    let aicc = |res: &DVector<f64>, params: usize| {
+        let p = params as f64 + 1.0;
+        n * (res.norm_squared() / n).ln() + 2.0 * p + 2.0 * p * (p + 1.0) / (n - p - 1.0).max(1.0)
+    };
+    let structures: [(&'static str, Vec<&DMatrix<f64>>); 4] = [
+        ("none", vec![]),
+        ("joint_friction", vec![&friction]),
+        ("payload_mass", vec![&payload]),
+        ("joint_friction+payload_mass", vec![&friction, &payload]),
+    ];
+    let fits: Vec<StructureFit> = structures
+        .iter()
+        .map(|(name, cols)| {
+            let (params, residual, signals) = least_squares(&r, cols);
+            let aicc = aicc(&residual, params.len());
+            StructureFit { name, params, residual, aicc, signals }
+        })
+        .collect();
+    let sse = |i: usize| fits[i].residual.norm_squared();
+    // An effect stays only if it cuts the sum of squares by min_gain against the structure without it,
+    // and its torque stands above what is left (min_signal times the residual's RMS).
+    let gains = |with: usize, without: usize| sse(with) < (1.0 - options.min_gain) * sse(without);
+    let stands = |i: usize| {
+        let left = (sse(i) / rows as f64).sqrt();
+        fits[i].signals.iter().all(|s| *s >= options.min_signal * left)
+    };
+    let allowed = [true, gains(1, 0) && stands(1), gains(2, 0) && stands(2), gains(3, 2) && gains(3, 1) && stands(3)];
+    let best = (0..4).filter(|&i| allowed[i]).min_by(|&a, &b| fits[a].aicc.total_cmp(&fits[b].aicc)).unwrap_or(0);
+    let rms = |res: &DVector<f64>| -> [f64; 7] {
+        std::array::from_fn(|j| (res.iter().skip(j).step_by(7).map(|v| v * v).sum::<f64>() / used.len() as f64).sqrt())
+    };
+    Ok(ArmReport {
+        named: effects_of(best, &fits[best].params),
+        rms_before: rms(&r),
+        rms_after: rms(&fits[best].residual),
+        candidates: fits.iter().map(|f| (f.name.to_string(), f.aicc)).collect(),
+        samples: used.len(),
+    })
+}
+
+/// Enough samples for the windows, every value finite, the time increasing.
+fn check_samples(samples: &[ArmSample], k: usize) -> Result<(), ArmError> {
     if samples.len() < 2 * k + 50 {
         return Err(ArmError::TooFew(samples.len(), 2 * k + 50));
     }
@@ -147,12 +193,25 @@ pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOption
             return Err(ArmError::Time(i));
         }
     }
+    Ok(())
+}
+
+/// The regression: the torque the URDF's dynamics leave unexplained, 7 rows per used sample, and the
+/// columns of each effect — 14 of friction (b_i, c_i), 4 of the payload (its mass and first moment).
+struct Design {
+    r: DVector<f64>,
+    friction: DMatrix<f64>,
+    payload: DMatrix<f64>,
+    /// The samples used (a window of ±k around each, reaching across no gap).
+    used: Vec<usize>,
+}
+
+fn design(model: &Model, samples: &[ArmSample], k: usize) -> Result<Design, ArmError> {
     let flange = model.frame_id(lwr4::FLANGE_FRAME).expect("the LWR's flange frame");
     let loaded: Vec<Model> =
         unit_loads().iter().map(|l| model.with_payload(flange, l).expect("the flange moves with the arm")).collect();
     let mut data = model.data();
     let mut loaded_data: Vec<Data> = loaded.iter().map(Model::data).collect();
-    // Rows: 7 per used sample. Columns: 14 friction (b_i, c_i), then 4 payload.
     // A difference must not reach across a gap (samples left out in contact, a dropped stretch): only
     // windows as short as 2k of the recording's usual sample period, and a half, are used.
     let mut periods: Vec<f64> = samples.windows(2).map(|w| w[1].t - w[0].t).collect();
@@ -183,67 +242,44 @@ pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOption
             }
         }
     }
-    // Least squares on the blocks of columns: the parameters, the residual and each block's contribution
-    // (RMS over every row).
-    let fit = |columns: &[&DMatrix<f64>]| -> (DVector<f64>, DVector<f64>, Vec<f64>) {
-        let width: usize = columns.iter().map(|c| c.ncols()).sum();
-        if width == 0 {
-            return (DVector::zeros(0), r.clone(), Vec::new());
-        }
-        let mut a = DMatrix::zeros(rows, width);
-        let mut at = 0;
-        for c in columns {
-            a.view_mut((0, at), (rows, c.ncols())).copy_from(c);
-            at += c.ncols();
-        }
-        // Columns scaled to unit RMS, so that the solve is well conditioned whatever their units.
-        let scale: Vec<f64> = (0..width).map(|j| a.column(j).norm().max(1e-300)).collect();
-        for (j, s) in scale.iter().enumerate() {
-            a.column_mut(j).scale_mut(1.0 / s);
-        }
-        let x = a.clone().svd(true, true).solve(&r, 1e-12).expect("an SVD solves");
-        let residual = &r - &a * &x;
-        let mut at = 0;
-        let signals = columns
-            .iter()
-            .map(|c| {
-                let part = a.columns(at, c.ncols()) * x.rows(at, c.ncols());
-                at += c.ncols();
-                part.norm() / (rows as f64).sqrt()
-            })
-            .collect();
-        (DVector::from_iterator(width, x.iter().zip(&scale).map(|(v, s)| v / s)), residual, signals)
-    };
-    let n = rows as f64;
-    let aicc = |res: &DVector<f64>, params: usize| {
-        let p = params as f64 + 1.0;
-        n * (res.norm_squared() / n).ln() + 2.0 * p + 2.0 * p * (p + 1.0) / (n - p - 1.0).max(1.0)
-    };
-    let structures: [(&'static str, Vec<&DMatrix<f64>>); 4] = [
-        ("none", vec![]),
-        ("joint_friction", vec![&friction]),
-        ("payload_mass", vec![&payload]),
-        ("joint_friction+payload_mass", vec![&friction, &payload]),
-    ];
-    let fits: Vec<StructureFit> = structures
+    Ok(Design { r, friction, payload, used })
+}
+
+/// Least squares of `r` on the blocks of columns: the parameters, the residual and each block's
+/// contribution (RMS over every row).
+fn least_squares(r: &DVector<f64>, columns: &[&DMatrix<f64>]) -> (DVector<f64>, DVector<f64>, Vec<f64>) {
+    let rows = r.len();
+    let width: usize = columns.iter().map(|c| c.ncols()).sum();
+    if width == 0 {
+        return (DVector::zeros(0), r.clone(), Vec::new());
+    }
+    let mut a = DMatrix::zeros(rows, width);
+    let mut at = 0;
+    for c in columns {
+        a.view_mut((0, at), (rows, c.ncols())).copy_from(c);
+        at += c.ncols();
+    }
+    // Columns scaled to unit RMS, so that the solve is well conditioned whatever their units.
+    let scale: Vec<f64> = (0..width).map(|j| a.column(j).norm().max(1e-300)).collect();
+    for (j, s) in scale.iter().enumerate() {
+        a.column_mut(j).scale_mut(1.0 / s);
+    }
+    let x = a.clone().svd(true, true).solve(r, 1e-12).expect("an SVD solves");
+    let residual = r - &a * &x;
+    let mut at = 0;
+    let signals = columns
         .iter()
-        .map(|(name, cols)| {
-            let (params, residual, signals) = fit(cols);
-            let aicc = aicc(&residual, params.len());
-            StructureFit { name, params, residual, aicc, signals }
+        .map(|c| {
+            let part = a.columns(at, c.ncols()) * x.rows(at, c.ncols());
+            at += c.ncols();
+            part.norm() / (rows as f64).sqrt()
         })
         .collect();
-    let sse = |i: usize| fits[i].residual.norm_squared();
-    // An effect stays only if it cuts the sum of squares by min_gain against the structure without it,
-    // and its torque stands above what is left (min_signal times the residual's RMS).
-    let gains = |with: usize, without: usize| sse(with) < (1.0 - options.min_gain) * sse(without);
-    let stands = |i: usize| {
-        let left = (sse(i) / rows as f64).sqrt();
-        fits[i].signals.iter().all(|s| *s >= options.min_signal * left)
-    };
-    let allowed = [true, gains(1, 0) && stands(1), gains(2, 0) && stands(2), gains(3, 2) && gains(3, 1) && stands(3)];
-    let best = (0..4).filter(|&i| allowed[i]).min_by(|&a, &b| fits[a].aicc.total_cmp(&fits[b].aicc)).unwrap_or(0);
-    let x = &fits[best].params;
+    (DVector::from_iterator(width, x.iter().zip(&scale).map(|(v, s)| v / s)), residual, signals)
+}
+
+/// The effects of structure `best` (0 none, 1 friction, 2 payload, 3 both) with its parameters `x`.
+fn effects_of(best: usize, x: &DVector<f64>) -> Vec<ArmEffect> {
     let mut named = Vec::new();
     let mut at = 0;
     if best == 1 || best == 3 {
@@ -259,16 +295,7 @@ pub fn name_arm_effects(model: &Model, samples: &[ArmSample], options: ArmOption
         let com = if mass > 1e-6 { first / mass } else { Vector3::zeros() };
         named.push(ArmEffect::PayloadMass { mass, com: [com.x, com.y, com.z] });
     }
-    let rms = |res: &DVector<f64>| -> [f64; 7] {
-        std::array::from_fn(|j| (res.iter().skip(j).step_by(7).map(|v| v * v).sum::<f64>() / used.len() as f64).sqrt())
-    };
-    Ok(ArmReport {
-        named,
-        rms_before: rms(&r),
-        rms_after: rms(&fits[best].residual),
-        candidates: fits.iter().map(|f| (f.name.to_string(), f.aicc)).collect(),
-        samples: used.len(),
-    })
+    named
 }
 
 #[cfg(test)]
