@@ -29,7 +29,8 @@
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use softcontact_contact::{
-    ContactError, MindlinDeresiewicz, PathSample, fit_normal_stiffness_and_zero, identify_tangential, with_hertz,
+    ContactError, MindlinDeresiewicz, PathSample, Tangential, fit_normal_stiffness_and_zero, identify_tangential,
+    with_hertz,
 };
 
 /// The deepest an episode's zero is searched for below the surface [m].
@@ -159,77 +160,12 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
     if law.stiffness.is_nan() || law.stiffness <= 0.0 {
         return Err(ContactError::NotEnoughData { kind: "loading-path discrepancy (no tangential stiffness)" });
     }
-    let mut prepared = Prepared { episodes: Vec::with_capacity(episodes.len()), k_n, k_t: 0.0 };
-    for e in &episodes {
-        let mut md = MindlinDeresiewicz::default();
-        let last = (e.len() - 1) as f64;
-        let mut points = Vec::with_capacity(e.len());
-        for (j, s) in e.iter().enumerate() {
-            let z = s.normal_displacement + zero_depth;
-            let (walton, incremental) = if z > 0.0 {
-                let p = k_n * z.powf(1.5);
-                (
-                    z.sqrt() * s.tangential_displacement,
-                    md.step(&law, z, s.tangential_displacement, p)?.0 / law.stiffness,
-                )
-            } else {
-                md = MindlinDeresiewicz::default();
-                (0.0, 0.0)
-            };
-            for v in [s.normal_force, s.tangential_force, walton, incremental] {
-                if !v.is_finite() {
-                    return Err(ContactError::NonFinite { name: "loading-path sample", value: v });
-                }
-            }
-            points.push(Point {
-                z,
-                progress: j as f64 / last,
-                p: s.normal_force,
-                t: s.tangential_force,
-                walton,
-                incremental,
-            });
-        }
-        prepared.episodes.push(points);
-    }
+    let mut prepared = Prepared::new(&episodes, k_n, zero_depth, &law)?;
     let samples: usize = prepared.episodes.iter().map(Vec::len).sum();
     prepared.k_t = prepared.solve(&[])?.beta[1];
     let base = prepared.solve(&[])?;
     let base_sse = base.sse;
-    let mut structure: Vec<PathEffect> = Vec::new();
-    let mut current = base;
-    let mut named = Vec::new();
-    loop {
-        let mut best: Option<(PathEffect, f64, f64, Solved)> = None;
-        for candidate in PathEffect::ALL.into_iter().filter(|c| !structure.contains(c)) {
-            let mut trial = structure.clone();
-            trial.push(candidate);
-            let solved = prepared.solve(&trial)?;
-            let (before, after) = (current.sse[0] + current.sse[1], solved.sse[0] + solved.sse[1]);
-            let gain = 1.0 - after / before;
-            let delta_aicc = prepared.aicc(before, &structure) - prepared.aicc(after, &trial);
-            let t_ok = match candidate {
-                PathEffect::SensorCrosstalk => {
-                    let i = prepared.column_of(&trial, candidate);
-                    (solved.beta[i] / solved.se[i]).abs() >= options.min_t
-                }
-                _ => true,
-            };
-            if gain >= options.min_gain
-                && delta_aicc >= options.min_delta_aicc
-                && t_ok
-                && best.as_ref().is_none_or(|b| delta_aicc > b.2)
-            {
-                best = Some((candidate, gain, delta_aicc, solved));
-            }
-        }
-        // The named candidate's fit is the model from now on (its structure adds it last, as tried).
-        let Some((effect, gain, delta_aicc, solved)) = best else { break };
-        structure.push(effect);
-        current = solved;
-        named.push(PathNamed { effect, gain, delta_aicc });
-    }
-    let last = current;
+    let (structure, last, named) = prepared.select(base, options)?;
     let n = episodes.len();
     let creep: Vec<f64> = if structure.contains(&PathEffect::ContactOffsetDrift) {
         let first = prepared.column_of(&structure, PathEffect::ContactOffsetDrift);
@@ -257,6 +193,90 @@ pub fn name_path_effects(episodes: &[Vec<PathSample>], options: &PathOptions) ->
         rms_before: [(base_sse[0] / per_channel).sqrt(), (base_sse[1] / per_channel).sqrt()],
         rms_after: [(last.sse[0] / per_channel).sqrt(), (last.sse[1] / per_channel).sqrt()],
     })
+}
+
+impl Prepared {
+    /// Each episode's points: the depth below the fitted zero, the Walton and incremental responses per
+    /// unit k_t (the incremental law restarted at each lift-off).
+    fn new(episodes: &[&Vec<PathSample>], k_n: f64, zero_depth: f64, law: &Tangential) -> Result<Self, ContactError> {
+        let mut prepared = Prepared { episodes: Vec::with_capacity(episodes.len()), k_n, k_t: 0.0 };
+        for e in episodes {
+            let mut md = MindlinDeresiewicz::default();
+            let last = (e.len() - 1) as f64;
+            let mut points = Vec::with_capacity(e.len());
+            for (j, s) in e.iter().enumerate() {
+                let z = s.normal_displacement + zero_depth;
+                let (walton, incremental) = if z > 0.0 {
+                    let p = k_n * z.powf(1.5);
+                    (
+                        z.sqrt() * s.tangential_displacement,
+                        md.step(law, z, s.tangential_displacement, p)?.0 / law.stiffness,
+                    )
+                } else {
+                    md = MindlinDeresiewicz::default();
+                    (0.0, 0.0)
+                };
+                for v in [s.normal_force, s.tangential_force, walton, incremental] {
+                    if !v.is_finite() {
+                        return Err(ContactError::NonFinite { name: "loading-path sample", value: v });
+                    }
+                }
+                points.push(Point {
+                    z,
+                    progress: j as f64 / last,
+                    p: s.normal_force,
+                    t: s.tangential_force,
+                    walton,
+                    incremental,
+                });
+            }
+            prepared.episodes.push(points);
+        }
+        Ok(prepared)
+    }
+
+    /// Forward selection from `base`: each round adds the candidate with the largest AICc gain that
+    /// passes the gates; returns the structure, its fit and what was named.
+    fn select(
+        &self,
+        base: Solved,
+        options: &PathOptions,
+    ) -> Result<(Vec<PathEffect>, Solved, Vec<PathNamed>), ContactError> {
+        let mut structure: Vec<PathEffect> = Vec::new();
+        let mut current = base;
+        let mut named = Vec::new();
+        loop {
+            let mut best: Option<(PathEffect, f64, f64, Solved)> = None;
+            for candidate in PathEffect::ALL.into_iter().filter(|c| !structure.contains(c)) {
+                let mut trial = structure.clone();
+                trial.push(candidate);
+                let solved = self.solve(&trial)?;
+                let (before, after) = (current.sse[0] + current.sse[1], solved.sse[0] + solved.sse[1]);
+                let gain = 1.0 - after / before;
+                let delta_aicc = self.aicc(before, &structure) - self.aicc(after, &trial);
+                let t_ok = match candidate {
+                    PathEffect::SensorCrosstalk => {
+                        let i = self.column_of(&trial, candidate);
+                        (solved.beta[i] / solved.se[i]).abs() >= options.min_t
+                    }
+                    _ => true,
+                };
+                if gain >= options.min_gain
+                    && delta_aicc >= options.min_delta_aicc
+                    && t_ok
+                    && best.as_ref().is_none_or(|b| delta_aicc > b.2)
+                {
+                    best = Some((candidate, gain, delta_aicc, solved));
+                }
+            }
+            // The named candidate's fit is the model from now on (its structure adds it last, as tried).
+            let Some((effect, gain, delta_aicc, solved)) = best else { break };
+            structure.push(effect);
+            current = solved;
+            named.push(PathNamed { effect, gain, delta_aicc });
+        }
+        Ok((structure, current, named))
+    }
 }
 
 impl Prepared {
