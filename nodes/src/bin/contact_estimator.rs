@@ -12,8 +12,9 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use mio::{Events, Interest, Poll, Token};
 use nalgebra::Vector3;
+use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
-use softcontact_nodes::contact_estimator::{ForcePairing, Params};
+use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ForcePairing, Paired, Params};
 use softcontact_nodes::geometry;
 use softcontact_nodes::runtime::liveness::{StreamWatch, first_dead};
 use softcontact_nodes::runtime::params::{self, ParamArgs};
@@ -34,7 +35,7 @@ fn main() -> anyhow::Result<()> {
     ros::init_logging("contact_estimator");
     let (p, declared) = params::load::<Params>("contact_estimator", &Args::parse().params)?;
     let stop = ros::shutdown_flag()?;
-    let mut estimator = p.estimator(f64::NEG_INFINITY)?;
+    let estimator = p.estimator(f64::NEG_INFINITY)?;
     let normal = Vector3::from(p.normal).normalize();
     let mut node = ros::node_with_parameters("contact_estimator", declared)?;
     let mut wrenches = ros::subscription(&mut node, &topics::WRENCH, ros::sensor_qos())?;
@@ -56,9 +57,16 @@ fn main() -> anyhow::Result<()> {
         &format!("ready: window {} × {} s, domain {}", p.window, p.sample_period, node.domain_id()),
     );
 
-    let mut next_state = f64::NEG_INFINITY;
-    let (mut samples, mut unpaired, mut refits, mut refit_failures) = (0u64, 0u64, 0u64, 0u64);
-    let mut was_in_contact = false;
+    let mut estimation = Estimation {
+        estimator,
+        state_period: 1.0 / p.state_rate,
+        next_state: f64::NEG_INFINITY,
+        was_in_contact: false,
+        samples: 0,
+        unpaired: 0,
+        refits: 0,
+        refit_failures: 0,
+    };
     let mut wrench_watch = StreamWatch::new(topics::WRENCH.name, 1000.0, p.dead_after);
     let mut pose_watch = StreamWatch::new(topics::EE_POSE.name, 1000.0, p.dead_after);
     let mut dead = None;
@@ -90,39 +98,10 @@ fn main() -> anyhow::Result<()> {
             wrench_watch.seen(start.elapsed().as_secs_f64());
             let Some(paired) = pairing.force(start.elapsed().as_secs_f64(), geometry::vector_of(&w.wrench.force))
             else {
-                unpaired += 1;
+                estimation.unpaired += 1;
                 continue;
             };
-            let t = w.header.stamp.as_secs_f64();
-            let out = match estimator.update(t, &paired.position, &paired.velocity, paired.normal_force) {
-                Ok(out) => out,
-                Err(e) => {
-                    unpaired += 1;
-                    ros::log(&node, LogLevel::Warn, &format!("reading refused: {e}"));
-                    continue;
-                }
-            };
-            samples += 1;
-            if out.in_contact != was_in_contact {
-                was_in_contact = out.in_contact;
-                let what = if out.in_contact { "contact" } else { "contact released" };
-                ros::log(&node, LogLevel::Info, &format!("{what} at t = {t:.3} s"));
-            }
-            if t >= next_state {
-                next_state = t + 1.0 / p.state_rate;
-                state_pub.publish(out.to_msg(w.header.stamp))?;
-            }
-            match estimator.refit_if_due(t) {
-                Some(Ok(m)) => {
-                    refits += 1;
-                    model_pub.publish(m.to_msg(Header { stamp: clock.now(), frame_id: "world".into() }))?;
-                }
-                Some(Err(e)) => {
-                    refit_failures += 1;
-                    ros::log(&node, LogLevel::Warn, &format!("refit failed: {e}"));
-                }
-                None => {}
-            }
+            estimation.reading(&node, w.header.stamp, &paired, (&state_pub, &model_pub), &mut clock)?;
         }
         // Judged after everything that arrived was read.
         if let Some(d) = first_dead(&[&wrench_watch, &pose_watch], start.elapsed().as_secs_f64()) {
@@ -132,11 +111,75 @@ fn main() -> anyhow::Result<()> {
         }
     }
     eprintln!(
-        "contact_estimator: exit: {samples} readings, {unpaired} without a fresh pose, {refits} models published, {refit_failures} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB",
+        "contact_estimator: exit: {} readings, {} without a fresh pose, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB",
+        estimation.samples,
+        estimation.unpaired,
+        estimation.refits,
+        estimation.refit_failures,
         pin_poses.refused,
         pin_twists.refused,
         pin_wrenches.refused,
         ros::peak_rss_mb().unwrap_or(f64::NAN)
     );
     dead.map_or(Ok(()), |d| Err(d.into()))
+}
+
+/// The estimator and what it has published and refused.
+struct Estimation {
+    estimator: ContactEstimatorNode,
+    state_period: f64,
+    next_state: f64,
+    was_in_contact: bool,
+    samples: u64,
+    unpaired: u64,
+    refits: u64,
+    refit_failures: u64,
+}
+
+type StatePublisher = ros2_client::Publisher<softcontact_msgs::softcontact_msgs::ContactState>;
+type ModelPublisher = ros2_client::Publisher<softcontact_msgs::softcontact_msgs::ContactModel>;
+
+impl Estimation {
+    /// One paired reading stamped `stamp`: the estimator updated, the state published at `state_rate`
+    /// and a model each time a refit is due; contact and release logged.
+    fn reading(
+        &mut self,
+        node: &ros2_client::Node,
+        stamp: Time,
+        paired: &Paired,
+        (state_pub, model_pub): (&StatePublisher, &ModelPublisher),
+        clock: &mut ros::Clock,
+    ) -> anyhow::Result<()> {
+        let t = stamp.as_secs_f64();
+        let out = match self.estimator.update(t, &paired.position, &paired.velocity, paired.normal_force) {
+            Ok(out) => out,
+            Err(e) => {
+                self.unpaired += 1;
+                ros::log(node, LogLevel::Warn, &format!("reading refused: {e}"));
+                return Ok(());
+            }
+        };
+        self.samples += 1;
+        if out.in_contact != self.was_in_contact {
+            self.was_in_contact = out.in_contact;
+            let what = if out.in_contact { "contact" } else { "contact released" };
+            ros::log(node, LogLevel::Info, &format!("{what} at t = {t:.3} s"));
+        }
+        if t >= self.next_state {
+            self.next_state = t + self.state_period;
+            state_pub.publish(out.to_msg(stamp))?;
+        }
+        match self.estimator.refit_if_due(t) {
+            Some(Ok(m)) => {
+                self.refits += 1;
+                model_pub.publish(m.to_msg(Header { stamp: clock.now(), frame_id: "world".into() }))?;
+            }
+            Some(Err(e)) => {
+                self.refit_failures += 1;
+                ros::log(node, LogLevel::Warn, &format!("refit failed: {e}"));
+            }
+            None => {}
+        }
+        Ok(())
+    }
 }
