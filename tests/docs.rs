@@ -348,10 +348,8 @@ const MAX_FILE_LINES: usize = 800;
 const MAX_FUNCTION_LINES: usize = 100;
 
 /// (file, function or "" for the file, lines when listed): what is over a limit today, to be split.
-const OVER_THE_LIMIT: &[(&str, &str, usize)] = &[
-    ("nodes/src/ft_sensor/component.rs", "run", 148),
-    ("nodes/src/lwr_driver/component.rs", "run", 137),
-];
+const OVER_THE_LIMIT: &[(&str, &str, usize)] =
+    &[("nodes/src/ft_sensor/component.rs", "run", 148), ("nodes/src/lwr_driver/component.rs", "run", 137)];
 
 /// Each function of `lines` (a formatted Rust file) with its length in lines.
 fn functions(lines: &[&str]) -> Vec<(String, usize)> {

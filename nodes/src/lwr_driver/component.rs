@@ -10,6 +10,8 @@ use nalgebra::Isometry3;
 use softcontact_dynamics::lwr4;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::diagnostic_msgs::{DiagnosticArray, DiagnosticStatus};
+use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped};
+use softcontact_msgs::sensor_msgs::JointState;
 
 use super::commander::{Answered, Commander};
 use super::{DriverCounters, DriverOutput, Params, Refusals, Waiting};
@@ -110,27 +112,20 @@ pub fn run<C: Commander>(
 ) -> anyhow::Result<()> {
     let mut client = FriClient::bind(p.fri_bind, super::LwrDriver::new(p.clone()))?;
     let mut node = ros::node_with_parameters("lwr_driver", declared)?;
-    let joint_states = ros::publisher(&mut node, &topics::JOINT_STATES, ros::sensor_qos())?;
+    let streams = FastStreams::new(&mut node)?;
     let mut commander = commander(&mut node)?;
-    let ee_pose = ros::publisher(&mut node, &topics::EE_POSE, ros::sensor_qos())?;
-    let ee_twist = ros::publisher(&mut node, &topics::EE_TWIST, ros::sensor_qos())?;
-    let tf = ros::publisher(&mut node, &topics::TF, ros::tf_qos())?;
+    let names: Vec<String> = lwr4::model().joints.iter().map(|j| j.name.clone()).collect();
+    let slow = SlowStreams::new(&mut node, &p, &names)?;
     let tf_static = ros::publisher(&mut node, &topics::TF_STATIC, ros::latched_qos())?;
     let robot_description = ros::publisher(&mut node, &topics::ROBOT_DESCRIPTION, ros::latched_qos())?;
-    let robot_joint_states = match p.publish_joint_states {
-        true => Some(ros::publisher(&mut node, &topics::ROBOT_JOINT_STATES, ros::reliable_qos())?),
-        false => None,
-    };
     let diag = ros::publisher(&mut node, &topics::DIAGNOSTICS, ros::reliable_qos())?;
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
 
     // The fixed frames below the tool, from the URDF: the sensor as seen from the tool.
-    let model = lwr4::model();
     if p.publish_tf {
         tf_static.publish(messages::tool_to_sensor_static(clock.now()))?;
     }
     robot_description.publish(softcontact_msgs::std_msgs::String { data: lwr4::URDF.to_owned() })?;
-    let names: Vec<String> = model.joints.iter().map(|j| j.name.clone()).collect();
     // This thread answers the KRC: it asks to run as soon as a measurement arrives.
     let scheduling = realtime::request_short_slice(realtime::FRI_SLICE).unwrap_or_else(|e| format!("unchanged ({e})"));
     let ready = format!("ready: FRI on {}, domain {}; {scheduling}", client.local_addr()?, node.domain_id());
@@ -139,21 +134,15 @@ pub fn run<C: Commander>(
     let mut commands = CommandStats::default();
     let mut last: Option<DriverOutput> = None;
     let mut last_seen = Instant::now();
-    let mut next_refusal_log = Instant::now();
     let mut publish_errors = 0u64;
     // /tf from its own thread at TF_RATE: a reliable write never runs on the 1 kHz loop.
     let arm_state = Latest::<ArmState>::shared();
     let tf_done = Arc::new(AtomicBool::new(false));
-    let slow = SlowStreams {
-        tf: if p.publish_tf { Some(tf) } else { None },
-        joint_states: robot_joint_states.map(|p| (p, names.clone())),
-    };
     let tf_thread = spawn_slow_streams(slow, arm_state.clone(), tf_done.clone())?;
     let start = Instant::now();
     let mut command_watch = CommandWatch::new(p.dead_after);
     let mut status = Status::default();
-    let mut fault_logged = None;
-    let mut waiting_log = WaitingLog { logged: None, next: Instant::now() };
+    let mut cycle_log = CycleLog::default();
     while !ros::stopping(&stop) {
         commander.take_inputs();
         // The measurement's stamp: the controller answers it, and the joint state carries it.
@@ -169,21 +158,7 @@ pub fn run<C: Commander>(
         if answered.sign_of_life {
             command_watch.watch.seen(start.elapsed().as_secs_f64());
         }
-        if let Some(out) = output.as_ref() {
-            waiting_log.note(&node, out.waiting);
-        }
-        if client.driver.fault() != fault_logged {
-            fault_logged = client.driver.fault();
-            if let Some(f) = fault_logged {
-                ros::log(&node, LogLevel::Error, &f.to_string());
-            }
-        }
-        if let Some(e) = answered.refused.as_ref()
-            && Instant::now() >= next_refusal_log
-        {
-            ros::log(&node, LogLevel::Warn, &format!("torque command refused: {e}"));
-            next_refusal_log = Instant::now() + Duration::from_secs(1);
-        }
+        cycle_log.note(&node, output.as_ref(), client.driver.fault(), answered.refused.as_ref());
         if let Some(out) = output {
             last_seen = Instant::now();
             let stamp = measured_at.unwrap_or_else(|| clock.now());
@@ -199,13 +174,8 @@ pub fn run<C: Commander>(
             // The commander's first: a controller of its own pairs the external torque with the joint
             // state by stamp.
             publish_errors += commander.publish(stamp, m.external_torque);
-            let sent = [
-                joint_states.publish(m.joint_state).is_ok(),
-                ee_pose.publish(m.ee_pose).is_ok(),
-                ee_twist.publish(m.ee_twist).is_ok(),
-            ];
+            publish_errors += streams.publish(m.joint_state, m.ee_pose, m.ee_twist);
             arm_state.put(ArmState { stamp, tool_pose: tool.pose, q: out.q });
-            publish_errors += sent.iter().filter(|ok| !**ok).count() as u64;
             last = Some(out);
         } else if p.exit_after_silence > 0.0 && last_seen.elapsed().as_secs_f64() > p.exit_after_silence {
             ros::log(&node, LogLevel::Info, &format!("no measurement for {} s, exiting", p.exit_after_silence));
@@ -225,7 +195,12 @@ pub fn run<C: Commander>(
     publish_errors += tf_thread.join().unwrap_or(1);
     let report = status.report(&node, &client, &commands.age, last.as_ref(), command_watch.dead.as_ref());
     diag.publish(report(clock.now()))?;
-    // The exit report: tests and `launch-scripts/sim.sh` read these lines.
+    exit_report(&client, &commands, &commander, publish_errors);
+    Ok(())
+}
+
+/// The exit report: tests and `launch-scripts/sim.sh` read these lines.
+fn exit_report(client: &FriClient, commands: &CommandStats, commander: &impl Commander, publish_errors: u64) {
     eprintln!("lwr_driver: exit: {:?}, publish errors {publish_errors}", client.driver.counters);
     eprintln!(
         "lwr_driver: reply latency {}; within 200 us: {:.4} %",
@@ -236,7 +211,6 @@ pub fn run<C: Commander>(
     commands.exit_report(client.driver.counters.stale_cycles);
     commander.exit_report();
     eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
-    Ok(())
 }
 
 /// The applied commands: how old the joint state behind each was when applied (the controller stamps
@@ -421,7 +395,46 @@ struct ArmState {
 /// publishes the tree), and /joint_states with its joint names.
 struct SlowStreams {
     tf: Option<ros2_client::Publisher<softcontact_msgs::tf2_msgs::TFMessage>>,
-    joint_states: Option<(ros2_client::Publisher<softcontact_msgs::sensor_msgs::JointState>, Vec<String>)>,
+    joint_states: Option<(ros2_client::Publisher<JointState>, Vec<String>)>,
+}
+
+impl SlowStreams {
+    fn new(node: &mut ros2_client::Node, p: &Params, names: &[String]) -> anyhow::Result<Self> {
+        let tf = ros::publisher(node, &topics::TF, ros::tf_qos())?;
+        let joint_states = match p.publish_joint_states {
+            true => Some((ros::publisher(node, &topics::ROBOT_JOINT_STATES, ros::reliable_qos())?, names.to_vec())),
+            false => None,
+        };
+        Ok(Self { tf: p.publish_tf.then_some(tf), joint_states })
+    }
+}
+
+/// The streams written each cycle, after the answer: /lwr/joint_states, /lwr/ee_pose, /lwr/ee_twist.
+struct FastStreams {
+    joint_states: ros2_client::Publisher<JointState>,
+    ee_pose: ros2_client::Publisher<PoseStamped>,
+    ee_twist: ros2_client::Publisher<TwistStamped>,
+}
+
+impl FastStreams {
+    fn new(node: &mut ros2_client::Node) -> anyhow::Result<Self> {
+        Ok(Self {
+            joint_states: ros::publisher(node, &topics::JOINT_STATES, ros::sensor_qos())?,
+            ee_pose: ros::publisher(node, &topics::EE_POSE, ros::sensor_qos())?,
+            ee_twist: ros::publisher(node, &topics::EE_TWIST, ros::sensor_qos())?,
+        })
+    }
+
+    /// Returns the publish errors: the KRC is answered already, a middleware error is counted, never the
+    /// end of the driver.
+    fn publish(&self, joint_state: JointState, ee_pose: PoseStamped, ee_twist: TwistStamped) -> u64 {
+        let sent = [
+            self.joint_states.publish(joint_state).is_ok(),
+            self.ee_pose.publish(ee_pose).is_ok(),
+            self.ee_twist.publish(ee_twist).is_ok(),
+        ];
+        sent.iter().filter(|ok| !**ok).count() as u64
+    }
 }
 
 /// Publishes the newest tool pose (and joint positions) at most `ros::TF_RATE` times a second, until
@@ -452,22 +465,51 @@ fn spawn_slow_streams(
     })
 }
 
-/// What the driver waits for, logged on each change — at most once a second: a flapping link logs no
-/// flood. A fault is logged on its own; monitor mode is no reason to log.
-struct WaitingLog {
-    logged: Option<Waiting>,
-    next: Instant,
+/// What each cycle logs, each at most once a second: a flapping link logs no flood. What the driver
+/// waits for, on each change (a fault is logged on its own, once it latches; monitor mode is no reason to
+/// log); a refused command.
+struct CycleLog {
+    waiting: Option<Waiting>,
+    next_waiting: Instant,
+    fault: Option<super::Fault>,
+    next_refusal: Instant,
 }
 
-impl WaitingLog {
-    fn note(&mut self, node: &ros2_client::Node, waiting: Option<Waiting>) {
-        if waiting == self.logged || Instant::now() < self.next {
-            return;
+impl Default for CycleLog {
+    fn default() -> Self {
+        Self { waiting: None, next_waiting: Instant::now(), fault: None, next_refusal: Instant::now() }
+    }
+}
+
+impl CycleLog {
+    fn note(
+        &mut self,
+        node: &ros2_client::Node,
+        out: Option<&DriverOutput>,
+        fault: Option<super::Fault>,
+        refused: Option<&super::DriverError>,
+    ) {
+        if let Some(waiting) = out.map(|o| o.waiting)
+            && waiting != self.waiting
+            && Instant::now() >= self.next_waiting
+        {
+            self.waiting = waiting;
+            self.next_waiting = Instant::now() + Duration::from_secs(1);
+            if let Some(w) = waiting.filter(|w| !matches!(w, Waiting::Fault(_) | Waiting::Monitor(_))) {
+                ros::log(node, LogLevel::Warn, &format!("no torque applied: {w}"));
+            }
         }
-        self.logged = waiting;
-        self.next = Instant::now() + Duration::from_secs(1);
-        if let Some(w) = waiting.filter(|w| !matches!(w, Waiting::Fault(_) | Waiting::Monitor(_))) {
-            ros::log(node, LogLevel::Warn, &format!("no torque applied: {w}"));
+        if fault != self.fault {
+            self.fault = fault;
+            if let Some(f) = fault {
+                ros::log(node, LogLevel::Error, &f.to_string());
+            }
+        }
+        if let Some(e) = refused
+            && Instant::now() >= self.next_refusal
+        {
+            ros::log(node, LogLevel::Warn, &format!("torque command refused: {e}"));
+            self.next_refusal = Instant::now() + Duration::from_secs(1);
         }
     }
 }
