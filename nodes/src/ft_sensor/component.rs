@@ -8,8 +8,11 @@ use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use softcontact_dynamics::lwr4;
+use softcontact_msgs::builtin_interfaces::Time;
+use softcontact_msgs::diagnostic_msgs::DiagnosticArray;
 use softcontact_msgs::diagnostic_msgs::DiagnosticStatus;
-use softcontact_msgs::std_srvs::TriggerResponse;
+use softcontact_msgs::geometry_msgs::WrenchStamped;
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
 use super::{FtConfig, FtSensorNode, Params, StartupTare, calibration};
 use crate::geometry;
@@ -59,7 +62,8 @@ pub fn run(
     };
     let mut clock = ros::Clock::new(&mut node, p.use_sim_time)?;
     let bias_name = ros::resolve(&node, topics::FT_BIAS_SERVICE)?;
-    let bias = ros::trigger_server(&mut node, ros::service_mapping(&p.service_mapping)?, &bias_name)?;
+    let server = ros::trigger_server(&mut node, ros::service_mapping(&p.service_mapping)?, &bias_name)?;
+    let mut tares = Tares { startup: StartupTare::new(p.tare_after), publisher: tare_pub, server };
 
     if let Err(e) = client.start() {
         ros::log(&node, LogLevel::Warn, &format!("start request to {} failed ({e}): retrying", p.sensor));
@@ -70,7 +74,6 @@ pub fn run(
     let mut last_saturated = false;
     let mut next_diagnostics = Instant::now();
     let mut logged_network_errors = 0;
-    let mut startup_tare = StartupTare::new(p.tare_after);
     let start = Instant::now();
     let mut hand = Hand::new(p.dead_after);
     while !ros::stopping(&stop) {
@@ -84,17 +87,10 @@ pub fn run(
         if let Some(out) = client.receive(Duration::from_millis(2), orientation.as_ref())? {
             last_status = out.status.0;
             last_saturated = out.saturated;
-            let compensated = out.compensated.filter(|_| startup_tare.tared() && !out.invalid);
+            let compensated = out.compensated.filter(|_| tares.startup.tared() && !out.invalid);
             // The composed controller first: it answers the next FRI measurement with this reading.
             if let Some(forces) = &links.forces {
-                match compensated {
-                    Some(c) => forces.put(ForceReading {
-                        stamp: clock.now().as_secs_f64(),
-                        force: Vector3::new(c[0], c[1], c[2]),
-                        arrived: Instant::now(),
-                    }),
-                    None => forces.withdraw(),
-                }
+                hand_over(forces, compensated, &mut clock);
             }
             if !out.invalid {
                 let stamp = clock.now();
@@ -104,34 +100,7 @@ pub fn run(
                 }
             }
         }
-        if let Some(o) = orientation {
-            let refused_before = startup_tare.refusal.clone();
-            match startup_tare.poll(&mut client.node, &o, start.elapsed().as_secs_f64()) {
-                Some(Ok(b)) => {
-                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
-                    ros::log(&node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
-                }
-                Some(Err(e)) if refused_before.as_ref() != Some(&e) => {
-                    ros::log(&node, LogLevel::Warn, &format!("start-up {e}; retrying"));
-                }
-                _ => {}
-            }
-        }
-        while let Ok(Some((id, _))) = bias.receive_request() {
-            let response = match client.node.checked_tare(orientation.as_ref()) {
-                Ok(b) => {
-                    startup_tare.taken();
-                    tare_pub.publish(messages::wrench(&b, clock.now()))?;
-                    ros::log(&node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
-                    TriggerResponse { success: true, message: format!("bias set to {b:?}") }
-                }
-                Err(e) => {
-                    ros::log(&node, LogLevel::Warn, &format!("/ft_sensor/bias: {e}"));
-                    TriggerResponse { success: false, message: e }
-                }
-            };
-            bias.send_response(id, response)?;
-        }
+        tares.take(&node, &mut client.node, orientation.as_ref(), start.elapsed().as_secs_f64(), &mut clock)?;
         // The client repeats the start request while no fresh record comes (box booting, rebooting).
         let silent = client.silence().as_secs_f64();
         let network_errors = client.node.counters.network_errors;
@@ -148,29 +117,10 @@ pub fn run(
             break;
         }
         if Instant::now() >= next_diagnostics {
-            let c = client.node.counters;
             let seen = Seen { status: softcontact_wire::rdt::Status(last_status), saturated: last_saturated, silent };
-            let (level, message) = seen.status(&p, &c, hand.poses_dead.as_ref(), orientation.is_some(), &startup_tare);
-            diag.publish(ros::diagnostics(
-                clock.now(),
-                "ft_sensor: RDT",
-                &p.sensor.to_string(),
-                level,
-                message,
-                &[
-                    ("records", c.records),
-                    ("lost", c.lost),
-                    ("out_of_order", c.out_of_order),
-                    ("duplicate", c.duplicate),
-                    ("restarts", c.restarts),
-                    ("malformed", c.malformed),
-                    ("saturated", c.saturated),
-                    ("errors", c.errors),
-                    ("network_errors", c.network_errors),
-                    ("foreign", c.foreign),
-                    ("tares_refused", c.tares_refused),
-                ],
-            ))?;
+            let c = client.node.counters;
+            let (level, message) = seen.status(&p, &c, hand.poses_dead.as_ref(), orientation.is_some(), &tares.startup);
+            diag.publish(diagnostics(&p, &c, level, message, clock.now()))?;
             next_diagnostics += Duration::from_secs(1);
         }
     }
@@ -321,5 +271,91 @@ impl Hand {
             }
             (None, None) => false,
         }
+    }
+}
+
+/// /diagnostics: the status and the stream's counters.
+fn diagnostics(p: &Params, c: &super::FtCounters, level: u8, message: String, stamp: Time) -> DiagnosticArray {
+    ros::diagnostics(
+        stamp,
+        "ft_sensor: RDT",
+        &p.sensor.to_string(),
+        level,
+        message,
+        &[
+            ("records", c.records),
+            ("lost", c.lost),
+            ("out_of_order", c.out_of_order),
+            ("duplicate", c.duplicate),
+            ("restarts", c.restarts),
+            ("malformed", c.malformed),
+            ("saturated", c.saturated),
+            ("errors", c.errors),
+            ("network_errors", c.network_errors),
+            ("foreign", c.foreign),
+            ("tares_refused", c.tares_refused),
+        ],
+    )
+}
+
+/// The tares: the one at start-up (retried while refused) and those asked for on /ft_sensor/bias, each
+/// published on /ft_sensor/tare.
+struct Tares {
+    startup: StartupTare,
+    publisher: ros2_client::Publisher<WrenchStamped>,
+    server: ros2_client::service::Server<TriggerRequest, TriggerResponse>,
+}
+
+impl Tares {
+    /// The start-up tare when due (the sensor's orientation known), then every request waiting.
+    fn take(
+        &mut self,
+        node: &ros2_client::Node,
+        ft: &mut FtSensorNode,
+        orientation: Option<&UnitQuaternion<f64>>,
+        now: f64,
+        clock: &mut ros::Clock,
+    ) -> anyhow::Result<()> {
+        if let Some(o) = orientation {
+            let refused_before = self.startup.refusal.clone();
+            match self.startup.poll(ft, o, now) {
+                Some(Ok(b)) => {
+                    self.publisher.publish(messages::wrench(&b, clock.now()))?;
+                    ros::log(node, LogLevel::Info, &format!("tared at start-up: bias {b:.3?}"));
+                }
+                Some(Err(e)) if refused_before.as_ref() != Some(&e) => {
+                    ros::log(node, LogLevel::Warn, &format!("start-up {e}; retrying"));
+                }
+                _ => {}
+            }
+        }
+        while let Ok(Some((id, _))) = self.server.receive_request() {
+            let response = match ft.checked_tare(orientation) {
+                Ok(b) => {
+                    self.startup.taken();
+                    self.publisher.publish(messages::wrench(&b, clock.now()))?;
+                    ros::log(node, LogLevel::Info, &format!("tared on request: bias {b:.3?}"));
+                    TriggerResponse { success: true, message: format!("bias set to {b:?}") }
+                }
+                Err(e) => {
+                    ros::log(node, LogLevel::Warn, &format!("/ft_sensor/bias: {e}"));
+                    TriggerResponse { success: false, message: e }
+                }
+            };
+            self.server.send_response(id, response)?;
+        }
+        Ok(())
+    }
+}
+
+/// The compensated force to the controller composed in this process, or none (withheld, invalid).
+fn hand_over(forces: &Latest<ForceReading>, compensated: Option<[f64; 6]>, clock: &mut ros::Clock) {
+    match compensated {
+        Some(c) => forces.put(ForceReading {
+            stamp: clock.now().as_secs_f64(),
+            force: Vector3::new(c[0], c[1], c[2]),
+            arrived: Instant::now(),
+        }),
+        None => forces.withdraw(),
     }
 }
