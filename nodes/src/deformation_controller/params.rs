@@ -62,7 +62,14 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        let c = ControllerConfig::lwr4(250.0, 0.06);
+        Self::from_law(&ControllerConfig::lwr4(250.0, 0.06))
+    }
+}
+
+impl Params {
+    /// The node's defaults with the law's configuration `c` (what [`Params::controller_config`] gives
+    /// back: `c`'s control period and joint torque limits are the LWR IV's).
+    pub fn from_law(c: &ControllerConfig) -> Self {
         Self {
             normal: c.normal.into(),
             deformation_frequency: c.gains.stiffness.sqrt(),
@@ -96,13 +103,12 @@ impl Default for Params {
             force_check_impulse: 0.5,
             dead_after: 2.0,
             service_mapping: "cyclone".into(),
-            arm_effects: ArmEffects::default(),
+            arm_effects: c.arm,
             use_sim_time: false,
         }
     }
-}
 
-impl Params {
+    /// The law's configuration these parameters give.
     pub fn controller_config(&self) -> ControllerConfig {
         let mut c = ControllerConfig::lwr4(self.max_force, self.max_deformation);
         c.normal = self.normal.into();
@@ -290,5 +296,39 @@ impl Params {
             "{joint_friction: {viscous: [7], coulomb: [7]}, payload: {mass, com: [3]}}, each optional and bounded",
             "the arm's own effects beyond the URDF to compensate, as `softcontact discrepancy --arm --out` writes them: joint friction fed forward, a flange payload carried in the dynamics",
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each law parameter is carried both ways: a configuration with every field off its default comes
+    /// back whole through the node's parameters (a field one way forgets is caught).
+    #[test]
+    fn the_laws_configuration_comes_back_whole_through_the_nodes_parameters() {
+        let mut c = ControllerConfig::lwr4(300.0, 0.07);
+        c.normal = Vector3::new(0.0, 0.6, -0.8);
+        c.gains = DeformationGains::critically_damped(33.0);
+        c.lateral = (300.0, 30.0);
+        c.orientation = (200.0, 20.0);
+        c.posture_stiffness = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        c.posture_damping = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7];
+        c.approach_speed = 0.02;
+        c.max_approach = 0.2;
+        c.onset = OnsetConfig { threshold: 2.0, confirm: 5 };
+        c.limits.torque_rate = 1500.0;
+        c.limits.max_lift = 0.03;
+        c.limits.move_duration = (0.2, 100.0);
+        c.limits.max_deformation_rate = 0.2;
+        c.limits.contact_lost_below = 0.7;
+        c.limits.force_limit = 350.0;
+        c.max_surface_offset = 0.02;
+        c.restart_after = 0.3;
+        c.arm.payload = Some(softcontact_dynamics::Payload { mass: 0.5, com: [0.0, 0.0, 0.05] });
+        let defaults = ControllerConfig::lwr4(250.0, 0.06);
+        assert_ne!(c, defaults);
+        assert_eq!(Params::from_law(&c).controller_config(), c);
+        assert_eq!(Params::default().controller_config(), defaults);
     }
 }
