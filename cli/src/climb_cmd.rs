@@ -1,5 +1,5 @@
 //! `softcontact climb`: the snake paper's snake climbing between two walls on its rubber feet (section V of
-//! "Modeling and Experimental Validation of a Compliant Contact Model…"), every set point of the gait
+//! "Frictional Compliance Model Development and Experiments for Snake Robot Climbing"), every set point of the gait
 //! simulated, its equilibrium analysed (stability, friction cones), the choice of tangential law and
 //! contact damping compared, and set points chosen badly explained. The model, gait and analysis are
 //! `crates/climb`; this command prints, draws and writes them.

@@ -1,5 +1,5 @@
-//! `softcontact loading-paths`: the snake paper's 205 loading-path experiments ("Modeling and Experimental
-//! Validation of a Compliant Contact Model…", section IV) on the simulated specimen, its Tables I–III
+//! `softcontact loading-paths`: the snake paper's 205 loading-path experiments ("Frictional Compliance
+//! Model Development and Experiments for Snake Robot Climbing", section IV) on the simulated specimen, its Tables I–III
 //! beside the paper's, and what the paper could not model: the spread at the convergence points, as the
 //! Mindlin–Deresiewicz law fitted from the linear paths alone predicts it.
 //!

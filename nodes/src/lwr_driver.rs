@@ -115,7 +115,7 @@ pub enum DriverError {
     Writer(#[from] WriterRefused),
     #[error("torque command answers KRC session {0:?}, the present one is {1}")]
     OtherSession(Option<u32>, u32),
-    #[error("torque command is {0:.4} s old, beyond the watchdog's {1:.4} s (or stamped in the future)")]
+    #[error("torque command is {0:.4} s old, beyond max_command_age {1:.4} s (or stamped in the future)")]
     TooOld(f64, f64),
     #[error("implausible measurement: {0}")]
     Implausible(String),
@@ -511,8 +511,8 @@ impl LwrDriver {
         Ok(self.answer(measured))
     }
 
-    /// Reads one datagram from the KRC: decoded, checked, counted, with the joint velocities and the
-    /// tool's pose and twist. The answer is chosen by [`LwrDriver::answer`]: in between, an in-process
+    /// Reads one datagram from the KRC: decoded, checked, counted, with the joint velocities (the tool's
+    /// pose and twist come after the answer, [`LwrDriver::tool_motion`]). The answer is chosen by [`LwrDriver::answer`]: in between, an in-process
     /// controller can compute the torque for this very measurement and hand it over with
     /// [`LwrDriver::set_command`] (or ask for a hold with [`LwrDriver::clear_command`]).
     pub fn measure(&mut self, datagram: &[u8]) -> Result<Measured, DriverError> {

@@ -1,5 +1,5 @@
-//! The snake paper's climbing snake ("Modeling and Experimental Validation of a Compliant Contact Model …",
-//! section V): a planar chain squeezed between two walls on compliant rubber feet, driven by
+//! The snake paper's climbing snake ("Frictional Compliance Model Development and Experiments for Snake
+//! Robot Climbing", section V): a planar chain squeezed between two walls on compliant rubber feet, driven by
 //! decentralised PD control to a sequence of set points; the equilibrium each set point reaches, its
 //! stability with the contact law plugged into the dynamics, and a gait that climbs.
 //!

@@ -1,5 +1,5 @@
-//! The snake paper's loading-path experiments ("Modeling and Experimental Validation of a Compliant Contact
-//! Model…", section IV): paths in the (δ_n, δ_t) plane along which a plate is pushed onto a compliant
+//! The snake paper's loading-path experiments ("Frictional Compliance Model Development and
+//! Experiments for Snake Robot Climbing", section IV): paths in the (δ_n, δ_t) plane along which a plate is pushed onto a compliant
 //! half-ball, and what a contact model predicts at their ends.
 //!
 //! - 10 normal loadings, (0, 0) → (δ_max, 0);

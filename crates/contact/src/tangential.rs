@@ -4,7 +4,7 @@
 //! Sphere of radius R pressed δ_n deep (contact radius a = √(R δ_n)) and displaced δ_t sideways, normal
 //! force P, tangential force T, friction coefficient μ. Two laws, chosen per model file (`law`):
 //!
-//! - **Walton** (the snake paper, "Modeling and Experimental Validation of a Compliant Contact…", eqs. 3–4):
+//! - **Walton** (the snake paper, eqs. 3–4):
 //!   T = k_t √δ_n δ_t, a function of the present displacement only, limited to |T| ≤ μP.
 //! - **Mindlin–Deresiewicz** (R. D. Mindlin and H. Deresiewicz, "Elastic spheres in contact under varying
 //!   oblique forces", 1953): T is state, advanced by increments. Without slip dT = 8G*a dδ_t; since

@@ -1,6 +1,6 @@
-//! The deformation control law of the force-control paper (eq. 11–12): a force command becomes a deformation command
-//! through the inverted contact model, and the deformation follows its reference with a PD law on the
-//! acceleration.
+//! The deformation control law of the force-control paper (eq. 11, and eq. 19 for a plain model): a force
+//! command becomes a deformation command through the inverted contact model, and the deformation follows its
+//! reference with a PD law on the acceleration.
 
 use softcontact_contact::{ContactError, ContactModel};
 

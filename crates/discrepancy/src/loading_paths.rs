@@ -1,5 +1,5 @@
-//! The discrepancy workflow on loading-path recordings (the snake paper, "Modeling and Experimental Validation
-//! of a Compliant Contact Model…", section IV): contact episodes, each zeroed where the paper zeroes it,
+//! The discrepancy workflow on loading-path recordings (the snake paper, "Frictional Compliance Model
+//! Development and Experiments for Snake Robot Climbing", section IV): contact episodes, each zeroed where the paper zeroes it,
 //! with both force channels — the normal force P and the tangential force T along the episode's axis.
 //!
 //! The snake paper names its two worst errors and cannot model a third thing it measured:

@@ -1,7 +1,7 @@
 //! The snake paper's specimen on its own bench: a gum-rubber half-ball (R = 12.7 mm) under a flat plate with
 //! friction, read by a Nano17-like F/T sensor, pushed along paths of the (δ_n, δ_t) plane by an ideal
-//! displacement stage — the paper's setup ("Modeling and Experimental Validation of a Compliant Contact
-//! Model…", section IV), and the reference an arm-driven run is graded against.
+//! displacement stage — the paper's setup ("Frictional Compliance Model Development and
+//! Experiments for Snake Robot Climbing", section IV), and the reference an arm-driven run is graded against.
 //!
 //! The contact is the model's: Hertz normal law and its tangential law (Walton or Mindlin–Deresiewicz,
 //! crates/contact). The two errors the snake paper names are explicit, seeded parameters:

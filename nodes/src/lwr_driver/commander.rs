@@ -76,8 +76,8 @@ impl Commander for TopicCommands {
 
     /// The newest torque command, taken now, just before the answer — so that the command for the
     /// previous measurement has had the whole cycle to arrive. A bad one is refused and counted, the
-    /// previous one stays. A command must answer a joint state of the present KRC session, within the
-    /// watchdog's age by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
+    /// previous one stays. A command must answer a joint state of the present KRC session, within
+    /// `max_command_age` by that joint state's stamp (the driver's own clock); an empty one asks for a hold.
     /// Only the session's pinned writer commands (crate::runtime::writer_pin).
     fn answer(&mut self, node: &Node, driver: &mut LwrDriver, _: &DriverOutput, stamp: Time) -> Answered {
         let mut answered = Answered::default();
