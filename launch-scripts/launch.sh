@@ -80,7 +80,7 @@ for n in "${nodes[@]}"; do
     if [[ ! -x "$bin/$n" ]]; then
         [[ -z "${SOFTCONTACT_BIN:-}" ]] || { echo "launch: $bin/$n missing" >&2; exit 2; }
         echo "launch: building the nodes (cargo build --release)…" >&2
-        (cd "$root" && cargo build --release -q -p softcontact-nodes --bins)
+        (cd "$root" && cargo build --release -q -p softcontact-nodes -p softcontact-simcell --bins)
         break
     fi
 done

@@ -22,7 +22,7 @@ while (($#)); do
     shift
 done
 ((seconds >= 15)) || { echo "bench-graph: --seconds at least 15 (8 s of start-up and approach first)" >&2; exit 2; }
-cargo build --release -q -p softcontact-nodes --bins
+cargo build --release -q -p softcontact-nodes -p softcontact-simcell --bins
 cargo build --release -q --bin softcontact
 log_dir="${log_dir:-$(mktemp -d -t softcontact-bench-graph.XXXXXX)}"
 

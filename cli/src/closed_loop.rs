@@ -23,10 +23,10 @@ use softcontact_bag::Recording;
 use softcontact_contact::ContactModel;
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::softcontact_msgs::ForceCommand;
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{self, ContactEstimatorNode};
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_sim::{FtSensorConfig, SimConfig, SurfaceConfig};
+use softcontact_simcell::cell::Cell;
 
 use crate::discrepancy_cmd::{Analysis, DiscrepancyArgs};
 use crate::identify_cmd;

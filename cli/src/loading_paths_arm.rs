@@ -21,10 +21,10 @@ use rand_distr::{Distribution, Normal};
 use softcontact_contact::{ContactModel, LoadingPath};
 use softcontact_control::PositionStage;
 use softcontact_dynamics::lwr4;
-use softcontact_nodes::cell::Lockstep;
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::lwr_driver::{LwrDriver, Params as DriverParams};
 use softcontact_sim::{BenchRun, BenchSample, FtSensorConfig, SimConfig, Simulator, ZERO_THRESHOLD};
+use softcontact_simcell::cell::Lockstep;
 use softcontact_wire::fri::InterfaceState;
 
 /// The stage's bandwidth [rad/s] (ω·dt = 0.15 at the 1 ms cycle).

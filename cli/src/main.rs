@@ -92,17 +92,17 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Climb(args) => climb_cmd::run(&args),
         Command::Params { node, markdown } => {
             use softcontact_nodes::runtime::params::reference;
+            let nodes = softcontact_simcell::parameter_reference();
             if markdown {
-                print!("{}", reference::markdown_all());
+                print!("{}", reference::markdown_all(&nodes));
                 return Ok(());
             }
             let node = node.expect("clap requires a node without --markdown");
-            let nodes = reference::nodes();
             let Some(found) = nodes.iter().find(|n| n.node == node) else {
                 let names: Vec<&str> = nodes.iter().map(|n| n.node).collect();
                 anyhow::bail!("no node {node:?}: one of {}", names.join(", "));
             };
-            print!("{}", (found.yaml)());
+            print!("{}", found.yaml());
             Ok(())
         }
         Command::Bench { what } => bench::run(what),

@@ -162,6 +162,10 @@ impl Default for TarePolicy {
     }
 }
 
+/// The box's web server port the node reads its calibration from by default: the simulated box's (a real
+/// box serves on 80, which needs privileges to bind; `config/robot.yaml` sets it).
+pub const DEFAULT_HTTP_PORT: u16 = 49180;
+
 /// Time between start-up tare attempts while they are refused \[s\].
 pub const TARE_RETRY: f64 = 0.1;
 
@@ -571,7 +575,7 @@ impl Default for Params {
     fn default() -> Self {
         Self {
             sensor: ([127, 0, 0, 1], 49152).into(),
-            http_port: crate::sim_arm::HTTP_PORT as i64,
+            http_port: DEFAULT_HTTP_PORT as i64,
             http_timeout: 10.0,
             counts_per_force: 0.0,
             counts_per_torque: 0.0,

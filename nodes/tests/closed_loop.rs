@@ -1,13 +1,13 @@
 //! The closed loop in-process, in lockstep with the simulator: the very driver and F/T node code
 //! exchanges real FRI and RDT bytes with the simulated cell, the deformation controller closes the loop,
-//! and the contact model and surface position come from the estimator node ([`softcontact_nodes::cell`]). Force commands
+//! and the contact model and surface position come from the estimator node ([`softcontact_simcell::cell`]). Force commands
 //! on the simulated sponge must be reached within 5 %.
 
 use softcontact_contact::Kind;
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
 use softcontact_nodes::deformation_controller::{ControllerConfig, ControllerState, DeformationController};
 use softcontact_sim::SimConfig;
+use softcontact_simcell::cell::Cell;
 use softcontact_wire::fri::InterfaceState;
 
 struct Loop(Cell);

@@ -117,7 +117,7 @@ fn nodes_notice_a_dead_middleware() {
 
     let dead_after = format!("dead_after:={DEAD_AFTER}");
     let mut procs = Processes { logs: logs.clone(), children: Vec::new() };
-    procs.spawn("sim_arm", env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=60"]);
+    procs.spawn("sim_arm", &common::workspace_binary("sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=60"]);
     procs.spawn("lwr_driver", env!("CARGO_BIN_EXE_lwr_driver"), &["-p", &dead_after]);
     procs.spawn("ft_sensor", env!("CARGO_BIN_EXE_ft_sensor"), &["-p", &dead_after]);
     procs.spawn("contact_estimator", env!("CARGO_BIN_EXE_contact_estimator"), &["-p", &dead_after]);

@@ -8,10 +8,10 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use softcontact_contact::{ContactModel, Effect};
 use softcontact_dynamics::{ArmEffects, lwr4};
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
 use softcontact_nodes::deformation_controller::*;
 use softcontact_sim::SimConfig;
+use softcontact_simcell::cell::Cell;
 
 fn controller() -> DeformationController {
     DeformationController::new(ControllerConfig::lwr4(250.0, 0.06), softcontact_sim::sponge()).unwrap()

@@ -17,8 +17,8 @@ use std::time::{Duration, Instant};
 
 use softcontact_nodes::ft_sensor::calibration::{fetch_settings, resolve};
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode, Params};
-use softcontact_nodes::sim_arm::{Pacing, SimArmConfig, SimArmServer, Transducer};
 use softcontact_sim::{SimConfig, Simulator};
+use softcontact_simcell::sim_arm::{Pacing, SimArmConfig, SimArmServer, Transducer};
 use softcontact_wire::rdt::{Calibration, RECORD_SIZE, RdtCommand, Record, Request, Status};
 
 struct Cell {

@@ -7,11 +7,11 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use softcontact_dynamics::lwr4;
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_nodes::lwr_driver::Waiting;
 use softcontact_sim::{KrlProgram, STRATEGY_JOINT_IMPEDANCE, STRATEGY_POSITION, SimConfig, Simulator};
+use softcontact_simcell::cell::Cell;
 use softcontact_wire::fri::{ControlMode, InterfaceState};
 
 const MAX_FORCE: f64 = 250.0;

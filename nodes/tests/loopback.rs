@@ -1,6 +1,6 @@
 //! The driver and F/T nodes against the simulated cell over real UDP sockets on loopback, paced in real
 //! time. The cell runs in a thread (its truth is what the tests compare against) or as the `sim_arm`
-//! process. Real-time tests run one at a time: two 1 kHz loops per test on a 2-core machine is enough.
+//! process (its own test is in simcell/tests/sim_arm.rs). Real-time tests run one at a time: two 1 kHz loops per test on a 2-core machine is enough.
 
 use std::net::SocketAddr;
 use std::sync::mpsc;
@@ -12,8 +12,8 @@ use softcontact_dynamics::{Axes, lwr4};
 use softcontact_nodes::ft_sensor::{FtConfig, FtSensorNode};
 use softcontact_nodes::lwr_driver::{DriverOutput, LwrDriver, Params as DriverParams};
 use softcontact_nodes::runtime::udp::{FriClient, RdtClient};
-use softcontact_nodes::sim_arm::{SimArmConfig, SimArmServer, SimArmStats};
 use softcontact_sim::{FtSensorConfig, SimConfig, Simulator};
+use softcontact_simcell::sim_arm::{SimArmConfig, SimArmServer, SimArmStats};
 use softcontact_wire::fri::InterfaceState;
 
 static REAL_TIME: Mutex<()> = Mutex::new(());
@@ -58,11 +58,11 @@ fn start_cell_waiting(
             fri_remote: driver,
             rdt_bind: "127.0.0.1:0".parse().unwrap(),
             http_bind: None,
-            box_settings: softcontact_nodes::sim_arm::Transducer::Gamma.settings(1000.0, 1),
+            box_settings: softcontact_simcell::sim_arm::Transducer::Gamma.settings(1000.0, 1),
             measurement_loss: loss_each_way,
             command_loss: loss_each_way,
             rdt_rate: 1000.0,
-            pacing: softcontact_nodes::sim_arm::Pacing::RealTime { answer_wait },
+            pacing: softcontact_simcell::sim_arm::Pacing::RealTime { answer_wait },
             seed: 3,
         },
     )
@@ -366,22 +366,4 @@ fn a_stale_controller_makes_the_driver_hold_position() {
     let last = truth.last().unwrap();
     assert!(last.dq.iter().all(|v| v.abs() < 0.01), "at rest: {:?}", last.dq);
     assert_eq!(last.state, InterfaceState::Command, "holding is done by the driver, the KRC stays in command mode");
-}
-
-#[test]
-fn the_sim_arm_process_serves_fri_to_the_driver() {
-    let _rt = one_at_a_time();
-    let mut client = FriClient::bind("127.0.0.1:0".parse().unwrap(), LwrDriver::new(DriverParams::default())).unwrap();
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sim_arm"))
-        .args(["-p", &format!("fri_remote:={}", client.local_addr().unwrap())])
-        .args(["-p", "rdt_bind:=127.0.0.1:0", "-p", "surface:=none", "-p", "seconds:=1.2"])
-        .spawn()
-        .unwrap();
-    let outputs = drive(&mut client, |out| Some(gravity(&out.q)));
-    let status = child.wait().unwrap();
-    assert!(status.success());
-    assert!(outputs.iter().filter(|o| o.state == InterfaceState::Command).count() > 700, "{} outputs", outputs.len());
-    let q0 = outputs.iter().find(|o| o.state == InterfaceState::Command).unwrap().q;
-    let drift = outputs.last().unwrap().q.iter().zip(&q0).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-    assert!(drift < 1e-4, "drift {drift}");
 }

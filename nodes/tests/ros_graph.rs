@@ -45,7 +45,7 @@ fn driver_and_ft_nodes_serve_the_graph_over_dds() {
         .unwrap();
 
     let _procs = Processes(vec![
-        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=8"]),
+        spawn(&common::workspace_binary("sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=8"]),
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "exit_after_silence:=1"]),
         spawn(env!("CARGO_BIN_EXE_ft_sensor"), &["-p", "exit_after_silence:=1", "-p", "tare_after:=-1"]),
     ]);
@@ -169,8 +169,10 @@ fn lockstep_runs_faster_than_real_time_on_sim_time() {
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "use_sim_time:=true", "-p", "exit_after_silence:=1"]);
     std::thread::sleep(Duration::from_millis(500)); // discovery
     let start = Instant::now();
-    let mut sim =
-        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "lockstep:=true", "-p", "surface:=none", "-p", "seconds:=10"]);
+    let mut sim = spawn(
+        &common::workspace_binary("sim_arm"),
+        &["-p", "lockstep:=true", "-p", "surface:=none", "-p", "seconds:=10"],
+    );
     let (mut latest_clock, mut latest_stamp, mut stamps) = (0.0f64, 0.0f64, 0usize);
     let status = loop {
         while let Ok(Some((c, _))) = clock.take() {
@@ -238,7 +240,7 @@ fn a_namespaced_driver_serves_its_urdf_latched_and_joint_states_as_robot_state_p
         "exit_after_silence:=1",
     ];
     let _procs = Processes(vec![
-        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=none", "-p", "seconds:=6"]),
+        spawn(&common::workspace_binary("sim_arm"), &["-p", "surface:=none", "-p", "seconds:=6"]),
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &args),
     ]);
     let (mut n_rsp, mut n_moved, mut n_unmoved, mut n_tf) = (0usize, 0usize, 0usize, 0usize);

@@ -13,10 +13,10 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use softcontact_contact::{ContactModel, Exponents, Kind};
 use softcontact_dynamics::lwr4;
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_sim::{SimConfig, Simulator};
+use softcontact_simcell::cell::Cell;
 
 const MAX_FORCE: f64 = 250.0;
 const FORCE_LIMIT: f64 = 1.2 * MAX_FORCE;

@@ -56,7 +56,7 @@ fn nodes_keep_their_dds_through_sigstop_sigcont() {
     let mut node = ros::node("stall_test").unwrap();
     let flow = Flow::new(&mut node);
     let mut procs = Processes(vec![
-        spawn(env!("CARGO_BIN_EXE_sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=60"]),
+        spawn(&common::workspace_binary("sim_arm"), &["-p", "surface:=dice", "-p", "seconds:=60"]),
         spawn(env!("CARGO_BIN_EXE_lwr_driver"), &["-p", "exit_after_silence:=1"]),
         spawn(env!("CARGO_BIN_EXE_ft_sensor"), &["-p", "exit_after_silence:=1"]),
         spawn(env!("CARGO_BIN_EXE_contact_estimator"), &[]),

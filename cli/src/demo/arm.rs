@@ -12,10 +12,10 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use softcontact_discrepancy::{ArmOptions, ArmSample, name_arm_effects};
 use softcontact_dynamics::{ArmEffects, JointFriction, Payload, lwr4};
-use softcontact_nodes::cell::Cell;
 use softcontact_nodes::contact_estimator::{ContactEstimatorNode, EstimatorConfig};
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_sim::{FtSensorConfig, SimConfig};
+use softcontact_simcell::cell::Cell;
 
 use super::experiment::{RATIOS, SurfaceSpec};
 

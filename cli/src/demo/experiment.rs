@@ -7,10 +7,10 @@
 use anyhow::Context;
 use nalgebra::Vector3;
 use softcontact_contact::{ContactModel, Fit, Kind};
-use softcontact_nodes::cell::{Cell, Tick};
 use softcontact_nodes::contact_estimator::{self, ContactEstimatorNode, ModelOut};
 use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationController};
 use softcontact_sim::{FtSensorConfig, SimConfig};
+use softcontact_simcell::cell::{Cell, Tick};
 
 /// The ratios of the maximum identified force that the force-control paper commands: 4 cycles of the first six,
 /// then one of the second six.

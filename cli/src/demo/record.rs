@@ -7,9 +7,9 @@ use std::path::Path;
 use softcontact_bag::BagWriter;
 use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::softcontact_msgs::ForceCommand;
-use softcontact_nodes::cell::Tick;
 use softcontact_nodes::contact_estimator::ModelOut;
 use softcontact_nodes::messages;
+use softcontact_simcell::cell::Tick;
 
 use super::experiment::Observer;
 

@@ -3,6 +3,7 @@
 //! that rejects unknown names and checks its values before the node starts. The same values are
 //! declared on the node, so `ros2 param list/get/describe` show what the node runs with.
 
+pub mod contract;
 pub mod reference;
 
 use std::path::{Path, PathBuf};
@@ -646,18 +647,6 @@ mod tests {
 
     /// Every parameter of every node is declared exactly once, with a description; no declaration
     /// names a parameter the node does not have.
-    fn declared_once<P: NodeParams>(node: &str) {
-        let (_, declared) = from_mapping::<P>(node, Mapping::new()).unwrap();
-        for (name, _) in &declared.values {
-            let n = declared.specs.iter().filter(|s| s.covers(name)).count();
-            assert_eq!(n, 1, "{node}: {name} is declared {n} times");
-        }
-        for s in &declared.specs {
-            assert!(declared.values.iter().any(|(n, _)| s.covers(n)), "{node}: {} is no parameter", s.name);
-            assert!(!s.description.is_empty(), "{node}: {} has no description", s.name);
-        }
-    }
-
     #[test]
     fn a_device_or_a_huge_file_is_refused_not_read() {
         let args = |f: &str| ParamArgs { files: vec![f.into()], ..Default::default() };
@@ -683,63 +672,28 @@ mod tests {
 
     #[test]
     fn every_parameter_of_every_node_is_declared_once_with_its_description() {
-        declared_once::<crate::deformation_controller::Params>("deformation_controller");
-        declared_once::<crate::lwr_driver::Params>("lwr_driver");
-        declared_once::<crate::ft_sensor::Params>("ft_sensor");
-        declared_once::<crate::contact_estimator::Params>("contact_estimator");
-        declared_once::<crate::sim_arm::Params>("sim_arm");
-        declared_once::<Demo>("demo");
-    }
-
-    /// Every number of every node refuses NaN and ±∞, and huge or negative values unless named here
-    /// (with why): a value reaching the arm is checked whatever the parameter.
-    fn non_finite_numbers_are_refused<P: NodeParams + std::fmt::Debug>(
-        node: &str,
-        huge_ok: &[&str],
-        negative_ok: &[&str],
-    ) {
-        let (_, declared) = from_mapping::<P>(node, Mapping::new()).unwrap();
-        let mut checked = 0;
-        for (name, value) in &declared.values {
-            let with = |x: f64| -> Value {
-                match value {
-                    ParameterValue::DoubleArray(v) => Value::Sequence(v.iter().map(|_| Value::from(x)).collect()),
-                    _ => Value::from(x),
-                }
-            };
-            if !matches!(value, ParameterValue::Double(_) | ParameterValue::DoubleArray(_)) {
-                continue;
-            }
-            checked += 1;
-            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, -1.0] {
-                let allowed = (bad == 1e300 && huge_ok.contains(&name.as_str()))
-                    || (bad < 0.0 && bad.is_finite() && negative_ok.contains(&name.as_str()));
-                let mut m = Mapping::new();
-                set_path(&mut m, name, with(bad));
-                let taken = from_mapping::<P>(node, m);
-                assert!(allowed || taken.is_err(), "{node}: {name} = {bad} is taken: {:?}", taken.map(|t| t.0));
-            }
-        }
-        assert!(checked >= 3, "{node}: only {checked} numbers");
+        contract::assert_declared_once::<crate::deformation_controller::Params>("deformation_controller");
+        contract::assert_declared_once::<crate::lwr_driver::Params>("lwr_driver");
+        contract::assert_declared_once::<crate::ft_sensor::Params>("ft_sensor");
+        contract::assert_declared_once::<crate::contact_estimator::Params>("contact_estimator");
+        contract::assert_declared_once::<Demo>("demo");
     }
 
     #[test]
     fn no_node_takes_a_non_finite_huge_or_negative_number() {
-        non_finite_numbers_are_refused::<crate::deformation_controller::Params>(
+        contract::assert_non_finite_refused::<crate::deformation_controller::Params>(
             "deformation_controller",
             &[],
             &["normal"],
         );
-        non_finite_numbers_are_refused::<crate::lwr_driver::Params>("lwr_driver", &[], &[]);
+        contract::assert_non_finite_refused::<crate::lwr_driver::Params>("lwr_driver", &[], &[]);
         // tare_after: negative is "never".
-        non_finite_numbers_are_refused::<crate::ft_sensor::Params>("ft_sensor", &[], &["tare_after"]);
-        non_finite_numbers_are_refused::<crate::contact_estimator::Params>(
+        contract::assert_non_finite_refused::<crate::ft_sensor::Params>("ft_sensor", &[], &["tare_after"]);
+        contract::assert_non_finite_refused::<crate::contact_estimator::Params>(
             "contact_estimator",
             &[],
             &["normal", "offset_range"],
         );
-        // The simulator's run length (seconds) may be as long as one likes.
-        non_finite_numbers_are_refused::<crate::sim_arm::Params>("sim_arm", &["seconds"], &[]);
     }
 
     #[test]

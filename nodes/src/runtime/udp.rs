@@ -16,7 +16,7 @@ use crate::lwr_driver::{DriverOutput, LwrDriver};
 use crate::runtime::stats::Histogram;
 
 /// A receive that ended without a datagram: the timeout passed, or a signal (shutdown) interrupted it.
-pub(crate) fn no_datagram(e: &std::io::Error) -> bool {
+pub fn no_datagram(e: &std::io::Error) -> bool {
     matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted)
 }
 

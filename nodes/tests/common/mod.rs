@@ -47,3 +47,16 @@ pub fn signal(children: &[&Child], sig: libc::c_int) {
         assert_eq!(unsafe { libc::kill(c.id() as libc::pid_t, sig) }, 0, "kill {sig}");
     }
 }
+
+/// A node binary of the workspace, found beside this test's own (target/<profile>/): the simulated cell's
+/// `sim_arm` is another package's binary, which `cargo test --workspace` builds with this one.
+pub fn workspace_binary(name: &str) -> String {
+    let exe = std::env::current_exe().unwrap();
+    let path = exe.parent().and_then(std::path::Path::parent).unwrap().join(name);
+    assert!(
+        path.is_file(),
+        "{} is not built: run the tests with `cargo test --workspace` (or build it: `cargo build -p softcontact-simcell`)",
+        path.display()
+    );
+    path.display().to_string()
+}

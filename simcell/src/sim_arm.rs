@@ -234,7 +234,7 @@ impl SimArmServer {
                     break;
                 }
             }
-            if !crate::runtime::udp::wait_readable(&self.fri, left)? {
+            if !softcontact_nodes::runtime::udp::wait_readable(&self.fri, left)? {
                 break;
             }
             match self.fri.recv_from(&mut buf[..]) {
@@ -255,7 +255,7 @@ impl SimArmServer {
                     }
                     Err(_) => self.stats.malformed += 1,
                 },
-                Err(e) if crate::runtime::udp::no_datagram(&e) => continue,
+                Err(e) if softcontact_nodes::runtime::udp::no_datagram(&e) => continue,
                 Err(e) => return Err(e),
             }
         }
@@ -413,16 +413,13 @@ pub struct Params {
     pub answer_wait: f64,
 }
 
-/// The simulated box's web server port (a real box serves on 80, which needs privileges here).
-pub const HTTP_PORT: u16 = 49180;
-
 impl Default for Params {
     fn default() -> Self {
         Self {
             fri_remote: ([127, 0, 0, 1], 49938).into(),
             fri_bind: ([127, 0, 0, 1], 0).into(),
             rdt_bind: ([127, 0, 0, 1], 49152).into(),
-            http_bind: ([127, 0, 0, 1], HTTP_PORT).into(),
+            http_bind: ([127, 0, 0, 1], softcontact_nodes::ft_sensor::DEFAULT_HTTP_PORT).into(),
             transducer: Transducer::Gamma,
             rdt_buffer: 1,
             surface: SurfaceKind::Sponge,
@@ -449,7 +446,7 @@ impl Params {
         if self.surface == SurfaceKind::None {
             return Err("surface_model given with surface none".into());
         }
-        let text = crate::runtime::params::read_small(std::path::Path::new(&self.surface_model))
+        let text = softcontact_nodes::runtime::params::read_small(std::path::Path::new(&self.surface_model))
             .map_err(|e| format!("{}: {e}", self.surface_model))?;
         let model = ContactModel::from_yaml(&text).map_err(|e| format!("{}: {e}", self.surface_model))?;
         model.plausible().map_err(|e| format!("{}: {e}", self.surface_model))?;
@@ -457,8 +454,8 @@ impl Params {
     }
 }
 
-impl crate::runtime::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
+impl softcontact_nodes::runtime::params::NodeParams for Params {
+    fn declare(&self, d: &mut softcontact_nodes::runtime::params::Declarations) {
         d.any("fri_remote", "where the FRI driver listens (the KRC's FRIHOST:FRISOCK)");
         d.any("fri_bind", "the simulated KRC's own FRI address");
         d.any("rdt_bind", "the simulated Net F/T box's RDT address");
@@ -519,10 +516,25 @@ impl crate::runtime::params::NodeParams for Params {
     }
 }
 
+/// The simulator's parameter reference (`config/sim_arm.yaml`, its section of `docs/parameters.md`).
+pub fn reference() -> softcontact_nodes::runtime::params::reference::NodeReference {
+    softcontact_nodes::runtime::params::reference::NodeReference::of::<Params>(
+        "sim_arm",
+        "the simulated LWR IV, KRC, soft surface and Net F/T behind the same UDP and HTTP protocols",
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::runtime::params::NodeParams;
+    use softcontact_nodes::runtime::params::{NodeParams, contract};
+
+    #[test]
+    fn every_parameter_is_declared_once_and_no_number_takes_a_non_finite_huge_or_negative_value() {
+        contract::assert_declared_once::<Params>("sim_arm");
+        // The simulator's run length (seconds) may be as long as one likes.
+        contract::assert_non_finite_refused::<Params>("sim_arm", &["seconds"], &[]);
+    }
 
     #[test]
     fn a_surface_model_file_replaces_the_presets_law_and_a_bad_one_is_refused() {

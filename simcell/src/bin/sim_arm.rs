@@ -13,8 +13,8 @@ use softcontact_msgs::rosgraph_msgs::Clock;
 use softcontact_nodes::messages;
 use softcontact_nodes::runtime::params::{self, ParamArgs};
 use softcontact_nodes::runtime::ros;
-use softcontact_nodes::sim_arm::{Pacing, Params, SimArmConfig, SimArmServer, SurfaceKind};
 use softcontact_sim::{SimConfig, Simulator};
+use softcontact_simcell::sim_arm::{Pacing, Params, SimArmConfig, SimArmServer, SurfaceKind};
 
 #[derive(Parser)]
 #[command(

@@ -10,12 +10,12 @@ use softcontact_dynamics::FrameMotion;
 use softcontact_sim::{SimConfig, SimError, Simulator};
 use softcontact_wire::WireError;
 
-use crate::contact_estimator::{ContactEstimatorNode, ContactStateOut};
-use crate::deformation_controller::{
+use softcontact_nodes::contact_estimator::{ContactEstimatorNode, ContactStateOut};
+use softcontact_nodes::deformation_controller::{
     self, ControlError, ControllerNode, ControllerState, DeformationController, JointSample, Reply,
 };
-use crate::ft_sensor::{self, FtConfig, FtOutput, FtSensorNode, StartupTare};
-use crate::lwr_driver::{DriverError, DriverOutput, LwrDriver, Params as DriverParams};
+use softcontact_nodes::ft_sensor::{self, FtConfig, FtOutput, FtSensorNode, StartupTare};
+use softcontact_nodes::lwr_driver::{DriverError, DriverOutput, LwrDriver, Params as DriverParams};
 
 #[derive(Debug, thiserror::Error)]
 pub enum CellError {
@@ -116,7 +116,7 @@ pub struct Cell {
     orientation: Option<UnitQuaternion<f64>>,
     startup_tare: StartupTare,
     pending_tare: Option<[f64; 6]>,
-    driver_fault: Option<crate::lwr_driver::Fault>,
+    driver_fault: Option<softcontact_nodes::lwr_driver::Fault>,
 }
 
 impl Cell {
