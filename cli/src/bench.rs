@@ -260,7 +260,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
 /// Writes `seconds` of 1 kHz data on the six 1 kHz topics of the graph, flushing every second.
 fn write_recording(
     path: &std::path::Path,
-    readings: &[softcontact_nodes::identify::SyntheticReading],
+    readings: &[softcontact_nodes::contact_estimator::identify::SyntheticReading],
 ) -> anyhow::Result<u64> {
     use softcontact_bag::BagWriter;
     use softcontact_msgs::geometry_msgs::TransformStamped;
@@ -304,7 +304,8 @@ fn write_recording(
 fn run_recording(seconds: f64, reps: usize) -> anyhow::Result<()> {
     anyhow::ensure!(seconds > 1.0 && reps > 0, "--seconds > 1 and --reps > 0");
     let model = softcontact_sim::sponge();
-    let readings = softcontact_nodes::identify::synthetic_pushes(&model, 0.3, 0.03, seconds, 1000.0, 0.2, 1)?;
+    let readings =
+        softcontact_nodes::contact_estimator::identify::synthetic_pushes(&model, 0.3, 0.03, seconds, 1000.0, 0.2, 1)?;
     let dir = std::env::temp_dir().join(format!("softcontact-bench-recording-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
     let (mut write_s, mut read_s) = (f64::INFINITY, f64::INFINITY);

@@ -14,7 +14,7 @@ use softcontact_contact::{Fit, FitConfig, Kind};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::EstimatorConfig;
-use softcontact_nodes::identify::{FramesFrom, Identification, Identifier};
+use softcontact_nodes::contact_estimator::identify::{FramesFrom, Identification, Identifier};
 
 use crate::table::{self, Depth, Table};
 use crate::tangential_paths;

@@ -9,7 +9,7 @@ use std::process::{Command, Output};
 use softcontact_bag::{BagWriter, Qos};
 use softcontact_contact::{ContactModel, Effect, Kind};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
-use softcontact_nodes::identify::synthetic_pushes;
+use softcontact_nodes::contact_estimator::identify::synthetic_pushes;
 
 fn write(path: &Path, model: &ContactModel, seed: u64) {
     let readings = synthetic_pushes(model, 0.3, 0.03, 20.0, 1000.0, 0.1, seed).unwrap();

@@ -10,7 +10,7 @@ use softcontact_contact::{ContactModel, Effect, Kind};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::sensor_msgs::JointState;
 use softcontact_msgs::tf2_msgs::TFMessage;
-use softcontact_nodes::identify::{SyntheticReading, synthetic_pushes, synthetic_readings};
+use softcontact_nodes::contact_estimator::identify::{SyntheticReading, synthetic_pushes, synthetic_readings};
 
 const SURFACE_Z: f64 = 0.3;
 

@@ -3,7 +3,15 @@
 //! (the force-control paper: 1200 samples at 10 ms), and on `refit` chooses the best kind by cross-validated fitness
 //! and estimates where the surface really is (the onset threshold fires late on a soft surface).
 
-use nalgebra::{UnitQuaternion, Vector3};
+pub mod component;
+pub mod identify;
+mod pairing;
+mod params;
+
+pub use pairing::{ForcePairing, Paired};
+pub use params::Params;
+
+use nalgebra::Vector3;
 
 use crate::geometry::ContactGeometry;
 use softcontact_contact::{
@@ -256,163 +264,6 @@ impl ContactEstimatorNode {
     }
 }
 
-/// The `contact_estimator` node's parameters (config/contact_estimator.yaml). What each means and the values it takes are
-/// declared once, in `declare` (`NodeParams`), which checks them at start-up and describes them over ROS.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    pub normal: [f64; 3],
-    pub sample_period: f64,
-    pub window: usize,
-    pub onset_threshold: f64,
-    pub onset_confirm: usize,
-    pub folds: usize,
-    pub max_relative_error: f64,
-    pub offset_range: [f64; 2],
-    pub refit_period: f64,
-    pub min_window_fill: f64,
-    pub state_rate: f64,
-    pub stale_after: f64,
-    pub dead_after: f64,
-    /// The model `softcontact discrepancy --out` augmented with named effects, carried in every refit.
-    pub augmented_model: Option<ContactModel>,
-    /// Where that workflow placed the undeformed surface in the world: the refits hold it there.
-    pub surface_position: Option<[f64; 3]>,
-    pub use_sim_time: bool,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        let c = EstimatorConfig::default();
-        Self {
-            normal: c.normal.into(),
-            sample_period: c.sample_period,
-            window: c.window,
-            onset_threshold: c.onset.threshold,
-            onset_confirm: c.onset.confirm,
-            folds: c.fit.folds,
-            max_relative_error: c.fit.max_relative_error,
-            offset_range: [c.offset_range.0, c.offset_range.1],
-            refit_period: 1.0,
-            min_window_fill: 0.25,
-            state_rate: 100.0,
-            stale_after: 0.05,
-            dead_after: 2.0,
-            augmented_model: None,
-            surface_position: None,
-            use_sim_time: false,
-        }
-    }
-}
-
-impl Params {
-    pub fn estimator_config(&self) -> EstimatorConfig {
-        EstimatorConfig {
-            normal: self.normal.into(),
-            sample_period: self.sample_period,
-            window: self.window,
-            onset: OnsetConfig { threshold: self.onset_threshold, confirm: self.onset_confirm },
-            fit: FitConfig { folds: self.folds, max_relative_error: self.max_relative_error, ..Default::default() },
-            offset_range: (self.offset_range[0], self.offset_range[1]),
-        }
-    }
-
-    /// The node these parameters describe: refitting on their schedule from reading time `from` on, with
-    /// the effects of `augmented_model` held at `surface_position` if they are given.
-    pub fn estimator(&self, from: f64) -> Result<ContactEstimatorNode, ContactError> {
-        let node = ContactEstimatorNode::new(self.estimator_config())?.with_refits(self, from);
-        match &self.augmented_model {
-            Some(model) => node.with_effects(model.clone(), self.surface_position.map(Vector3::from)),
-            None => Ok(node),
-        }
-    }
-}
-
-impl crate::runtime::params::NodeParams for Params {
-    fn declare(&self, d: &mut crate::runtime::params::Declarations) {
-        d.direction("normal", self.normal, "contact direction n in the world");
-        d.above(
-            "sample_period",
-            self.sample_period,
-            (0.0, 1.0),
-            "time between window samples (the force-control paper: 10 ms) [s]",
-        );
-        d.integer(
-            "window",
-            self.window as i64,
-            (10 * self.folds.max(1) as i64, 1_000_000),
-            "samples in the window (the force-control paper: 1200; at least 10 per fold)",
-        );
-        d.onset(self.onset_threshold, self.onset_confirm);
-        d.integer("folds", self.folds as i64, (1, 100), "cross-validation folds of the model selection");
-        d.above(
-            "max_relative_error",
-            self.max_relative_error,
-            (0.0, 100.0),
-            "excitation guard: largest relative standard error of an identified parameter",
-        );
-        let [lo, hi] = self.offset_range;
-        let ordered = if lo.is_finite() && hi.is_finite() && lo < hi {
-            Ok(())
-        } else {
-            Err(format!("{:?} is not [low, high]", self.offset_range))
-        };
-        d.rule(
-            "offset_range",
-            ordered,
-            "[low, high], low < high [m]",
-            "where to search for the undeformed surface relative to the onset position, along n [m]",
-        );
-        d.above(
-            "refit_period",
-            self.refit_period,
-            (0.0, 3600.0),
-            "time between refits, each published on /contact_estimator/model [s]",
-        );
-        d.within(
-            "min_window_fill",
-            self.min_window_fill,
-            (0.0, 1.0),
-            "no model is published before the window is this full",
-        );
-        d.above("state_rate", self.state_rate, (0.0, 1000.0), "/contact_estimator/state rate [Hz]");
-        d.above(
-            "stale_after",
-            self.stale_after,
-            (0.0, 10.0),
-            "a pose older than this when a force arrives is not paired with it [s]",
-        );
-        crate::runtime::liveness::declare_dead_after(
-            d,
-            self.dead_after,
-            0.0,
-            "/ft_sensor/wrench or /lwr/ee_pose silent this long after they flowed (both are due at 1 kHz): their publisher or the middleware is dead, and the node exits with an error [s]",
-        );
-        d.rule(
-            "augmented_model",
-            self.augmented_model.as_ref().map_or(Ok(()), |m| m.plausible().map_err(|e| e.to_string())),
-            "null, or a plausible contact model with named effects",
-            "the model the discrepancy workflow augmented (`softcontact discrepancy FILE --out DIR` writes it into DIR/NAME.params.yaml): every refit keeps its kind, exponents and effects' time constants and refits their amplitudes",
-        );
-        let surface = match (self.surface_position, &self.augmented_model) {
-            (Some(p), _) if !(p.iter().all(|v| v.is_finite()) && Vector3::from(p).norm() <= MAX_SURFACE_DISTANCE) => {
-                Err(format!("{p:?} is not finite or farther than {MAX_SURFACE_DISTANCE} m from the base"))
-            }
-            (Some(_), None) => Err("it places the surface of an augmented_model, and there is none".into()),
-            _ => Ok(()),
-        };
-        d.rule(
-            "surface_position",
-            surface,
-            "null, or a point [x, y, z] within 5 m of the base [m], with augmented_model",
-            "where the discrepancy workflow placed the undeformed surface in the world: the refits of augmented_model hold it there (a window that never leaves the surface cannot tell its place from a sensor offset) [m]",
-        );
-        d.use_sim_time();
-        // The estimator checks its configuration as it is built.
-        d.together(self.estimator(0.0).map(|_| ()).map_err(|e| e.to_string()));
-    }
-}
-
 /// /contact_estimator/model as the message the nodes exchange.
 pub type ModelMsg = softcontact_msgs::softcontact_msgs::ContactModel;
 
@@ -478,84 +329,6 @@ pub fn model_from_msg(msg: &ModelMsg) -> Result<(ContactModel, Vector3<f64>), Co
         return Err(ContactError::InvalidConfig("contact position is not finite".into()));
     }
     Ok((model, position))
-}
-
-/// One force reading made into what the estimator takes (docs/conventions.md): the sensor's force
-/// rotated into the world through the newest tool pose, its normal component f = −F·n ≥ 0, and the
-/// tool's position and velocity. The node and `softcontact identify` pair readings the same way.
-#[derive(Debug, Clone)]
-pub struct ForcePairing {
-    /// The normal and the sensor's mounting (its `tool_to_sensor` from /tf_static, or the URDF).
-    pub geometry: ContactGeometry,
-    stale_after: f64,
-    /// Tool position, rotation and the time they were taken [s].
-    pose: Option<(Vector3<f64>, UnitQuaternion<f64>, f64)>,
-    velocity: Vector3<f64>,
-    /// Without twists the velocity is the difference of successive poses.
-    twists_seen: bool,
-}
-
-/// A force reading paired with the tool's state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Paired {
-    pub position: Vector3<f64>,
-    pub velocity: Vector3<f64>,
-    /// The contact's normal force, f ≥ 0 \[N\].
-    pub normal_force: f64,
-    /// The sensor's reading along the normal, unclamped \[N\]: in free space its noise and bias.
-    pub normal_reading: f64,
-    /// The whole force on the hand in the world \[N\] and the sensor's orientation (sensor → world).
-    pub force: Vector3<f64>,
-    pub sensor_rotation: UnitQuaternion<f64>,
-}
-
-impl ForcePairing {
-    /// `None` for a zero or non-finite normal.
-    pub fn new(tool_to_sensor: UnitQuaternion<f64>, normal: Vector3<f64>, stale_after: f64) -> Option<Self> {
-        Some(Self {
-            geometry: ContactGeometry::new(normal, tool_to_sensor)?,
-            stale_after,
-            pose: None,
-            velocity: Vector3::zeros(),
-            twists_seen: false,
-        })
-    }
-
-    pub fn pose(&mut self, t: f64, position: Vector3<f64>, rotation: UnitQuaternion<f64>) {
-        if !self.twists_seen
-            && let Some((previous, _, t0)) = self.pose
-            && t > t0
-        {
-            self.velocity = (position - previous) / (t - t0);
-        }
-        self.pose = Some((position, rotation, t));
-    }
-
-    pub fn twist(&mut self, linear: Vector3<f64>) {
-        self.twists_seen = true;
-        self.velocity = linear;
-    }
-
-    /// The reading at `t` of the force on the sensor in its frame; `None` without a pose at most
-    /// `stale_after` old, or for a non-finite force.
-    pub fn force(&self, t: f64, force_in_sensor: Vector3<f64>) -> Option<Paired> {
-        let (position, rotation, seen) = self.pose?;
-        if t - seen > self.stale_after || !force_in_sensor.iter().all(|v| v.is_finite()) {
-            return None;
-        }
-        let geometry = &self.geometry;
-        let sensor_rotation = geometry.sensor_rotation(&rotation);
-        let force = geometry.world_force(&rotation, &force_in_sensor);
-        let normal_reading = geometry.normal_reading(&force);
-        Some(Paired {
-            position,
-            velocity: self.velocity,
-            normal_force: normal_reading.max(0.0),
-            normal_reading,
-            force,
-            sensor_rotation,
-        })
-    }
 }
 
 #[cfg(test)]

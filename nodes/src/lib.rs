@@ -9,7 +9,6 @@ pub mod contact_estimator;
 pub mod deformation_controller;
 pub mod ft_sensor;
 pub mod geometry;
-pub mod identify;
 pub mod lwr_driver;
 pub mod messages;
 pub mod runtime;
