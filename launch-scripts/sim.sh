@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The simulated cell and the four nodes: sim_arm, lwr_driver, ft_sensor, contact_estimator,
+# The simulated cell (sim_arm) and the four nodes: lwr_driver, ft_sensor, contact_estimator,
 # deformation_controller, with the parameter files of config/. Options (see launch.sh --help):
 #   --isolated        everything in a network namespace with only loopback (tests, the --graph demo)
 #   --lockstep        faster than real time on /clock

@@ -28,8 +28,8 @@ use softcontact_nodes::deformation_controller::{ControllerConfig, DeformationCon
 use softcontact_sim::{FtSensorConfig, SimConfig, SurfaceConfig};
 use softcontact_simcell::cell::Cell;
 
-use crate::identify_cmd;
 use crate::discrepancy_cmd::{Analysis, DiscrepancyArgs};
+use crate::identify_cmd;
 
 const FORCE_COMMAND: &str = topics::FORCE_COMMAND.name;
 const JOINT_STATES: &str = topics::JOINT_STATES.name;

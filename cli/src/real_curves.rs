@@ -10,8 +10,8 @@ use serde::Deserialize;
 use serde_json::json;
 use softcontact_discrepancy::Remaining;
 
-use crate::identify_cmd::IdentifyArgs;
 use crate::discrepancy_cmd::{self, DiscrepancyArgs};
+use crate::identify_cmd::IdentifyArgs;
 use crate::table::si;
 
 #[derive(Debug, Deserialize)]

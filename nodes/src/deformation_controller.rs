@@ -8,6 +8,7 @@ pub mod component;
 pub mod interface;
 mod node;
 mod params;
+pub mod standalone;
 
 pub use component::InProcessController;
 pub use interface::{ControllerInterface, PRESS_ACTION};

@@ -42,8 +42,14 @@
 //! - The watchdog counts answered measurements (each one sample time), whatever their sequence
 //!   numbers say: an out-of-order counter is counted, never a way to keep an old command alive.
 //! - A measurement that is not physically plausible (sample time outside 0.5–100 ms, a joint beyond its
-//!   limit by more than [`POSITION_MARGIN`], a KRC gravity torque beyond twice the joint's limit) is
-//!   refused unanswered: the KRC's own fallback takes over.
+//!   limit by more than [`POSITION_MARGIN`], a KRC gravity torque beyond twice the joint's limit, or, in
+//!   command mode, one that stepped faster than [`GRAVITY_RATE`] allows since the last measurement) is
+//!   refused unanswered: the KRC's own fallback takes over. The driver sends the total torque less the
+//!   KRC's gravity, so a gravity that jumps would step the torque at the arm past any rate limit.
+//! - Outside torque mode every answer is a stiff spring (the hold's stiffness): mirroring the KRC's own
+//!   command in monitor mode, and held where the arm was when the driver began to hold in any other
+//!   strategy, so that no answer, applied when it should not be, lets the arm float or follow its own
+//!   drift.
 //! - A command that is not 7 finite torques within the joints' limits makes the driver hold at once (the
 //!   controller sends an empty command when its tick failed); a command from another session, or older
 //!   than the watchdog by its stamp, is refused and the previous one ages out.
@@ -99,6 +105,12 @@ pub const OPERATOR_RESTART_CYCLES: u32 = 100;
 pub const ALL_DRIVES: u16 = 0x7F;
 /// More lost measurements in a row than this is no longer a gap but a broken counter.
 const MAX_LOST_IN_A_ROW: i32 = 100;
+/// The fastest the KRC's gravity torque may change in command mode \[N·m/s\], and the least step it
+/// is allowed per measurement \[N·m\]. Gravity follows the joint positions: at the joints' velocity
+/// limits the LWR IV's changes by at most about 130 N·m/s (∂g/∂q below 70 N·m/rad, 1.9 rad/s), so a
+/// faster change is no KRC's gravity. Steps are counted over at most 10 lost measurements.
+pub const GRAVITY_RATE: f64 = 500.0;
+pub const GRAVITY_STEP_AT_LEAST: f64 = 1.0;
 
 /// Why a command or datagram was refused.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -275,6 +287,8 @@ pub struct LwrDriver {
     restart_seen: u32,
     /// The torque beyond the KRC's gravity of the last commanded cycle [N·m].
     last_torque: [f32; 7],
+    /// The KRC's gravity torque in the last measurement taken (the step check's reference).
+    krc_gravity: Option<[f32; 7]>,
     pub counters: DriverCounters,
 }
 
@@ -308,6 +322,7 @@ impl LwrDriver {
             last_state: InterfaceState::Off,
             restart_seen: 0,
             last_torque: [0.0; 7],
+            krc_gravity: None,
             counters: DriverCounters::default(),
         }
     }
@@ -373,6 +388,7 @@ impl LwrDriver {
         self.torque_mode = false;
         self.session_used = false;
         self.last_torque = [0.0; 7];
+        self.krc_gravity = None;
     }
 
     /// Why the driver would apply no torque on `m` (the fault as latched now).
@@ -500,6 +516,27 @@ impl LwrDriver {
                 return implausible(format!("KRC gravity {g} N·m on joint {}", i + 1));
             }
         }
+        self.check_gravity_step(m)
+    }
+
+    /// In command mode, the KRC's gravity changed since the last measurement by no more than
+    /// [`GRAVITY_RATE`] allows. Outside command mode no torque is applied, and the reference follows.
+    fn check_gravity_step(&self, m: &fri::Measurement) -> Result<(), DriverError> {
+        let (Some(previous), Some((prev_seq, _))) = (self.krc_gravity, self.last_msr) else { return Ok(()) };
+        if m.intf.state != InterfaceState::Command {
+            return Ok(());
+        }
+        let steps = fri::sequence_gap(prev_seq, m.header.send_seq).clamp(0, 9) as f64 + 1.0;
+        let allowed = (GRAVITY_RATE * m.intf.desired_msr_sample_time as f64 * steps).max(GRAVITY_STEP_AT_LEAST);
+        for (i, (now, before)) in m.data.gravity.iter().zip(previous).enumerate() {
+            let step = (now - before) as f64;
+            if !(step.abs() <= allowed) {
+                return Err(DriverError::Implausible(format!(
+                    "KRC gravity on joint {} stepped by {step:.3} N·m in one measurement (at most {allowed:.3})",
+                    i + 1
+                )));
+            }
+        }
         Ok(())
     }
 
@@ -528,6 +565,7 @@ impl LwrDriver {
             return Err(e);
         }
         self.counters.measurements += 1;
+        self.krc_gravity = Some(m.data.gravity);
         self.sample_time = m.intf.desired_msr_sample_time as f64;
         let q: [f64; 7] = std::array::from_fn(|i| m.data.msr_jnt_pos[i] as f64);
         let seq = m.header.send_seq;
@@ -669,17 +707,23 @@ impl LwrDriver {
                 false
             }
             _ if !in_command => {
-                // Mirror what the KRC commands itself, so that entering command mode is seamless.
+                // Mirror what the KRC commands itself, so that entering command mode is seamless, as a
+                // stiff spring: applied by a KRC that is commanding after all, it holds the arm.
                 reply.jnt_pos = std::array::from_fn(|i| m.data.cmd_jnt_pos[i] + m.data.cmd_jnt_pos_fri_offset[i]);
+                reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
                 self.hold = None;
                 self.last_torque = [0.0; 7];
                 false
             }
             _ if !joint_impedance => {
-                // Position control, Cartesian impedance or anything else: the measured position.
-                reply.jnt_pos = m.data.msr_jnt_pos;
+                // Position control, Cartesian impedance or anything else: where the arm was when the
+                // driver began to hold, never the measured position of the moment (a set point that follows the
+                // arm holds nothing), with no torque of any command.
+                let config = &self.config;
+                let hold = self.hold.get_or_insert_with(|| Hold::new(q, self.cycle, &[0.0; 7], config));
+                (hold.preload, hold.rest) = ([0.0; 7], [0.0; 7]);
+                reply.jnt_pos = hold.q.map(|v| v as f32);
                 reply.jnt_stiffness = self.config.hold_stiffness.map(|v| v as f32);
-                self.hold = None;
                 self.last_torque = [0.0; 7];
                 true
             }

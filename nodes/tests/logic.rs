@@ -67,6 +67,70 @@ fn out_of_command_mode_the_driver_mirrors_the_krc_and_asks_to_start() {
     assert_eq!((reply.krl.int[0], reply.krl.int[1]), (30, 1));
 }
 
+/// A KRC that applies a monitor-mode answer (a forged "monitor" while it commands, or the answer it
+/// takes into command mode) gets a stiff spring at its own commanded position, never a floating arm.
+#[test]
+fn a_monitor_answer_applied_by_a_commanding_krc_holds_the_arm_instead_of_floating_it() {
+    let mut d = LwrDriver::new(DriverParams::default());
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    d.set_command(&[1.0, -28.0, 0.5, 12.0, -0.2, 1.0, 0.3]).unwrap();
+    let (reply, _) = d.handle(&measurement(2, InterfaceState::Monitor, Q, G)).unwrap();
+    let stiff = DriverParams::default().hold_stiffness.map(|k| k as f32);
+    assert_eq!(reply.jnt_stiffness, stiff, "the hold's stiffness");
+    assert_eq!(reply.add_jnt_trq, [0.0; 7], "no torque of the command");
+}
+
+/// In position control (or any strategy but joint impedance) the set point is where the arm was when
+/// the driver began to hold (here the first measurement, without a command): measured positions that drift — a KRC applying it in joint impedance after all, a
+/// forged measurement — never drag it along.
+#[test]
+fn outside_joint_impedance_the_set_point_stays_where_the_arm_was_however_the_measurement_drifts() {
+    let mut d = LwrDriver::new(DriverParams::default());
+    d.handle(&measurement(1, InterfaceState::Command, Q, G)).unwrap();
+    for seq in 2..300u16 {
+        let drift = 1e-4 * seq as f32;
+        let datagram = commanding_with(seq, |m| {
+            m.robot.control = fri::ControlMode::Position;
+            m.data.msr_jnt_pos = Q.map(|q| q + drift);
+        });
+        let (reply, out) = d.handle(&datagram).unwrap();
+        assert!(out.holding);
+        for (i, (sent, first)) in reply.jnt_pos.iter().zip(Q).enumerate() {
+            assert!((sent - first).abs() < 1e-6, "joint {i}: set point {sent} followed the drift");
+        }
+    }
+}
+
+/// The driver sends the total torque less the KRC's gravity: a gravity that jumps between two
+/// measurements (+60 N·m on A2 in one cycle) would step the torque at the arm past any rate limit. In
+/// command mode it is refused unanswered; a gravity that changes as fast as the arm can move it is
+/// taken, and outside command mode (no torque applied) the reference follows the KRC.
+#[test]
+fn a_krc_gravity_that_jumps_in_command_mode_is_refused_and_one_that_follows_the_arm_is_taken() {
+    let mut d = LwrDriver::new(DriverParams::default());
+    let with_gravity = |seq: u16, state, offset: f32| {
+        let mut g = G;
+        g[1] += offset;
+        measurement(seq, state, Q, g)
+    };
+    d.handle(&with_gravity(1, InterfaceState::Command, 0.0)).unwrap();
+    // 0.4 N·m a millisecond: faster than the LWR's gravity changes at its velocity limits.
+    for seq in 2..50u16 {
+        d.handle(&with_gravity(seq, InterfaceState::Command, 0.4 * seq as f32)).unwrap();
+    }
+    for (seq, jump) in [(50u16, 60.0), (51, -100.0), (52, 150.0), (53, 3.0)] {
+        let err = d.handle(&with_gravity(seq, InterfaceState::Command, 0.4 * 49.0 + jump)).unwrap_err();
+        assert!(matches!(err, DriverError::Implausible(_)) && err.to_string().contains("gravity"), "{jump}: {err}");
+    }
+    assert_eq!(d.counters.implausible, 4);
+    // The next measurement like the last one taken is answered; a lost measurement widens the step.
+    d.handle(&with_gravity(54, InterfaceState::Command, 0.4 * 49.0)).unwrap();
+    d.handle(&with_gravity(57, InterfaceState::Command, 0.4 * 49.0 + 1.4)).unwrap();
+    // Out of command mode the KRC's gravity is taken whatever it did (a new load, set in KRL).
+    d.handle(&with_gravity(58, InterfaceState::Monitor, 40.0)).unwrap();
+    d.handle(&with_gravity(59, InterfaceState::Command, 40.0)).unwrap();
+}
+
 #[test]
 fn a_bad_command_is_refused_and_the_driver_holds_at_once() {
     // Safety class 1: a non-finite value anywhere means hold, never "repeat the last torque".

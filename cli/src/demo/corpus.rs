@@ -15,8 +15,8 @@ use softcontact_sim::FtSensorConfig;
 
 use super::experiment::{Plan, SurfaceSpec, run_hold, run_surface};
 use super::record::Recorder;
-use crate::identify_cmd::IdentifyArgs;
 use crate::discrepancy_cmd::{self, DiscrepancyArgs};
+use crate::identify_cmd::IdentifyArgs;
 
 /// One recording to make and what the workflow should answer.
 pub struct Case {
