@@ -104,7 +104,7 @@ pub enum BenchCommand {
         reps: usize,
     },
     /// The discrepancy workflow: its hidden-effect corpus made in the lockstep cell (the detection table
-    /// and the goals), and the whole workflow's time on a 1 kHz recording on one core.
+    /// and the goals), and the whole workflow's time on a 1 kHz recording (one thread, and a second for the delay's screen where there is a second core).
     Discrepancy {
         /// Threads for the corpus (each case is an independent cell).
         #[arg(long, default_value_t = 2, value_parser = crate::ranges::count(1, 64))]

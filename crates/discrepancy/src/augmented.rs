@@ -145,7 +145,7 @@ pub(crate) fn uncertainty(
             fit::columns(d, &s).swap_remove(j)
         };
         let (up, dn) = (col(sh * (1.0 + eps)), col(sh * (1.0 - eps)));
-        let jac: Vec<f64> = up.iter().zip(&dn).map(|(a, b)| fit.beta[j] * (a - b) / (2.0 * eps * sh)).collect();
+        let jac = up.iter().zip(dn.iter()).map(|(a, b)| fit.beta[j] * (a - b) / (2.0 * eps * sh)).collect();
         let mut cols = fit::columns(d, st);
         cols.push(jac);
         let f = fit::fit_columns(d, &cols);
@@ -177,7 +177,7 @@ pub(crate) fn uncertainty(
         }
         Family::TimeDelay => {
             let mut cols = fit::columns(d, st);
-            cols.push(fit::negative_rate(&d.time, &fit.pred));
+            cols.push(fit::negative_rate(&d.time, &fit.pred).into());
             let f = fit::fit_columns(d, &cols);
             u.insert("delay_s".into(), z * f.se[f.se.len() - 1]);
         }

@@ -54,7 +54,7 @@ pub(crate) fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: 
             let linear = |s: &Structure| {
                 let base = fit::fit(d, s);
                 let mut cols = fit::columns(d, s);
-                cols.push(fit::negative_rate(&d.time, &base.pred));
+                cols.push(fit::negative_rate(&d.time, &base.pred).into());
                 fit::fit_columns(d, &cols)
             };
             let fd = linear(&st);

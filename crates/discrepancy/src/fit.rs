@@ -6,10 +6,14 @@ use nalgebra::{DMatrix, DVector};
 use std::collections::HashMap;
 use std::hash::{DefaultHasher, Hash, Hasher};
 use std::ops::Range;
+use std::sync::Arc;
 
 use softcontact_contact::{ContactModel, adhesion_share, maxwell_step, maxwell_step_with_decay, next_adhesion_peak};
 
 use crate::Series;
+
+/// One column of the design, one value a sample; shared, so that a cached column is handed out without a copy (and a screen on another thread may hold one).
+pub(crate) type Col = Arc<[f64]>;
 
 /// An augmentation term with its shape parameter fixed; each adds one column (one linear amplitude).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,7 +88,7 @@ impl Structure {
 
 /// Samples in contact where the surface force Σ βⱼ·colⱼ over the surface columns (not the sensor's, nor
 /// those `skip` names) is ≤ 0; `raw` unmasked and undelayed.
-fn surface_clamped(terms: &[Term], raw: &[Vec<f64>], beta: &[f64], skip: impl Fn(Term) -> bool) -> Vec<bool> {
+fn surface_clamped(terms: &[Term], raw: &[Col], beta: &[f64], skip: impl Fn(Term) -> bool) -> Vec<bool> {
     let surface = |j: usize| j < 2 || !(terms[j - 2].unclamped() || skip(terms[j - 2]));
     (0..raw[0].len())
         .map(|i| {
@@ -186,6 +190,26 @@ impl<'a> Data<'a> {
     }
 }
 
+impl<'a> Data<'a> {
+    /// The same series and precomputed vectors with empty caches, for a screen on another thread (the
+    /// caches are transparent: a cached column or product is the same arithmetic as a fresh one).
+    pub fn detached(&self) -> Data<'a> {
+        Data {
+            s: self.s,
+            time: self.time.clone(),
+            since_tare: self.since_tare.clone(),
+            dt: self.dt.clone(),
+            folds: self.folds.clone(),
+            force_squares: self.force_squares.clone(),
+            clamped: self.clamped.clone(),
+            lateral_axis: self.lateral_axis,
+            lateral: self.lateral.clone(),
+            cache: Default::default(),
+            products: Default::default(),
+        }
+    }
+}
+
 #[inline]
 fn signed_pow(x: f64, c: f64) -> f64 {
     if c == 1.0 { x } else { x.signum() * x.abs().powf(c) }
@@ -208,7 +232,7 @@ fn pow(z: f64, e: f64) -> f64 {
 
 /// The raw (unscaled) columns of a structure: [zᵃ, zᵇ·sgn(ż)|ż|ᶜ, terms…], each zero out of contact
 /// except the sensor terms.
-pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Vec<f64>> {
+pub(crate) fn columns(d: &Data, st: &Structure) -> Vec<Col> {
     columns_masked(d, st, &st.clamped)
 }
 
@@ -226,9 +250,9 @@ enum Column {
 /// delayed fit or a re-mask reads the same columns under other masks.
 #[derive(Default)]
 pub(crate) struct ColumnCache {
-    columns: Vec<(Column, [f64; 5], Vec<f64>)>,
+    columns: Vec<(Column, [f64; 5], Col)>,
     /// The columns as the design has them (masked and delayed), by [`ColumnId`], most recently used last.
-    designed: Vec<(ColumnId, Vec<f64>)>,
+    designed: Vec<(ColumnId, Col)>,
 }
 
 /// Designed columns a [`ColumnCache`] keeps (12 MB at 60 000 samples).
@@ -283,12 +307,12 @@ fn mask_hash(mask: &[bool]) -> u64 {
 const CACHED_COLUMNS: usize = 40;
 
 /// [`columns`] with the given samples masked where the law clamps (instead of the structure's).
-fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Vec<f64>> {
+fn columns_masked(d: &Data, st: &Structure, clamped: &[bool]) -> Vec<Col> {
     columns_with_ids(d, st, clamped).0
 }
 
 /// [`columns_masked`], and each column's identity.
-fn columns_with_ids(d: &Data, st: &Structure, clamped: &[bool]) -> (Vec<Vec<f64>>, Vec<ColumnId>) {
+fn columns_with_ids(d: &Data, st: &Structure, clamped: &[bool]) -> (Vec<Col>, Vec<ColumnId>) {
     let design = design_of(st, clamped);
     let mut zeff = None;
     let cols = design.iter().map(|&(id, key, column_id)| design_column(d, st, clamped, id, key, column_id, &mut zeff));
@@ -325,12 +349,12 @@ fn design_column(
     key: [f64; 5],
     column_id: ColumnId,
     zeff: &mut Option<Vec<f64>>,
-) -> Vec<f64> {
+) -> Col {
     let mut caches = d.cache.borrow_mut();
     let ColumnCache { columns: cache, designed } = &mut *caches;
     if let Some(i) = designed.iter().position(|(c, _)| *c == column_id) {
         let hit = designed.remove(i);
-        let col = hit.1.clone();
+        let col = Arc::clone(&hit.1);
         designed.push(hit);
         return col;
     }
@@ -347,25 +371,25 @@ fn design_column(
             if cache.len() >= CACHED_COLUMNS {
                 cache.remove(0);
             }
-            cache.push((id, key, column(d, st, zeff, id)));
+            cache.push((id, key, column(d, st, zeff, id).into()));
             cache.len() - 1
         }
     };
     let unmasked = &cache[index].2;
     debug_assert_eq!(unmasked.len(), clamped.len(), "a mask of every sample");
-    let mut col = if matches!(id, Column::Term(t) if t.unclamped()) {
-        unmasked.clone()
+    let mut col: Col = if matches!(id, Column::Term(t) if t.unclamped()) {
+        Arc::clone(unmasked)
     } else {
         unmasked.iter().zip(clamped).map(|(&v, &c)| if c { 0.0 } else { v }).collect()
     };
     // The sensor reads everything late: clamped where the surface lets go, then delayed.
     if st.delay > 0.0 {
-        col = delayed(&d.time, &col, st.delay);
+        col = delayed(&d.time, &col, st.delay).into();
     }
     if designed.len() >= DESIGNED_COLUMNS {
         designed.remove(0);
     }
-    designed.push((column_id, col.clone()));
+    designed.push((column_id, Arc::clone(&col)));
     col
 }
 
@@ -524,7 +548,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     lanes.iter().sum::<f64>() + tail
 }
 
-pub(crate) fn fit_columns(d: &Data, cols: &[Vec<f64>]) -> Fit {
+pub(crate) fn fit_columns(d: &Data, cols: &[Col]) -> Fit {
     fit_columns_held_out(d, cols, None, None)
 }
 
@@ -554,7 +578,7 @@ struct Products {
     with_force: Vec<Vec<f64>>,
 }
 
-fn products(d: &Data, cols: &[Vec<f64>], ids: Option<&[ColumnId]>) -> Products {
+fn products(d: &Data, cols: &[Col], ids: Option<&[ColumnId]>) -> Products {
     let y = &d.s.f;
     let per_fold =
         |a: &[f64], b: &[f64]| -> Vec<f64> { d.folds.iter().map(|r| dot(&a[r.clone()], &b[r.clone()])).collect() };
@@ -593,18 +617,13 @@ enum Extent {
     HeldOutOnly,
 }
 
-fn fit_columns_held_out(
-    d: &Data,
-    cols: &[Vec<f64>],
-    ids: Option<&[ColumnId]>,
-    per_sample: Option<&mut Vec<f64>>,
-) -> Fit {
+fn fit_columns_held_out(d: &Data, cols: &[Col], ids: Option<&[ColumnId]>, per_sample: Option<&mut Vec<f64>>) -> Fit {
     fit_columns_to(d, cols, ids, per_sample, Extent::Full)
 }
 
 fn fit_columns_to(
     d: &Data,
-    cols: &[Vec<f64>],
+    cols: &[Col],
     ids: Option<&[ColumnId]>,
     mut per_sample: Option<&mut Vec<f64>>,
     extent: Extent,
@@ -724,12 +743,12 @@ fn fit_to(d: &Data, st: &Structure, extent: Extent) -> Fit {
         let needed: Vec<bool> = (0..ids.len()).map(needed).collect();
         drop(products);
         let mut zeff = None;
-        let cols: Vec<Vec<f64>> = design
+        let cols: Vec<Col> = design
             .iter()
             .zip(&needed)
             .map(|(&(id, key, column_id), &needed)| match needed {
                 true => design_column(d, st, clamped, id, key, column_id, &mut zeff),
-                false => vec![],
+                false => Arc::from([]),
             })
             .collect();
         fit_columns_to(d, &cols, Some(&ids), None, extent)

@@ -126,7 +126,7 @@ fn gauss_newton_shapes(
             let mut up = st.clone();
             up.terms[j] = scaled(st.terms[j], H.exp());
             let moved = fit::columns(d, &up).swap_remove(j + 2);
-            cols.push(moved.iter().zip(&cols[j + 2]).map(|(u, c)| (u - c) / H).collect());
+            cols.push(moved.iter().zip(cols[j + 2].iter()).map(|(u, c)| (u - c) / H).collect());
         }
         let linear = fit::fit_columns(d, &cols);
         let mut step: Vec<f64> = shaped
