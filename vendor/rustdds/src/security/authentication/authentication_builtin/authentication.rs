@@ -29,7 +29,7 @@ use crate::{
 };
 use super::{
   types::{
-    parse_signature_algo_name_to_ring, BuiltinAuthenticatedPeerCredentialToken,
+    algo_name_without_nul, parse_signature_algo_name_to_ring, BuiltinAuthenticatedPeerCredentialToken,
     BuiltinIdentityToken, DH_MODP_KAGREE_ALGO_NAME, ECDH_KAGREE_ALGO_NAME,
     QOS_IDENTITY_CA_PROPERTY_NAME, QOS_IDENTITY_CERTIFICATE_PROPERTY_NAME,
     QOS_PASSWORD_PROPERTY_NAME, QOS_PRIVATE_KEY_PROPERTY_NAME,
@@ -553,9 +553,10 @@ impl Authentication for AuthenticationBuiltin {
 
     // Check which key agreement algorithm the remote has chosen & generate our own
     // key pair
-    let dh2_keys = if request.c_kagree_algo == *DH_MODP_KAGREE_ALGO_NAME {
+    let requested_kagree_algo = algo_name_without_nul(&request.c_kagree_algo);
+    let dh2_keys = if requested_kagree_algo == DH_MODP_KAGREE_ALGO_NAME.as_bytes() {
       DHKeys::new_modp_keys()?
-    } else if request.c_kagree_algo == *ECDH_KAGREE_ALGO_NAME {
+    } else if requested_kagree_algo == ECDH_KAGREE_ALGO_NAME.as_bytes() {
       DHKeys::new_ec_keys(&self.secure_random_generator)?
     } else {
       return Err(create_security_error_and_log!(
@@ -715,125 +716,153 @@ impl Authentication for AuthenticationBuiltin {
         // We are the initiator, and expect a reply.
         // Result is that we produce a MassageToken (i.e. send the final message)
         // and the handshake results (shared secret)
-        let reply =
-          BuiltinHandshakeMessageToken::try_from(handshake_message_in)?.extract_reply()?;
+        // softcontact patch (VENDORED.md): every check of the reply runs before the key pair is used,
+        // and a reply that fails one leaves the handshake waiting for the right reply. The state was
+        // moved out above; dropped on an error, a single malformed or stale reply (a stranger's, or one
+        // with a field another vendor leaves out) wedged the handshake with that participant for good.
+        let checked = (|| -> SecurityResult<_> {
+          let reply =
+            BuiltinHandshakeMessageToken::try_from(handshake_message_in)?.extract_reply()?;
 
-        // "Verifies Cert2 with the configured Identity CA"
-        // So Cert2 is now `request.c_id`
-        let cert2 = Certificate::from_pem(reply.c_id.as_ref())?;
+          // "Verifies Cert2 with the configured Identity CA"
+          // So Cert2 is now `request.c_id`
+          let cert2 = Certificate::from_pem(reply.c_id.as_ref())?;
 
-        // Verify that 2's identity cert checks out against CA.
-        cert2.verify_signed_by_certificate(&local_info.identity_ca)?;
+          // Verify that 2's identity cert checks out against CA.
+          cert2.verify_signed_by_certificate(&local_info.identity_ca)?;
 
-        // Verify that the remote GUID is as specified by the spec.
-        // Note that spec does say that this check needs to be done here. But it seems
-        // that it has just been forgotten, since otherwise only the other
-        // participant would check the other's guid (in begin_handshake_reply)
-        let remote_pdata =
-          discovery::spdp_participant_data::SpdpDiscoveredParticipantData::from_pl_cdr_bytes(
-            &reply.c_pdata,
-            RepresentationIdentifier::CDR_BE,
-          )
-          .map_err(|e| {
-            create_security_error_and_log!(
-              "Failed to deserialize SpdpDiscoveredParticipantData from remote: {e}"
+          // Verify that the remote GUID is as specified by the spec.
+          // Note that spec does say that this check needs to be done here. But it seems
+          // that it has just been forgotten, since otherwise only the other
+          // participant would check the other's guid (in begin_handshake_reply)
+          let remote_pdata =
+            discovery::spdp_participant_data::SpdpDiscoveredParticipantData::from_pl_cdr_bytes(
+              &reply.c_pdata,
+              RepresentationIdentifier::CDR_BE,
             )
+            .map_err(|e| {
+              create_security_error_and_log!(
+                "Failed to deserialize SpdpDiscoveredParticipantData from remote: {e}"
+              )
+            })?;
+
+          validate_remote_guid(remote_pdata.participant_guid, &cert2).map_err(|e| {
+            create_security_error_and_log!("Remote GUID does not comply with the spec: {e}")
           })?;
 
-        validate_remote_guid(remote_pdata.participant_guid, &cert2).map_err(|e| {
-          create_security_error_and_log!("Remote GUID does not comply with the spec: {e}")
-        })?;
+          // TODO: verify ocsp_status / status of IdentityCredential
 
-        // TODO: verify ocsp_status / status of IdentityCredential
-
-        if challenge1 != reply.challenge1 {
-          return Err(create_security_error_and_log!(
-            "Challenge 1 mismatch on authentication reply"
-          ));
-        }
-
-        if let Some(received_hash_c1) = reply.hash_c1 {
-          if hash_c1 != received_hash_c1 {
+          if challenge1 != reply.challenge1 {
             return Err(create_security_error_and_log!(
-              "Hash C1 mismatch on authentication reply"
+              "Challenge 1 mismatch on authentication reply"
             ));
-          } else { /* ok */
           }
-        } else {
-          debug!("Cannot compare hash C1 in process_handshake. Reply did not have any.");
-        }
 
-        // Compute hash(C2) from received data.
-        let c2_properties: Vec<BinaryProperty> = vec![
-          BinaryProperty::with_propagate("c.id", reply.c_id.clone()),
-          BinaryProperty::with_propagate("c.perm", reply.c_perm.clone()),
-          BinaryProperty::with_propagate("c.pdata", reply.c_pdata.clone()),
-          BinaryProperty::with_propagate("c.dsign_algo", reply.c_dsign_algo.clone()),
-          BinaryProperty::with_propagate("c.kagree_algo", reply.c_kagree_algo.clone()),
-        ];
-        let c2_hash_recomputed = Sha256::hash(
-          &to_vec::<Vec<BinaryProperty>, BigEndian>(&c2_properties).map_err(|e| SecurityError {
-            msg: format!("Error serializing C2: {e}"),
-          })?,
-        );
-
-        if let Some(received_hash_c2) = reply.hash_c2 {
-          if received_hash_c2.as_ref() == c2_hash_recomputed.as_ref() {
-            // hashes match, safe to proceed
+          if let Some(received_hash_c1) = &reply.hash_c1 {
+            if hash_c1 != *received_hash_c1 {
+              return Err(create_security_error_and_log!(
+                "Hash C1 mismatch on authentication reply"
+              ));
+            } else { /* ok */
+            }
           } else {
+            debug!("Cannot compare hash C1 in process_handshake. Reply did not have any.");
+          }
+
+          // Compute hash(C2) from received data.
+          let c2_properties: Vec<BinaryProperty> = vec![
+            BinaryProperty::with_propagate("c.id", reply.c_id.clone()),
+            BinaryProperty::with_propagate("c.perm", reply.c_perm.clone()),
+            BinaryProperty::with_propagate("c.pdata", reply.c_pdata.clone()),
+            BinaryProperty::with_propagate("c.dsign_algo", reply.c_dsign_algo.clone()),
+            BinaryProperty::with_propagate("c.kagree_algo", reply.c_kagree_algo.clone()),
+          ];
+          let c2_hash_recomputed = Sha256::hash(
+            &to_vec::<Vec<BinaryProperty>, BigEndian>(&c2_properties).map_err(|e| SecurityError {
+              msg: format!("Error serializing C2: {e}"),
+            })?,
+          );
+
+          if let Some(received_hash_c2) = &reply.hash_c2 {
+            if received_hash_c2.as_ref() == c2_hash_recomputed.as_ref() {
+              // hashes match, safe to proceed
+            } else {
+              return Err(create_security_error_and_log!(
+                "process_handshake: hash_c2 mismatch"
+              ));
+            }
+          } else {
+            debug!("Cannot compare hashes in process_handshake. Reply did not have any.");
+          }
+
+          // Reconstruct signed data: C2 = Cert2, Perm2, Pdata2, Dsign_algo2, Kagree_algo2
+          // Spec: "Sign(Hash(C2) | Challenge2 | DH2 | Challenge1 | DH1 | Hash(C1)) )",
+          // see Table 50
+          //
+          // Note: We already verified above that hash_c1-recomputed vs. hash_c1-stored
+          // match and hash_c2 recomputed vs received (if any) match.
+
+          // softcontact patch (VENDORED.md): the DH1 the signature covers is the one we sent; a reply
+          // may leave it out (optional), and one it carries must be ours.
+          let dh1_sent = dh1.public_key_bytes()?;
+          if reply.dh1.as_ref().is_some_and(|received| *received != dh1_sent) {
             return Err(create_security_error_and_log!(
-              "process_handshake: hash_c2 mismatch"
+              "process_handshake: dh1 in the reply is not the one sent"
             ));
           }
-        } else {
-          debug!("Cannot compare hashes in process_handshake. Reply did not have any.");
-        }
+          let cc2_properties: Vec<BinaryProperty> = vec![
+            BinaryProperty::with_propagate(
+              "hash_c2",
+              Bytes::copy_from_slice(c2_hash_recomputed.as_ref()),
+            ),
+            BinaryProperty::with_propagate(
+              "challenge2",
+              Bytes::copy_from_slice(reply.challenge2.as_ref()),
+            ),
+            BinaryProperty::with_propagate("dh2", Bytes::copy_from_slice(reply.dh2.as_ref())),
+            BinaryProperty::with_propagate(
+              "challenge1",
+              Bytes::copy_from_slice(reply.challenge1.as_ref()),
+            ),
+            BinaryProperty::with_propagate("dh1", dh1_sent.clone()),
+            BinaryProperty::with_propagate("hash_c1", Bytes::copy_from_slice(hash_c1.as_ref())),
+          ];
 
-        // Reconstruct signed data: C2 = Cert2, Perm2, Pdata2, Dsign_algo2, Kagree_algo2
-        // Spec: "Sign(Hash(C2) | Challenge2 | DH2 | Challenge1 | DH1 | Hash(C1)) )",
-        // see Table 50
-        //
-        // Note: We already verified above that hash_c1-recomputed vs. hash_c1-stored
-        // match and hash_c2 recomputed vs received (if any) match.
+          let c2_signature_algorithm = parse_signature_algo_name_to_ring(&reply.c_dsign_algo)?;
 
-        let cc2_properties: Vec<BinaryProperty> = vec![
-          BinaryProperty::with_propagate(
-            "hash_c2",
-            Bytes::copy_from_slice(c2_hash_recomputed.as_ref()),
-          ),
-          BinaryProperty::with_propagate(
-            "challenge2",
-            Bytes::copy_from_slice(reply.challenge2.as_ref()),
-          ),
-          BinaryProperty::with_propagate("dh2", Bytes::copy_from_slice(reply.dh2.as_ref())),
-          BinaryProperty::with_propagate(
-            "challenge1",
-            Bytes::copy_from_slice(reply.challenge1.as_ref()),
-          ),
-          BinaryProperty::with_propagate("dh1", Bytes::copy_from_slice(reply.dh1.as_ref())),
-          BinaryProperty::with_propagate("hash_c1", Bytes::copy_from_slice(hash_c1.as_ref())),
-        ];
+          // Verify "C2" contents against reply.signature and 2's public key
+          cert2.verify_signed_data_with_algorithm(
+            to_vec::<Vec<BinaryProperty>, BigEndian>(&cc2_properties).map_err(|e| SecurityError {
+              msg: format!("Error serializing CC2: {e}"),
+            })?,
+            reply.signature.clone(),
+            c2_signature_algorithm,
+          )?; // verify ok or exit here
 
-        let c2_signature_algorithm = parse_signature_algo_name_to_ring(&reply.c_dsign_algo)?;
+          // Verify that the key agreement algo in the reply is as we expect
+          let kagree_algo_in_reply = &reply.c_kagree_algo;
+          let expected_kagree_algo = dh1.kagree_algo_name_str();
+          if algo_name_without_nul(&kagree_algo_in_reply) != expected_kagree_algo.as_bytes() {
+            return Err(create_security_error_and_log!(
+              "Unexpected key agreement algorithm: {kagree_algo_in_reply:?} in \
+               HandshakeReplyMessageToken. Expected {expected_kagree_algo}"
+            ));
+          }
 
-        // Verify "C2" contents against reply.signature and 2's public key
-        cert2.verify_signed_data_with_algorithm(
-          to_vec::<Vec<BinaryProperty>, BigEndian>(&cc2_properties).map_err(|e| SecurityError {
-            msg: format!("Error serializing CC2: {e}"),
-          })?,
-          reply.signature,
-          c2_signature_algorithm,
-        )?; // verify ok or exit here
-
-        // Verify that the key agreement algo in the reply is as we expect
-        let kagree_algo_in_reply = reply.c_kagree_algo;
-        let expected_kagree_algo = dh1.kagree_algo_name_str();
-        if kagree_algo_in_reply != expected_kagree_algo {
-          return Err(create_security_error_and_log!(
-            "Unexpected key agreement algorithm: {kagree_algo_in_reply:?} in \
-             HandshakeReplyMessageToken. Expected {expected_kagree_algo}"
-          ));
-        }
+          Ok((reply, cert2, c2_hash_recomputed))
+        })();
+        let (reply, cert2, c2_hash_recomputed) = match checked {
+          Ok(checked) => checked,
+          Err(e) => {
+            let remote_info = self.get_remote_participant_info_mutable(&remote_identity_handle)?;
+            remote_info.handshake.state = BuiltinHandshakeState::PendingReplyMessage {
+              dh1,
+              challenge1,
+              hash_c1,
+            };
+            return Err(e);
+          }
+        };
 
         let dh1_public_key = dh1.public_key_bytes()?;
 

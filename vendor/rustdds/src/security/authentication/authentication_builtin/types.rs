@@ -305,10 +305,17 @@ pub const ECDSA_SIGNATURE_ALGO_NAME: &[u8] = b"ECDSA-SHA256";
 
 // Recognize standard string constatns and convert to
 // corresponging algorithm identifiers in ring library.
+// softcontact patch (VENDORED.md): an algorithm name as a C implementation sends it, with its
+// terminating NUL (Cyclone DDS sets every string property with strlen + 1 bytes), names the same
+// algorithm. The bytes stay as received wherever they are hashed or signed.
+pub(crate) fn algo_name_without_nul(algo_name: &[u8]) -> &[u8] {
+  algo_name.strip_suffix(&[0]).unwrap_or(algo_name)
+}
+
 pub(crate) fn parse_signature_algo_name_to_ring(
   algo_name: &[u8],
 ) -> SecurityResult<&'static dyn ring::signature::VerificationAlgorithm> {
-  match algo_name {
+  match algo_name_without_nul(algo_name) {
     RSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::RSA_PSS_2048_8192_SHA256),
     ECDSA_SIGNATURE_ALGO_NAME => Ok(&ring::signature::ECDSA_P256_SHA256_ASN1),
     _other =>
@@ -423,9 +430,9 @@ impl BuiltinHandshakeMessageToken {
       .challenge2
       .ok_or_else(|| create_security_error_and_log!("challenge2 not found"))
       .and_then(|b| Challenge::try_from(b.as_ref()))?;
-    let dh1 = self
-      .dh1
-      .ok_or_else(|| create_security_error_and_log!("dh1 not found"))?;
+    // softcontact patch (VENDORED.md): dh1 is optional in a reply (DDS Security 1.1, Table 50; Cyclone
+    // DDS leaves it out unless IncludeOptionalFields): the initiator uses its own.
+    let dh1 = self.dh1;
     let dh2 = self
       .dh2
       .ok_or_else(|| create_security_error_and_log!("dh2 not found"))?;
@@ -515,7 +522,7 @@ pub(in crate::security) struct HandshakeReply {
   pub hash_c2: Option<Sha256>,
   pub challenge1: Challenge,
   pub challenge2: Challenge,
-  pub dh1: Bytes,
+  pub dh1: Option<Bytes>,
   pub dh2: Bytes,
   pub signature: Bytes,
 }

@@ -290,10 +290,20 @@ impl TryFrom<Vec<CryptoToken>> for KeyMaterial_AES_GCM_GMAC_seq {
 impl TryFrom<KeyMaterial_AES_GCM_GMAC_seq> for Vec<CryptoToken> {
   type Error = SecurityError;
   fn try_from(key_materials: KeyMaterial_AES_GCM_GMAC_seq) -> Result<Self, Self::Error> {
-    Vec::from(key_materials)
-      .iter()
-      .map(|key_material| CryptoToken::try_from(key_material.clone()))
-      .collect()
+    // softcontact patch (VENDORED.md): of two key materials (submessage and payload), one whose
+    // transformation is NONE is not sent. Cyclone DDS sends only the materials it protects with and
+    // refuses a token of kind NONE for an endpoint that is protected (its check_crypto_keymaterial), so
+    // a secure builtin writer's [submessage: AES-GCM, payload: NONE] made its whole token set invalid.
+    // Decoding looks materials up by the key id in the crypto header; the NONE one is never referred to.
+    let none = |k: &KeyMaterial_AES_GCM_GMAC| {
+      k.transformation_kind == BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_NONE
+    };
+    let sent = match key_materials {
+      KeyMaterial_AES_GCM_GMAC_seq::Two(sub, payload) if none(&payload) => vec![sub],
+      KeyMaterial_AES_GCM_GMAC_seq::Two(sub, payload) if none(&sub) => vec![payload],
+      other => Vec::from(other),
+    };
+    sent.into_iter().map(CryptoToken::try_from).collect()
   }
 }
 //For (de)serialization

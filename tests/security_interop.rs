@@ -1,0 +1,127 @@
+//! DDS-Security across vendors: a RustDDS participant with the builtin plugins (`vendor/rustdds` with its
+//! `security` feature, `tests/peers/rustdds-secure`) and a Cyclone DDS 0.10 participant with Debian's
+//! plugins (`tests/peers/cyclonedds/secure_peer.c`), both enrolled in one SROS2-layout keystore
+//! (`tests/peers/security/keystore.sh`, sros2's default governance: discovery, liveliness and every
+//! topic encrypted, RTPS messages signed), authenticate each other and exchange encrypted samples both
+//! ways, in a network namespace that has only loopback. Beside them a Cyclone participant without
+//! credentials and one enrolled by another CA read nothing, and what they write is never read.
+//!
+//! The patches to RustDDS this needs are in `vendor/rustdds/VENDORED.md`. Not yet run by CI: the
+//! handshake completed in every run looked at, but in about half the runs Cyclone then cannot decode RustDDS's
+//! protected submessages ("Pre-process submsg failed: Invalid Crypto Handle", an AES-GCM tag that does
+//! not verify) and no sample passes, either way. Run it with
+//! `cargo test --release -p softcontact --test security_interop -- --ignored` (it needs pkg-config, the
+//! OpenSSL headers and the openssl command: `apt-get install pkg-config libssl-dev openssl`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap().to_path_buf()
+}
+
+fn run(what: &str, command: &mut Command) {
+    let out = command.output().unwrap_or_else(|e| panic!("{what}: {e}"));
+    assert!(
+        out.status.success(),
+        "{what} failed (tools/test.sh installs what the peers need):\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Where Debian's Cyclone DDS keeps its security plugins: libddsc0debian's own folder of the multiarch
+/// library directory, off the default search path, so the configuration names each library in full.
+fn cyclone_plugins() -> PathBuf {
+    std::fs::read_dir("/usr/lib")
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.path().join("libddsc0debian"))
+        .find(|d| d.join("libdds_security_auth.so").is_file())
+        .expect("Cyclone DDS's security plugins (libddsc0debian) are installed")
+}
+
+/// A Cyclone DDS configuration on `lo` with multicast, and DDS-Security from `enclave` when there is one.
+fn cyclone_config(enclave: Option<&Path>) -> String {
+    let security = enclave.map_or(String::new(), |e| {
+        let lib = cyclone_plugins();
+        let (lib, e) = (lib.display(), e.display());
+        format!(
+            "<Security>\
+             <Authentication><Library path=\"{lib}/libdds_security_auth.so\" initFunction=\"init_authentication\" \
+             finalizeFunction=\"finalize_authentication\"/>\
+             <IdentityCA>file:{e}/identity_ca.cert.pem</IdentityCA>\
+             <IdentityCertificate>file:{e}/cert.pem</IdentityCertificate>\
+             <PrivateKey>file:{e}/key.pem</PrivateKey></Authentication>\
+             <AccessControl><Library path=\"{lib}/libdds_security_ac.so\" initFunction=\"init_access_control\" \
+             finalizeFunction=\"finalize_access_control\"/>\
+             <PermissionsCA>file:{e}/permissions_ca.cert.pem</PermissionsCA>\
+             <Governance>file:{e}/governance.p7s</Governance>\
+             <Permissions>file:{e}/permissions.p7s</Permissions></AccessControl>\
+             <Cryptographic><Library path=\"{lib}/libdds_security_crypto.so\" initFunction=\"init_crypto\" \
+             finalizeFunction=\"finalize_crypto\"/></Cryptographic>\
+             </Security>"
+        )
+    });
+    format!(
+        "<CycloneDDS><Domain id=\"any\"><General><Interfaces><NetworkInterface name=\"lo\" multicast=\"true\"/>\
+         </Interfaces></General>{security}</Domain></CycloneDDS>"
+    )
+}
+
+#[test]
+#[ignore = "RustDDS and Cyclone DDS exchange samples in only about half the runs (see the file's header)"]
+fn a_rustdds_and_a_cyclone_dds_participant_of_one_keystore_exchange_encrypted_samples_and_strangers_get_nothing() {
+    let peers = root().join("tests/peers");
+    run("the Cyclone DDS peers' build", &mut Command::new(peers.join("cyclonedds/build.sh")));
+    run("the secure RustDDS peer's build", &mut Command::new(peers.join("rustdds-secure/build.sh")));
+    let cyclone = root().join("target/peers/cyclonedds/cyclonedds_secure_peer");
+    let rustdds = root().join("target/peers/rustdds-secure/release/rustdds-secure-peer");
+
+    let dir = tempfile::tempdir().unwrap();
+    let (keystore, other_ca) = (dir.path().join("keystore"), dir.path().join("other_ca"));
+    let keystore_sh = peers.join("security/keystore.sh");
+    run("keystore.sh", Command::new(&keystore_sh).arg(&keystore).args(["/rustdds_peer", "/cyclonedds_peer"]));
+    run("keystore.sh (another CA)", Command::new(&keystore_sh).arg(&other_ca).arg("/cyclonedds_peer"));
+    let configs = [
+        ("enrolled", Some(keystore.join("enclaves/cyclonedds_peer"))),
+        ("other_ca", Some(other_ca.join("enclaves/cyclonedds_peer"))),
+        ("no_credentials", None),
+    ];
+    for (name, enclave) in &configs {
+        std::fs::write(dir.path().join(format!("{name}.xml")), cyclone_config(enclave.as_deref())).unwrap();
+    }
+
+    // In a fresh user and network namespace with only `lo`: the three Cyclone participants (the two
+    // strangers also writing forged replies) and the RustDDS one, 10 s each.
+    let script = r#"
+        ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo || exit 1
+        out="$1"; cyclone="$2"; rustdds="$3"; enclave="$4"
+        CYCLONEDDS_URI="file://$out/enrolled.xml" "$cyclone" 10 > "$out/enrolled.out" 2>&1 &
+        CYCLONEDDS_URI="file://$out/other_ca.xml" "$cyclone" 10 forge > "$out/other_ca.out" 2>&1 &
+        CYCLONEDDS_URI="file://$out/no_credentials.xml" "$cyclone" 10 forge > "$out/no_credentials.out" 2>&1 &
+        "$rustdds" "$enclave" 10 > "$out/rustdds.out" 2>&1
+        wait
+    "#;
+    let status = Command::new("unshare")
+        .args(["--map-root-user", "--net", "sh", "-c", script, "sh"])
+        .arg(dir.path())
+        .arg(&cyclone)
+        .arg(&rustdds)
+        .arg(keystore.join("enclaves/rustdds_peer"))
+        .status()
+        .expect("unshare runs");
+    let output = |name: &str| std::fs::read_to_string(dir.path().join(format!("{name}.out"))).unwrap_or_default();
+    let all =
+        ["rustdds", "enrolled", "other_ca", "no_credentials"].map(|n| format!("--- {n}\n{}", output(n))).join("\n");
+    assert!(status.success(), "the namespace's run failed:\n{all}");
+    let read = |name: &str, prefix: &str| output(name).lines().filter(|l| l.starts_with(prefix)).count();
+
+    assert!(read("enrolled", "read hello ") >= 5, "Cyclone read too little of RustDDS's chatter:\n{all}");
+    assert!(read("rustdds", "read ack ") >= 5, "RustDDS read too few of Cyclone's replies:\n{all}");
+    assert_eq!(read("rustdds", "read forged"), 0, "a stranger's forged reply was read:\n{all}");
+    for stranger in ["other_ca", "no_credentials"] {
+        assert_eq!(read(stranger, "read "), 0, "{stranger} read the enrolled participants' chatter:\n{all}");
+        assert!(output(stranger).contains("got 0"), "{stranger} did not run to its end:\n{all}");
+    }
+}
