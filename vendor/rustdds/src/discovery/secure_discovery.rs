@@ -105,6 +105,12 @@ pub(crate) struct SecureDiscovery {
 
   cached_key_exchange_messages_for_resend: HashSet<ParticipantVolatileMessageSecure>,
 
+  // softcontact patch (VENDORED.md): key exchange messages sent once more at the next resend tick.
+  // The volatile secure writer delivers a message only to a reader it has already matched, and the
+  // event loop matches the remote's volatile reader concurrently with the first send (a race lost in
+  // about half the runs against Cyclone DDS: the remote then never had our keys).
+  key_exchange_messages_to_repeat: HashSet<ParticipantVolatileMessageSecure>,
+
   // In the key, first GUID is local endpoint's, second is remote endpoint's
   cached_received_key_exchange_messages: HashMap<(GUID, GUID), ParticipantVolatileMessageSecure>,
   user_data_endpoints_with_keys_already_sent_to: HashSet<GUID>,
@@ -253,6 +259,7 @@ impl SecureDiscovery {
       generic_message_helper: ParticipantGenericMessageHelper::new(),
       handshake_states: HashMap::new(),
       cached_key_exchange_messages_for_resend: HashSet::new(),
+      key_exchange_messages_to_repeat: HashSet::new(),
       stored_authentication_messages: HashMap::new(),
       cached_received_key_exchange_messages: HashMap::new(),
       user_data_endpoints_with_keys_already_sent_to: HashSet::new(),
@@ -1559,6 +1566,16 @@ impl SecureDiscovery {
       }
     }
     self.cached_key_exchange_messages_for_resend = msgs_still_to_cache;
+
+    // And once more each key exchange message first sent since the last tick.
+    for msg in std::mem::take(&mut self.key_exchange_messages_to_repeat) {
+      if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &msg) {
+        debug!(
+          "Failed to repeat a key exchange message to {:?}: {e}",
+          msg.generic.destination_participant_guid
+        );
+      }
+    }
   }
 
   fn reset_stored_message_resend_counter(&mut self, remote_guid_prefix: &GuidPrefix) {
@@ -2184,6 +2201,7 @@ impl SecureDiscovery {
           GUID::GUID_UNKNOWN, // No destination endpoint, just the participant
           &tokens,
         );
+        self.key_exchange_messages_to_repeat.insert(message.clone());
         if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
           create_security_error_and_log!(
             "Failed to send participant crypto tokens to {remote_guid_prefix:?}: {e}. Trying \
@@ -2225,6 +2243,7 @@ impl SecureDiscovery {
               remote_reader_guid,
               &tokens,
             );
+            self.key_exchange_messages_to_repeat.insert(message.clone());
             if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
               create_security_error_and_log!(
                 "Failed to send local writer {writer_eid:?} crypto tokens to \
@@ -2271,6 +2290,7 @@ impl SecureDiscovery {
               remote_writer_guid,
               &tokens,
             );
+            self.key_exchange_messages_to_repeat.insert(message.clone());
             if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
               create_security_error_and_log!(
                 "Failed to send local reader {reader_eid:?} crypto tokens to \
@@ -2501,6 +2521,7 @@ impl SecureDiscovery {
           &crypto_tokens,
         )
       };
+      self.key_exchange_messages_to_repeat.insert(vol_msg.clone());
       if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &vol_msg) {
         create_security_error_and_log!(
           "Failed to send local endpoint {:?} crypto tokens to {:?}: {e}. Trying again later.",
