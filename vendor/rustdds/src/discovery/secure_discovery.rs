@@ -2201,8 +2201,7 @@ impl SecureDiscovery {
           GUID::GUID_UNKNOWN, // No destination endpoint, just the participant
           &tokens,
         );
-        self.key_exchange_messages_to_repeat.insert(message.clone());
-        if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+        if let Err(e) = self.first_send_key_exchange_message(key_exchange_writer, &message) {
           create_security_error_and_log!(
             "Failed to send participant crypto tokens to {remote_guid_prefix:?}: {e}. Trying \
              again later."
@@ -2243,8 +2242,7 @@ impl SecureDiscovery {
               remote_reader_guid,
               &tokens,
             );
-            self.key_exchange_messages_to_repeat.insert(message.clone());
-            if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+            if let Err(e) = self.first_send_key_exchange_message(key_exchange_writer, &message) {
               create_security_error_and_log!(
                 "Failed to send local writer {writer_eid:?} crypto tokens to \
                  {remote_reader_guid:?}: {e}. Trying again later."
@@ -2290,8 +2288,7 @@ impl SecureDiscovery {
               remote_writer_guid,
               &tokens,
             );
-            self.key_exchange_messages_to_repeat.insert(message.clone());
-            if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &message) {
+            if let Err(e) = self.first_send_key_exchange_message(key_exchange_writer, &message) {
               create_security_error_and_log!(
                 "Failed to send local reader {reader_eid:?} crypto tokens to \
                  {remote_writer_guid:?}: {e}. Trying again later."
@@ -2521,8 +2518,7 @@ impl SecureDiscovery {
           &crypto_tokens,
         )
       };
-      self.key_exchange_messages_to_repeat.insert(vol_msg.clone());
-      if let Err(e) = self.send_key_exchange_message(key_exchange_writer, &vol_msg) {
+      if let Err(e) = self.first_send_key_exchange_message(key_exchange_writer, &vol_msg) {
         create_security_error_and_log!(
           "Failed to send local endpoint {:?} crypto tokens to {:?}: {e}. Trying again later.",
           local_endpoint_guid.entity_id,
@@ -2567,6 +2563,17 @@ impl SecureDiscovery {
       &permissions_token,
       &auth_credential_token,
     )
+  }
+
+  // softcontact patch (VENDORED.md): the first send of a key exchange message, which is also sent once
+  // more at the next resend tick (`key_exchange_messages_to_repeat`).
+  fn first_send_key_exchange_message(
+    &mut self,
+    key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+    message: &ParticipantVolatileMessageSecure,
+  ) -> Result<(), String> {
+    self.key_exchange_messages_to_repeat.insert(message.clone());
+    self.send_key_exchange_message(key_exchange_writer, message)
   }
 
   fn send_key_exchange_message(
