@@ -1,10 +1,12 @@
 //! DDS-Security across vendors: a RustDDS participant with the builtin plugins (`vendor/rustdds` with its
 //! `security` feature, `tests/peers/rustdds-secure`) and a Cyclone DDS 0.10 participant with Debian's
-//! plugins (`tests/peers/cyclonedds/secure_peer.c`), both enrolled in one SROS2-layout keystore
-//! (`tests/peers/security/keystore.sh`, sros2's default governance: discovery, liveliness and every
+//! plugins (`tests/peers/cyclonedds/secure_peer.c`), both enrolled in one keystore that
+//! `softcontact security` wrote (sros2's layout and default governance: discovery, liveliness and every
 //! topic encrypted, RTPS messages signed), authenticate each other and exchange encrypted samples both
 //! ways, in a network namespace that has only loopback. Beside them a Cyclone participant without
-//! credentials and one enrolled by another CA read nothing, and what they write is never read.
+//! credentials and one enrolled by another CA read nothing, and what they write is never read. The
+//! keystore's certificates and signed documents are first checked by the openssl command, which shares
+//! no code with the crates that wrote them.
 //!
 //! The patches to RustDDS this needs are in `vendor/rustdds/VENDORED.md`; before the last of them (the
 //! key exchange messages sent once more), no sample passed in about half the runs. The peers need
@@ -76,9 +78,38 @@ fn a_rustdds_and_a_cyclone_dds_participant_of_one_keystore_exchange_encrypted_sa
 
     let dir = tempfile::tempdir().unwrap();
     let (keystore, other_ca) = (dir.path().join("keystore"), dir.path().join("other_ca"));
-    let keystore_sh = peers.join("security/keystore.sh");
-    run("keystore.sh", Command::new(&keystore_sh).arg(&keystore).args(["/rustdds_peer", "/cyclonedds_peer"]));
-    run("keystore.sh (another CA)", Command::new(&keystore_sh).arg(&other_ca).arg("/cyclonedds_peer"));
+    let softcontact = |args: &[&str], keystore: &Path| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_softcontact"));
+        c.arg("security").arg(args[0]).arg(keystore).args(&args[1..]);
+        run(&format!("softcontact security {}", args.join(" ")), &mut c);
+    };
+    for (store, enclaves) in
+        [(&keystore, &["/rustdds_peer", "/cyclonedds_peer"][..]), (&other_ca, &["/cyclonedds_peer"])]
+    {
+        softcontact(&["create-keystore"], store);
+        for enclave in enclaves {
+            softcontact(&["create-enclave", enclave, "--allow-everything"], store);
+        }
+    }
+    let openssl = |args: &[&str]| {
+        let mut c = Command::new("openssl");
+        c.current_dir(&keystore).args(args);
+        run(&format!("openssl {}", args.join(" ")), &mut c);
+    };
+    openssl(&["verify", "-CAfile", "public/identity_ca.cert.pem", "enclaves/rustdds_peer/cert.pem"]);
+    for signed in ["enclaves/governance.p7s", "enclaves/cyclonedds_peer/permissions.p7s"] {
+        openssl(&[
+            "smime",
+            "-verify",
+            "-text",
+            "-in",
+            signed,
+            "-CAfile",
+            "public/permissions_ca.cert.pem",
+            "-out",
+            "/dev/null",
+        ]);
+    }
     let configs = [
         ("enrolled", Some(keystore.join("enclaves/cyclonedds_peer"))),
         ("other_ca", Some(other_ca.join("enclaves/cyclonedds_peer"))),

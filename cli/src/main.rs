@@ -18,6 +18,7 @@ mod model_cmd;
 mod ranges;
 mod real_curves;
 mod record_cmd;
+mod security_cmd;
 mod table;
 mod tangential_paths;
 
@@ -72,6 +73,12 @@ enum Command {
         #[arg(long, conflicts_with = "node")]
         markdown: bool,
     },
+    /// ROS 2 security (SROS2): keystores, and the enclave of each process with its least-privilege
+    /// permissions.
+    Security {
+        #[command(subcommand)]
+        what: security_cmd::SecurityCommand,
+    },
     /// Benchmarks of the product's hot paths.
     Bench {
         #[command(subcommand)]
@@ -105,6 +112,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             print!("{}", found.yaml());
             Ok(())
         }
+        Command::Security { what } => security_cmd::run(what),
         Command::Bench { what } => bench::run(what),
     }
 }
