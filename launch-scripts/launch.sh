@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The node graph, started, watched and stopped as one: the implementation behind sim.sh and robot.sh.
 #
-#   launch.sh --sim|--robot [--isolated] [--lockstep] [--separate] [--surface sponge|dice|lab_sponge|lab_dice|none]
+#   launch.sh --sim|--robot [--isolated] [--lockstep] [--separate] [--secure] [--surface sponge|dice|lab_sponge|lab_dice|none]
 #             [--log-dir DIR] [--params-file FILE]... [--nodes N1,N2...] [--run COMMAND [ARGS...]]
 #
 # Starts the nodes with the parameter files of config/ (plus any --params-file overlays, later ones win),
@@ -19,11 +19,17 @@
 # --isolated runs everything in a new network namespace with only loopback (DDS never leaves the machine;
 # needs unprivileged user namespaces). Binaries: $SOFTCONTACT_BIN (default target/release, built with
 # `cargo build --release` when missing).
+#
+# --secure runs the graph with ROS 2 security (DDS-Security: authenticated, encrypted, each process held to
+# its enclave's permissions; docs/safety.md): the keystore of $ROS_SECURITY_KEYSTORE, or a new one in the
+# log folder (`softcontact security create-keystore DIR --enclaves`), ROS_SECURITY_ENABLE=true and
+# ROS_SECURITY_STRATEGY=Enforce, each process in the enclave of its name, and COMMAND in /user's
+# (ROS_SECURITY_ENCLAVE_OVERRIDE). The binaries must be built with `--features softcontact/security`.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(dirname "$here")"
-mode="" isolated=0 lockstep=0 separate=0 surface="" log_dir="" only="" run=() overlays=()
+mode="" isolated=0 lockstep=0 separate=0 secure=0 surface="" log_dir="" only="" run=() overlays=()
 while (($#)); do
     case "$1" in
     --sim) mode=sim ;;
@@ -31,6 +37,7 @@ while (($#)); do
     --isolated) isolated=1 ;;
     --lockstep) lockstep=1 ;;
     --separate) separate=1 ;;
+    --secure) secure=1 ;;
     --surface) surface="$2"; shift ;;
     --log-dir) log_dir="$2"; shift ;;
     --params-file) overlays+=("$(realpath "$2")"); shift ;;
@@ -49,6 +56,7 @@ if ((isolated)) && [[ -z "${SOFTCONTACT_NETNS:-}" ]]; then
     args=("--$mode" --isolated)
     ((lockstep)) && args+=(--lockstep)
     ((separate)) && args+=(--separate)
+    ((secure)) && args+=(--secure)
     [[ -n "$surface" ]] && args+=(--surface "$surface")
     [[ -n "$log_dir" ]] && args+=(--log-dir "$(realpath -m "$log_dir")")
     for o in "${overlays[@]}"; do args+=(--params-file "$o"); done
@@ -80,7 +88,9 @@ for n in "${nodes[@]}"; do
     if [[ ! -x "$bin/$n" ]]; then
         [[ -z "${SOFTCONTACT_BIN:-}" ]] || { echo "launch: $bin/$n missing" >&2; exit 2; }
         echo "launch: building the nodes (cargo build --release)…" >&2
-        (cd "$root" && cargo build --release -q -p softcontact-nodes -p softcontact-simcell --bins)
+        features=()
+        ((secure)) && features=(--features softcontact/security)
+        (cd "$root" && cargo build --release -q -p softcontact -p softcontact-nodes -p softcontact-simcell --bins "${features[@]}")
         break
     fi
 done
@@ -88,6 +98,16 @@ done
 log_dir="${log_dir:-$(mktemp -d -t softcontact-graph.XXXXXX)}"
 mkdir -p "$log_dir"
 echo "launch: logs in $log_dir" >&2
+
+if ((secure)); then
+    export ROS_SECURITY_ENABLE=true ROS_SECURITY_STRATEGY=Enforce
+    export ROS_SECURITY_KEYSTORE="${ROS_SECURITY_KEYSTORE:-$log_dir/keystore}"
+    if [[ ! -f "$ROS_SECURITY_KEYSTORE/enclaves/governance.p7s" ]]; then
+        "$bin/softcontact" security create-keystore "$ROS_SECURITY_KEYSTORE" --enclaves >"$log_dir/keystore.log" ||
+            { echo "launch: no keystore in $ROS_SECURITY_KEYSTORE" >&2; cat "$log_dir/keystore.log" >&2; exit 1; }
+    fi
+    echo "launch: secure: keystore $ROS_SECURITY_KEYSTORE, Enforce" >&2
+fi
 
 # The parameters of one node: its file, the robot overlay, the user's overlays, then the mode's settings.
 params_of() {
@@ -103,6 +123,7 @@ params_of() {
         if [[ "$n" == sim_arm ]]; then p+=(-p lockstep:=true); else p+=(-p use_sim_time:=true); fi
     fi
     [[ "$n" == sim_arm && -n "$surface" ]] && p+=(-p "surface:=$surface")
+    ((secure)) && p+=(--enclave "/$n")
     printf '%s\n' "${p[@]}"
 }
 
@@ -158,7 +179,7 @@ echo "launch: up: ${nodes[*]}" >&2
 status=0
 if ((${#run[@]})); then
     # The command runs in the background so that Ctrl-C (trapped above) still stops the graph at once.
-    "${run[@]}" &
+    if ((secure)); then ROS_SECURITY_ENCLAVE_OVERRIDE=/user "${run[@]}" & else "${run[@]}" & fi
     run_pid=$!
     while kill -0 "$run_pid" 2>/dev/null; do
         wait -n || true

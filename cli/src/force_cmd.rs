@@ -34,12 +34,15 @@ pub struct ForceArgs {
     /// The namespace the graph runs in (its nodes started with `-r __ns:=/NS`).
     #[arg(long, default_value = "/")]
     pub namespace: String,
+    /// The enclave on a secure graph (`ROS_SECURITY_ENABLE=true`): /user, whose permissions send force goals.
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 pub fn run(args: &ForceArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.force.is_finite() && args.force >= 0.0, "the force must be a number ≥ 0");
     anyhow::ensure!(args.duration.is_finite() && args.duration > 0.0, "the duration must be positive");
-    let mut node = ros::node_in_namespace("softcontact_force", &args.namespace)?;
+    let mut node = ros::tool_node("softcontact_force", &args.namespace, args.enclave.as_deref())?;
     let action = ros::resolve(&node, PRESS_ACTION)?.to_string();
     let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
     let press = press_client(&mut node, &args.service_mapping)?;

@@ -22,6 +22,9 @@ pub struct RecordArgs {
     /// Stop after this many seconds (default: at Ctrl-C / SIGTERM).
     #[arg(long, value_parser = crate::ranges::real(0.001, 1e7, " s"))]
     pub duration: Option<f64>,
+    /// The enclave on a secure graph (`ROS_SECURITY_ENABLE=true`), e.g. /user, whose permissions read every stream.
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -44,6 +47,10 @@ pub struct ReplayArgs {
     /// it. Without this flag they are never published.
     #[arg(long)]
     pub actuators: bool,
+    /// The enclave on a secure graph (`ROS_SECURITY_ENABLE=true`): its permissions decide what may be
+    /// published (/user's do not include the actuator topics).
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 /// Recorded topics whose messages command the arm when published into a live graph: torques the driver
@@ -148,7 +155,7 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
     let topics = resolve(&args.topics)?;
     let output = args.output.clone().unwrap_or_else(default_name);
     let stop = ros::shutdown_flag()?;
-    let mut node = ros::node("softcontact_record")?;
+    let mut node = ros::tool_node("softcontact_record", "/", args.enclave.as_deref())?;
     let mut writer = BagWriter::create(&output)?;
     let mut subscriptions = Vec::new();
     let mut poll = mio::Poll::new()?;
@@ -246,7 +253,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     }
     anyhow::ensure!(!plan.is_empty(), "nothing to replay");
     let stop = ros::shutdown_flag()?;
-    let mut node = ros::node("softcontact_replay")?;
+    let mut node = ros::tool_node("softcontact_replay", "/", args.enclave.as_deref())?;
     let mut publishers = Vec::new();
     for topic in plan {
         let qos = topic.qos.or_else(|| graph_topics().into_iter().find(|t| t.0 == topic.name).map(|t| t.2));

@@ -10,6 +10,7 @@ pub mod names;
 pub mod params;
 pub mod realtime;
 pub mod ros;
+pub mod security;
 pub mod stats;
 pub mod udp;
 pub mod writer_pin;

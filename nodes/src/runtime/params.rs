@@ -26,6 +26,10 @@ pub struct ParamArgs {
     /// `NODE:` for one node of lwr_control (docs/architecture.md, "Names").
     #[arg(short = 'r', long = "remap", value_name = "FROM:=TO")]
     pub remaps: Vec<String>,
+    /// The process's enclave on a secure graph (`ROS_SECURITY_ENABLE=true`; docs/safety.md): its folder in
+    /// `ROS_SECURITY_KEYSTORE`. `ROS_SECURITY_ENCLAVE_OVERRIDE` wins over it; without either, `/`.
+    #[arg(short = 'e', long = "enclave", value_name = "NAME")]
+    pub enclave: Option<String>,
     /// Accepted for `ros2 run` compatibility; the options above follow it.
     #[arg(long = "ros-args", hide = true)]
     pub ros_args: bool,
@@ -48,7 +52,13 @@ impl ParamArgs {
                 }
             })
             .collect();
-        ParamArgs { files: self.files.clone(), overrides, remaps: self.remaps.clone(), ros_args: self.ros_args }
+        ParamArgs {
+            files: self.files.clone(),
+            overrides,
+            remaps: self.remaps.clone(),
+            enclave: self.enclave.clone(),
+            ros_args: self.ros_args,
+        }
     }
 
     /// Refuses a `NODE:` prefix, in `-p NODE:name:=value` or `-r NODE:FROM:=TO`, that names none of the
@@ -307,6 +317,8 @@ pub struct Declared {
     pub values: Vec<(String, ParameterValue)>,
     pub specs: Vec<Spec>,
     pub remapping: crate::runtime::names::Remapping,
+    /// `--enclave`: the process's enclave on a secure graph.
+    pub enclave: Option<String>,
 }
 
 /// The largest parameter or model file read \[bytes\]: memory stays bounded whatever the path names.
@@ -395,7 +407,7 @@ pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared)
         set_path(&mut merged, name.trim(), value);
     }
     let (params, declared) = from_mapping(node, merged)?;
-    Ok((params, Declared { remapping, ..declared }))
+    Ok((params, Declared { remapping, enclave: args.enclave.clone(), ..declared }))
 }
 
 /// The typed parameters from a merged mapping, checked, with their flat list.
@@ -409,7 +421,7 @@ pub fn from_mapping<P: NodeParams>(node: &str, mapping: Mapping) -> Result<(P, D
     let mut values = Vec::new();
     flatten("", &value, &mut values);
     let specs = params.specs();
-    Ok((params, Declared { values, specs, remapping: Default::default() }))
+    Ok((params, Declared { values, specs, ..Default::default() }))
 }
 
 /// The `ros__parameters` of `node` in one file: the `/**` section, then the node's own (`node` or

@@ -18,6 +18,7 @@ use softcontact_msgs::RosType;
 use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 
 use crate::runtime::params::Declared;
+use crate::runtime::security;
 
 /// Sends the `log` records of the middleware (RustDDS, ros2-client) and of our crates to stderr, each
 /// line prefixed with `node`: warnings and errors by default (RustDDS's errors only: its warnings are
@@ -43,19 +44,50 @@ pub fn node(name: &str) -> anyhow::Result<Node> {
     node_with_parameters(name, Declared::default())
 }
 
-/// A tool's node whose topics and services are those of a graph started in `namespace` (`-r __ns:=/NS`).
-pub fn node_in_namespace(name: &str, namespace: &str) -> anyhow::Result<Node> {
+/// A tool's node whose topics and services are those of a graph started in `namespace` (`-r __ns:=/NS`),
+/// in `enclave` on a secure graph (`None`: ROS 2's default, `/`).
+pub fn tool_node(name: &str, namespace: &str, enclave: Option<&str>) -> anyhow::Result<Node> {
     let remapping =
         crate::runtime::names::Remapping::parse(name, &[format!("__ns:={namespace}")]).map_err(anyhow::Error::msg)?;
-    node_with_parameters(name, Declared { remapping, ..Default::default() })
+    node_with_parameters(name, Declared { remapping, enclave: enclave.map(str::to_owned), ..Default::default() })
+}
+
+/// The participant's options: the domain of `ROS_DOMAIN_ID`, and DDS-Security where `ROS_SECURITY_*`
+/// asks for it ([`security::decide`]); refused under `Enforce` without a usable enclave, or in a build
+/// without the `security` feature.
+fn context_options(enclave: Option<&str>) -> anyhow::Result<ContextOptions> {
+    let options = ContextOptions::new().domain_id(domain_id()?);
+    let environment = security::Environment::from_process();
+    match security::decide(&environment, enclave).map_err(anyhow::Error::msg)? {
+        security::Decision::Off => Ok(options),
+        security::Decision::Unsecured { why } => {
+            eprintln!("warning: {why}: joining the graph without DDS-Security (ROS_SECURITY_STRATEGY is not Enforce)");
+            Ok(options)
+        }
+        #[cfg(feature = "security")]
+        security::Decision::Secure { dir, .. } => Ok(options.enable_security(dir, String::new())),
+        #[cfg(not(feature = "security"))]
+        security::Decision::Secure { name, .. } => match environment.strategy() {
+            security::Strategy::Enforce => anyhow::bail!(
+                "ROS_SECURITY_ENABLE=true with ROS_SECURITY_STRATEGY=Enforce, and this build has no DDS-Security \
+                 (enclave {name}): not starting (build with `--features security`)"
+            ),
+            security::Strategy::Permissive => {
+                eprintln!(
+                    "warning: this build has no DDS-Security: enclave {name} unused, joining the graph without it"
+                );
+                Ok(options)
+            }
+        },
+    }
 }
 
 /// A node on the domain of `ROS_DOMAIN_ID` that declares `parameters` and serves them through the
 /// standard parameter services (list, get, get_types, describe; set answers that a node reads its
 /// parameters at start-up). The services run on a spinner thread of their own, never in a 1 kHz path.
 pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<Node> {
-    let Declared { values: parameters, specs, remapping } = declared;
-    let context = Context::with_options(ContextOptions::new().domain_id(domain_id()?))?;
+    let Declared { values: parameters, specs, remapping, enclave } = declared;
+    let context = Context::with_options(context_options(enclave.as_deref())?)?;
     let serve = !parameters.is_empty();
     // Declaring sets each value once through the validator: those are the only values it accepts.
     let start_values = parameters.clone();

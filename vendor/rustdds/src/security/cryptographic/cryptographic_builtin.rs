@@ -180,20 +180,20 @@ impl CryptographicBuiltin {
     remote_entity_crypto_handle: CryptoHandle,
     key_materials: KeyMaterial_AES_GCM_GMAC_seq,
   ) -> SecurityResult<()> {
-    match self
-      .decode_key_materials
-      .insert(remote_entity_crypto_handle, key_materials)
-    {
-      None => SecurityResult::Ok(()),
-      Some(old_key_materials) => {
+    match self.decode_key_materials.get(&remote_entity_crypto_handle) {
+      None => {
         self
           .decode_key_materials
-          .insert(remote_entity_crypto_handle, old_key_materials);
-        SecurityResult::Err(create_security_error_and_log!(
-          "The CryptoHandle {} was already associated with decode key material",
-          remote_entity_crypto_handle
-        ))
+          .insert(remote_entity_crypto_handle, key_materials);
+        SecurityResult::Ok(())
       }
+      // softcontact: the same key material again is the key exchange message sent once more
+      // (first_send_key_exchange_message), not a conflict.
+      Some(old_key_materials) if *old_key_materials == key_materials => SecurityResult::Ok(()),
+      Some(_) => SecurityResult::Err(create_security_error_and_log!(
+        "The CryptoHandle {} was already associated with decode key material",
+        remote_entity_crypto_handle
+      )),
     }
   }
 

@@ -1,0 +1,122 @@
+//! The graph under ROS 2 security, as users start it: `launch-scripts/sim.sh --isolated --secure` writes a
+//! keystore (`softcontact security create-keystore --enclaves`), starts sim_arm, lwr_control and the
+//! contact estimator each in the enclave of its name under `ROS_SECURITY_STRATEGY=Enforce`, and runs a
+//! command in the `/user` enclave. That command checks, on the running graph:
+//!
+//! - the user, enrolled, records the F/T node's wrenches;
+//! - a stranger with no credentials (security off) records nothing of them;
+//! - the contact estimator started in the `/user` enclave, whose permissions do not let it write its
+//!   topics, refuses to start.
+//!
+//! And, without any graph: every process asked for security under Enforce with no usable enclave refuses
+//! to start, saying why.
+//!
+//! Not asserted, because it does not hold yet: the user reads none of the estimator's
+//! /contact_estimator/state. Between some pairs of RustDDS participants the protected submessages fail to
+//! decode ("ring … 'Unspecified' error", "Could not find a remote EndpointCryptoHandle"), so the secure
+//! graph is not yet fit to run the controller (docs/status.md). The graph test needs the `security`
+//! feature: `cargo test --release --features softcontact/security -p softcontact --test security_graph`.
+
+use std::path::Path;
+use std::process::Command;
+
+fn bin_dir() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap()
+}
+
+#[test]
+fn every_process_asked_for_security_under_enforce_without_an_enclave_refuses_to_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let keystore = dir.path().join("keystore");
+    let run = |bin: &str, args: &[&str]| {
+        // In a network namespace of its own (no interface up): a process that did start would reach nothing.
+        Command::new("unshare")
+            .args(["--map-root-user", "--net", "timeout", "20"])
+            .arg(bin_dir().join(bin))
+            .args(args)
+            .env("ROS_SECURITY_ENABLE", "true")
+            .env("ROS_SECURITY_STRATEGY", "Enforce")
+            .env("ROS_SECURITY_KEYSTORE", &keystore)
+            .env_remove("ROS_SECURITY_ENCLAVE_OVERRIDE")
+            .output()
+            .unwrap()
+    };
+    let check = |what: &str, out: std::process::Output, why: &str| {
+        let text = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{what} started:\n{text}");
+        assert!(text.contains("not starting") && text.contains(why), "{what}:\n{text}");
+    };
+    // No keystore at all.
+    check("contact_estimator", run("contact_estimator", &["--enclave", "/contact_estimator"]), "has no folder");
+    check(
+        "softcontact record",
+        run("softcontact", &["record", "/ft_sensor/wrench", "--duration", "1"]),
+        "has no folder",
+    );
+    // A keystore without the enclave asked for.
+    let made = Command::new(bin_dir().join("softcontact"))
+        .args(["security", "create-keystore"])
+        .arg(&keystore)
+        .output()
+        .unwrap();
+    assert!(made.status.success(), "{}", String::from_utf8_lossy(&made.stderr));
+    check("lwr_control", run("lwr_control", &["--enclave", "/lwr_control"]), "has no folder");
+    check("sim_arm", run("sim_arm", &["--enclave", "/sim_arm"]), "has no folder");
+    check(
+        "softcontact force",
+        run("softcontact", &["force", "10", "--duration", "2", "--enclave", "user"]),
+        "must start with `/`",
+    );
+}
+
+#[test]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (tools/test.sh builds with it)")]
+fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misplaced_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path();
+    let script = r#"
+        out="$1"; bin="$2"
+        "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/user.mcap" --duration 10 \
+            > "$out/user.log" 2>&1 || exit 11
+        env -u ROS_SECURITY_ENABLE -u ROS_SECURITY_ENCLAVE_OVERRIDE \
+            "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/stranger.mcap" --duration 3 \
+            > "$out/stranger.log" 2>&1
+        env -u ROS_SECURITY_ENCLAVE_OVERRIDE timeout 20 "$bin/contact_estimator" --enclave /user \
+            > "$out/misplaced.log" 2>&1
+        echo $? > "$out/misplaced.status"
+    "#;
+    let run = Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch-scripts/sim.sh"))
+        .args(["--isolated", "--secure", "--log-dir"])
+        .arg(out.join("graph"))
+        .args(["--run", "bash", "-c", script, "bash"])
+        .arg(out)
+        .arg(bin_dir())
+        .env("SOFTCONTACT_BIN", bin_dir())
+        .env_remove("ROS_SECURITY_KEYSTORE")
+        .output()
+        .unwrap();
+    let log = |name: &str| std::fs::read_to_string(out.join(name)).unwrap_or_default();
+    let all = format!(
+        "{}\n--- user\n{}\n--- stranger\n{}\n--- misplaced\n{}\n--- lwr_control\n{}\n--- contact_estimator\n{}",
+        String::from_utf8_lossy(&run.stderr),
+        log("user.log"),
+        log("stranger.log"),
+        log("misplaced.log"),
+        log("graph/lwr_control.log"),
+        log("graph/contact_estimator.log"),
+    );
+    assert!(run.status.success(), "the secure graph's run failed:\n{all}");
+    assert!(all.contains("launch: secure: keystore"), "{all}");
+    let count = |file: &str, topic: &str| {
+        softcontact_bag::Recording::open(&out.join(file))
+            .ok()
+            .and_then(|r| r.topic(topic).map(|t| t.message_count))
+            .unwrap_or(0)
+    };
+    assert!(count("user.mcap", "/ft_sensor/wrench") > 2000, "the user read the wrenches:\n{all}");
+    assert_eq!(count("stranger.mcap", "/ft_sensor/wrench"), 0, "a stranger read the wrenches:\n{all}");
+    assert_eq!(count("stranger.mcap", "/contact_estimator/state"), 0, "a stranger read the estimator:\n{all}");
+    // Refused at once (status 1), not started and stopped by the timeout (124).
+    assert_eq!(log("misplaced.status").trim(), "1", "the estimator in /user's enclave:\n{all}");
+    assert!(!log("misplaced.log").contains("ready"), "the estimator in /user's enclave came up:\n{all}");
+}
