@@ -3,7 +3,8 @@
 //! contact estimator each in the enclave of its name under `ROS_SECURITY_STRATEGY=Enforce`, and runs a
 //! command in the `/user` enclave. That command checks, on the running graph:
 //!
-//! - the user, enrolled, records the F/T node's wrenches;
+//! - the user, enrolled, records the F/T node's wrenches and the contact estimator's state, each from
+//!   another process;
 //! - a stranger with no credentials (security off) records nothing of them;
 //! - the contact estimator started in the `/user` enclave, whose permissions do not let it write its
 //!   topics, refuses to start.
@@ -11,11 +12,8 @@
 //! And, without any graph: every process asked for security under Enforce with no usable enclave refuses
 //! to start, saying why.
 //!
-//! Not asserted, because it does not hold yet: the user reads none of the estimator's
-//! /contact_estimator/state. Between some pairs of RustDDS participants the protected submessages fail to
-//! decode ("ring … 'Unspecified' error", "Could not find a remote EndpointCryptoHandle"), so the secure
-//! graph is not yet fit to run the controller (docs/status.md). The graph test needs the `security`
-//! feature: `cargo test --release --features softcontact/security -p softcontact --test security_graph`.
+//! The graph test needs the `security` feature:
+//! `cargo test --release --features softcontact/security -p softcontact --test security_graph`.
 
 use std::path::Path;
 use std::process::Command;
@@ -114,6 +112,9 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
             .unwrap_or(0)
     };
     assert!(count("user.mcap", "/ft_sensor/wrench") > 2000, "the user read the wrenches:\n{all}");
+    // From another process than the wrenches' (RustDDS to RustDDS: vendor/rustdds/VENDORED.md).
+    let states = count("user.mcap", "/contact_estimator/state");
+    assert!(states > 100, "the user read {states} of the estimator's states:\n{all}");
     assert_eq!(count("stranger.mcap", "/ft_sensor/wrench"), 0, "a stranger read the wrenches:\n{all}");
     assert_eq!(count("stranger.mcap", "/contact_estimator/state"), 0, "a stranger read the estimator:\n{all}");
     // Refused at once (status 1), not started and stopped by the timeout (124).

@@ -8,6 +8,10 @@
 //! keystore's certificates and signed documents are first checked by the openssl command, which shares
 //! no code with the crates that wrote them.
 //!
+//! A second RustDDS participant answers the first from two writers of one topic, as two nodes of one
+//! process do: RustDDS to RustDDS, each of the two writers' samples must arrive. Their texts are not a
+//! multiple of four octets long, so the encrypted payloads end in the DATA submessage's padding.
+//!
 //! The patches to RustDDS this needs are in `vendor/rustdds/VENDORED.md`; before the last of them (the
 //! key exchange messages sent once more), no sample passed in about half the runs. The peers need
 //! pkg-config, the OpenSSL headers and the openssl command (`tools/dds-peers.sh` installs them).
@@ -84,7 +88,7 @@ fn a_rustdds_and_a_cyclone_dds_participant_of_one_keystore_exchange_encrypted_sa
         run(&format!("softcontact security {}", args.join(" ")), &mut c);
     };
     for (store, enclaves) in
-        [(&keystore, &["/rustdds_peer", "/cyclonedds_peer"][..]), (&other_ca, &["/cyclonedds_peer"])]
+        [(&keystore, &["/rustdds_peer", "/rustdds_echo", "/cyclonedds_peer"][..]), (&other_ca, &["/cyclonedds_peer"])]
     {
         softcontact(&["create-keystore"], store);
         for enclave in enclaves {
@@ -120,10 +124,11 @@ fn a_rustdds_and_a_cyclone_dds_participant_of_one_keystore_exchange_encrypted_sa
     }
 
     // In a fresh user and network namespace with only `lo`: the three Cyclone participants (the two
-    // strangers also writing forged replies) and the RustDDS one, 10 s each.
+    // strangers also writing forged replies), the RustDDS echo and the RustDDS talker, 10 s each.
     let script = r#"
         ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo || exit 1
-        out="$1"; cyclone="$2"; rustdds="$3"; enclave="$4"
+        out="$1"; cyclone="$2"; rustdds="$3"; enclave="$4"; echo_enclave="$5"
+        "$rustdds" "$echo_enclave" 11 echo > "$out/rustdds_echo.out" 2>&1 &
         CYCLONEDDS_URI="file://$out/enrolled.xml" "$cyclone" 10 > "$out/enrolled.out" 2>&1 &
         CYCLONEDDS_URI="file://$out/other_ca.xml" "$cyclone" 10 forge > "$out/other_ca.out" 2>&1 &
         CYCLONEDDS_URI="file://$out/no_credentials.xml" "$cyclone" 10 forge > "$out/no_credentials.out" 2>&1 &
@@ -136,17 +141,24 @@ fn a_rustdds_and_a_cyclone_dds_participant_of_one_keystore_exchange_encrypted_sa
         .arg(&cyclone)
         .arg(&rustdds)
         .arg(keystore.join("enclaves/rustdds_peer"))
+        .arg(keystore.join("enclaves/rustdds_echo"))
         .status()
         .expect("unshare runs");
     let output = |name: &str| std::fs::read_to_string(dir.path().join(format!("{name}.out"))).unwrap_or_default();
-    let all =
-        ["rustdds", "enrolled", "other_ca", "no_credentials"].map(|n| format!("--- {n}\n{}", output(n))).join("\n");
+    let all = ["rustdds", "rustdds_echo", "enrolled", "other_ca", "no_credentials"]
+        .map(|n| format!("--- {n}\n{}", output(n)))
+        .join("\n");
     assert!(status.success(), "the namespace's run failed:\n{all}");
     let read = |name: &str, prefix: &str| output(name).lines().filter(|l| l.starts_with(prefix)).count();
 
     assert!(read("enrolled", "read hello ") >= 5, "Cyclone read too little of RustDDS's chatter:\n{all}");
     assert!(read("rustdds", "read ack ") >= 5, "RustDDS read too few of Cyclone's replies:\n{all}");
     assert_eq!(read("rustdds", "read forged"), 0, "a stranger's forged reply was read:\n{all}");
+    assert!(read("rustdds_echo", "read hello ") >= 5, "the RustDDS echo read too little of the chatter:\n{all}");
+    for writer in ["ack1 ", "ack2 "] {
+        let n = read("rustdds", &format!("read {writer}"));
+        assert!(n >= 5, "RustDDS read {n} replies of the echo's writer {writer}:\n{all}");
+    }
     for stranger in ["other_ca", "no_credentials"] {
         assert_eq!(read(stranger, "read "), 0, "{stranger} read the enrolled participants' chatter:\n{all}");
         assert!(output(stranger).contains("got 0"), "{stranger} did not run to its end:\n{all}");

@@ -6,7 +6,10 @@
 //! ROS 2 DDS type name, reliable), and prints `read TEXT` for each sample read and `wrote N` at the end,
 //! for tests/security_interop.rs to judge. Exits 2 when it read nothing.
 //!
-//! Usage: rustdds-secure-peer ENCLAVE_DIR SECONDS   (RUST_LOG=info shows the handshake)
+//! With `echo`, it is the other side instead: it reads `rt/chatter` and answers each sample on `rt/reply`
+//! from two writers, as two nodes of one process do (`ack1 TEXT` and `ack2 TEXT`).
+//!
+//! Usage: rustdds-secure-peer ENCLAVE_DIR SECONDS [echo]   (RUST_LOG=info shows the handshake)
 use std::time::{Duration, Instant};
 
 use rustdds::{
@@ -29,9 +32,10 @@ fn main() {
     env_logger::init();
     let mut args = std::env::args().skip(1);
     let (Some(enclave), Some(seconds)) = (args.next(), args.next().and_then(|s| s.parse::<f64>().ok())) else {
-        eprintln!("usage: rustdds-secure-peer ENCLAVE_DIR SECONDS");
+        eprintln!("usage: rustdds-secure-peer ENCLAVE_DIR SECONDS [echo]");
         std::process::exit(1);
     };
+    let echo = args.next().as_deref() == Some("echo");
     let files = DomainParticipantSecurityConfigFiles::with_ros_default_names(&enclave, String::new());
     let participant = match DomainParticipantBuilder::new(0).builtin_security(files).build() {
         Ok(p) => p,
@@ -48,19 +52,29 @@ fn main() {
     let topic =
         |name: &str| participant.create_topic(name.into(), TYPE_NAME.into(), &qos, TopicKind::NoKey).expect("topic");
     let (chatter, reply) = (topic("rt/chatter"), topic("rt/reply"));
-    let writer: DataWriter<Text, CDRSerializerAdapter<Text>> =
-        participant.create_publisher(&qos).unwrap().create_datawriter_no_key(&chatter, None).expect("writer");
+    let (publisher, subscriber) =
+        (participant.create_publisher(&qos).unwrap(), participant.create_subscriber(&qos).unwrap());
+    let writer = |topic: &rustdds::Topic| -> DataWriter<Text, CDRSerializerAdapter<Text>> {
+        publisher.create_datawriter_no_key(topic, None).expect("writer")
+    };
     let mut reader: DataReader<Text, CDRDeserializerAdapter<Text>> =
-        participant.create_subscriber(&qos).unwrap().create_datareader_no_key(&reply, None).expect("reader");
+        subscriber.create_datareader_no_key(if echo { &chatter } else { &reply }, None).expect("reader");
+    let writers = if echo { vec![writer(&reply), writer(&reply)] } else { vec![writer(&chatter)] };
     let start = Instant::now();
     let (mut wrote, mut read) = (0, 0);
     while start.elapsed().as_secs_f64() < seconds {
-        if writer.write(Text { data: format!("hello {wrote}") }, None).is_ok() {
+        if !echo && writers[0].write(Text { data: format!("hello {wrote}") }, None).is_ok() {
             wrote += 1;
         }
         while let Ok(Some(sample)) = reader.take_next_sample() {
-            println!("read {}", sample.value().data);
+            let text = &sample.value().data;
+            println!("read {text}");
             read += 1;
+            for (i, w) in writers.iter().enumerate().filter(|_| echo) {
+                if w.write(Text { data: format!("ack{} {text}", i + 1) }, None).is_ok() {
+                    wrote += 1;
+                }
+            }
         }
         std::thread::sleep(Duration::from_millis(50));
     }

@@ -785,8 +785,6 @@ impl CryptoTransform for CryptographicBuiltin {
       return Err(security_error("Encoded payload smaller than minimum size"));
     }
     let (header_bytes, content_and_footer_bytes) = encoded_buffer.split_at(head_len);
-    let (content_bytes, footer_bytes) =
-      content_and_footer_bytes.split_at(content_and_footer_bytes.len() - foot_len);
 
     // Deserialize crypto header and footer
 
@@ -802,6 +800,27 @@ impl CryptoTransform for CryptographicBuiltin {
         },
       builtin_crypto_header_extra: BuiltinCryptoHeaderExtra(initialization_vector),
     } = crypto_header.try_into()?;
+
+    // softcontact patch (VENDORED.md): a CryptoContent carries its length, and the footer follows it.
+    // What comes after the footer is the DATA submessage's padding to a multiple of 4 octets (RTPS
+    // 9.4.1), which the submessage reader leaves in the payload: counting the footer from the end put
+    // it 1-3 octets off for every payload whose length was not a multiple of 4, so its MAC failed
+    // ("ring ... 'Unspecified' error"). A signed-only payload has no length and is split at the end.
+    let content_len = match (transformation_kind, content_and_footer_bytes.get(..4)) {
+      (
+        BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES128_GCM
+        | BuiltinCryptoTransformationKind::CRYPTO_TRANSFORMATION_KIND_AES256_GCM,
+        Some(length),
+      ) => 4 + u32::from_be_bytes([length[0], length[1], length[2], length[3]]) as usize,
+      _ => content_and_footer_bytes.len() - foot_len,
+    };
+    if content_and_footer_bytes.len() < content_len.saturating_add(foot_len) {
+      return Err(security_error(
+        "Encoded payload shorter than its CryptoContent and CryptoFooter",
+      ));
+    }
+    let (content_bytes, footer_and_padding) = content_and_footer_bytes.split_at(content_len);
+    let footer_bytes = &footer_and_padding[..foot_len];
 
     let BuiltinCryptoFooter { common_mac, .. } = BuiltinCryptoFooter::try_from(footer_bytes)?;
 
@@ -847,3 +866,4 @@ impl CryptoTransform for CryptographicBuiltin {
     }
   }
 }
+
