@@ -2,17 +2,31 @@
 //! surface): the node processes come up in a loopback-only namespace for each surface, the demo client
 //! drives them over DDS in real time, and the tables, the JSON and a recording per surface come out;
 //! then the discrepancy workflow runs on each recording and a second graph, started with the augmented
-//! model's parameter overlay, takes the three commands again.
+//! model's parameter overlay, takes the three commands again. The same with `--secure`: every graph under
+//! ROS 2 security, the client in `/user`'s enclave (needs the `security` feature).
 
 use std::process::Command;
 
 #[test]
 fn the_graph_demo_runs_the_node_processes_for_both_surfaces_and_again_through_the_augmented_model() {
-    let out = std::env::temp_dir().join(format!("softcontact-demo-graph-test-{}", std::process::id()));
+    graph_demo(&[]);
+}
+
+#[test]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature")]
+fn the_graph_demo_runs_as_well_on_graphs_under_ros_2_security() {
+    graph_demo(&["--secure"]);
+}
+
+fn graph_demo(extra: &[&str]) {
+    let out =
+        std::env::temp_dir().join(format!("softcontact-demo-graph-test-{}{}", std::process::id(), extra.concat()));
     let _ = std::fs::remove_dir_all(&out);
     let json = out.join("demo.json");
     let run = Command::new(env!("CARGO_BIN_EXE_softcontact"))
-        .args(["demo", "--graph", "--runs", "2", "--commands", "3", "--out"])
+        .args(["demo", "--graph", "--runs", "2", "--commands", "3"])
+        .args(extra)
+        .arg("--out")
         .arg(&out)
         .arg("--json")
         .arg(&json)
@@ -23,6 +37,10 @@ fn the_graph_demo_runs_the_node_processes_for_both_surfaces_and_again_through_th
     eprintln!("{text}{}", String::from_utf8_lossy(&run.stderr));
     assert!(run.status.success(), "the graph demo ran (logs in {})", out.join("graph_logs").display());
     assert!(text.contains("TABLE I") && text.contains("over DDS in real time"), "tables labelled as the graph run");
+    if extra.contains(&"--secure") {
+        let launched = format!("{text}{}", String::from_utf8_lossy(&run.stderr));
+        assert_eq!(launched.matches("launch: secure: keystore").count(), 4, "four graphs, each under security");
+    }
 
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert_eq!(report["mode"], "graph");

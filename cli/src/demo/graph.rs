@@ -42,7 +42,8 @@ fn augmented_report(out: &Path, name: &str) -> PathBuf {
 /// `plan.augmented`, the discrepancy workflow then runs on the first graph's recording, and a second
 /// graph, started with the augmented model's parameter overlay as a user would start it, runs the
 /// control experiment again through it.
-pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Report> {
+/// `secure`: each graph under ROS 2 security (`sim.sh --secure`), the client in `/user`'s enclave.
+pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path, secure: bool) -> anyhow::Result<Report> {
     let mut surfaces = Vec::new();
     for spec in specs {
         let logs = out.join("graph_logs").join(spec.name);
@@ -62,7 +63,7 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
         let report_path = client_report(out, spec.name);
         let _ = std::fs::remove_file(&report_path);
         println!("{}: starting the graph (logs in {}) …", spec.name, logs.display());
-        launch(spec, plan, out, &logs, &[&limits], &["--graph-client", spec.name])?;
+        launch(spec, plan, out, &logs, &[&limits], &["--graph-client", spec.name], secure)?;
         let text =
             std::fs::read_to_string(&report_path).with_context(|| format!("reading {}", report_path.display()))?;
         let mut report: SurfaceReport =
@@ -74,7 +75,7 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
             println!("{}: the graph again, with {} …", spec.name, overlay.display());
             let max_force = format!("{:?}", report.max_force);
             let args = ["--graph-client", spec.name, "--graph-augmented", &max_force];
-            launch(spec, plan, out, &logs.join("augmented"), &[&limits, &overlay], &args)?;
+            launch(spec, plan, out, &logs.join("augmented"), &[&limits, &overlay], &args, secure)?;
             let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
             let mut commands: Vec<CommandResult> =
                 serde_json::from_str(&text).with_context(|| path.display().to_string())?;
@@ -91,7 +92,8 @@ pub fn run(specs: &[SurfaceSpec], plan: Plan, out: &Path) -> anyhow::Result<Repo
 }
 
 /// One graph of the surface `spec` (`launch-scripts/sim.sh --isolated`, logs in `logs`, the parameter
-/// `overlays` on top of config/), with this binary inside as `demo CLIENT_ARGS`.
+/// `overlays` on top of config/), with this binary inside as `demo CLIENT_ARGS`; `secure`: `sim.sh --secure`,
+/// the client in `/user`'s enclave.
 fn launch(
     spec: &SurfaceSpec,
     plan: Plan,
@@ -99,6 +101,7 @@ fn launch(
     logs: &Path,
     overlays: &[&Path],
     client_args: &[&str],
+    secure: bool,
 ) -> anyhow::Result<()> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().context("the repository root")?;
     let script = root.join("launch-scripts/sim.sh");
@@ -110,6 +113,12 @@ fn launch(
     for overlay in overlays {
         cmd.arg("--params-file").arg(overlay);
     }
+    let client_args = if secure {
+        cmd.arg("--secure");
+        [client_args, &["--enclave", "/user"]].concat()
+    } else {
+        client_args.to_vec()
+    };
     cmd.arg("--log-dir").arg(logs).arg("--run").arg(&exe).arg("demo").args(client_args).arg("--out").arg(out).args([
         "--runs",
         &plan.identification_runs.to_string(),
@@ -200,8 +209,8 @@ struct Client {
 }
 
 impl Client {
-    fn new() -> anyhow::Result<Self> {
-        let mut node = ros::node("softcontact_demo")?;
+    fn new(enclave: Option<&str>) -> anyhow::Result<Self> {
+        let mut node = ros::tool_node("softcontact_demo", "/", enclave)?;
         let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
         let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
         let truth = ros::subscription(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
@@ -287,13 +296,21 @@ impl Client {
 }
 
 /// Inside the namespace, with the graph up: the experiments on one surface.
-pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> {
+/// `enclave`: the client's and its recorder's on a secure graph.
+pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path, enclave: Option<&str>) -> anyhow::Result<()> {
     let exe = std::env::current_exe()?;
     let recording = out.join(format!("{}_graph.mcap", spec.name));
     let _ = std::fs::remove_file(&recording);
-    let mut recorder =
-        Recorder(Some(Command::new(&exe).arg("record").arg("-o").arg(&recording).stdout(Stdio::null()).spawn()?));
-    let mut c = Client::new()?;
+    let mut recorder = Recorder(Some(
+        Command::new(&exe)
+            .arg("record")
+            .args(enclave.map(|e| ["--enclave", e]).into_iter().flatten())
+            .arg("-o")
+            .arg(&recording)
+            .stdout(Stdio::null())
+            .spawn()?,
+    ));
+    let mut c = Client::new(enclave)?;
     let retare_name = ros::resolve(&c.node, softcontact_msgs::topics::RETARE_SERVICE)?;
     let retare = ros::trigger_client(&mut c.node, ros::service_mapping("cyclone")?, &retare_name)?;
     c.wait_for_contact(spec.name)?;
@@ -368,9 +385,15 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path) -> anyhow::Result<()> 
 /// Inside the namespace of the second graph (its controller starting from the augmented model, its
 /// estimator carrying the model's effects): the control experiment again, planned from the first
 /// graph's `max_force`.
-pub fn client_augmented(spec: &SurfaceSpec, plan: Plan, max_force: f64, out: &Path) -> anyhow::Result<()> {
+pub fn client_augmented(
+    spec: &SurfaceSpec,
+    plan: Plan,
+    max_force: f64,
+    out: &Path,
+    enclave: Option<&str>,
+) -> anyhow::Result<()> {
     anyhow::ensure!(max_force.is_finite() && max_force > 0.0, "the maximum force must be positive");
-    let mut c = Client::new()?;
+    let mut c = Client::new(enclave)?;
     c.wait_for_contact(spec.name)?;
     c.listen(0.5)?;
     let results = c.control(spec.name, plan, max_force, ModelUse::Augmented)?;

@@ -43,6 +43,15 @@ pub struct DemoArgs {
     /// parameters, its commands planned from this maximum force \[N\].
     #[arg(long, hide = true, requires = "graph_client", value_parser = crate::ranges::real(0.0, 1e6, ""))]
     pub graph_augmented: Option<f64>,
+    /// With --graph: each graph under ROS 2 security (`launch-scripts/sim.sh --secure`: a keystore of its
+    /// own, every process in the enclave of its name under Enforce), the client in `/user`'s enclave.
+    /// Needs a build with `--features security`.
+    #[arg(long, requires = "graph")]
+    pub secure: bool,
+    /// The --graph client's enclave on a secure graph (default: `ROS_SECURITY_ENCLAVE_OVERRIDE`, else
+    /// `/`, as in ROS 2).
+    #[arg(long)]
+    pub enclave: Option<String>,
 }
 
 /// The force-control paper's two surfaces as the simulator makes them (with effects no model kind has).
@@ -73,9 +82,10 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     let plan = Plan { identification_runs: args.runs as usize, commands: args.commands as usize, ..Plan::SEED_001 };
     if let Some(name) = &args.graph_client {
         let spec = surfaces().into_iter().find(|s| s.name == name).context("no such surface")?;
+        let enclave = args.enclave.as_deref();
         return match args.graph_augmented {
-            Some(max_force) => graph::client_augmented(&spec, plan, max_force, &args.out),
-            None => graph::client(&spec, plan, &args.out),
+            Some(max_force) => graph::client_augmented(&spec, plan, max_force, &args.out, enclave),
+            None => graph::client(&spec, plan, &args.out, enclave),
         };
     }
     let specs = surfaces();
@@ -88,7 +98,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     println!("  Every comparison below is this simulation against the paper's real robot.\n");
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     if args.graph {
-        let report = graph::run(&specs, plan, &args.out)?;
+        let report = graph::run(&specs, plan, &args.out, args.secure)?;
         report::print(&report);
         return write_tables(&report, args);
     }
