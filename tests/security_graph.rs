@@ -5,7 +5,8 @@
 //!
 //! - the user, enrolled, records the F/T node's wrenches and the contact estimator's state, each from
 //!   another process;
-//! - a stranger with no credentials (security off) records nothing of them;
+//! - a stranger with no credentials (security off), and one enrolled by another authority, record nothing
+//!   of them, and their force commands get no answer and never reach the controller;
 //! - the contact estimator started in the `/user` enclave, whose permissions do not let it write its
 //!   topics, refuses to start.
 //!
@@ -68,7 +69,7 @@ fn every_process_asked_for_security_under_enforce_without_an_enclave_refuses_to_
 }
 
 #[test]
-#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (tools/test.sh builds with it)")]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
 fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misplaced_process() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path();
@@ -82,6 +83,16 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         env -u ROS_SECURITY_ENCLAVE_OVERRIDE timeout 20 "$bin/contact_estimator" --enclave /user \
             > "$out/misplaced.log" 2>&1
         echo $? > "$out/misplaced.status"
+        "$bin/softcontact" security create-keystore "$out/other_ca" --enclaves > /dev/null || exit 12
+        ROS_SECURITY_KEYSTORE="$out/other_ca" \
+            "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/other_ca.mcap" --duration 3 \
+            > "$out/other_ca.log" 2>&1
+        ROS_SECURITY_KEYSTORE="$out/other_ca" timeout 30 "$bin/softcontact" force 40 --duration 2 \
+            > "$out/other_ca_force.log" 2>&1
+        echo $? > "$out/other_ca_force.status"
+        env -u ROS_SECURITY_ENABLE -u ROS_SECURITY_ENCLAVE_OVERRIDE timeout 30 "$bin/softcontact" force 40 --duration 2 \
+            > "$out/stranger_force.log" 2>&1
+        echo $? > "$out/stranger_force.status"
     "#;
     let run = Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch-scripts/sim.sh"))
         .args(["--isolated", "--secure", "--log-dir"])
@@ -102,7 +113,9 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         log("misplaced.log"),
         log("graph/lwr_control.log"),
         log("graph/contact_estimator.log"),
-    );
+    ) + &["other_ca", "other_ca_force", "stranger_force"]
+        .map(|n| format!("\n--- {n}\n{}", log(&format!("{n}.log"))))
+        .concat();
     assert!(run.status.success(), "the secure graph's run failed:\n{all}");
     assert!(all.contains("launch: secure: keystore"), "{all}");
     let count = |file: &str, topic: &str| {
@@ -117,6 +130,13 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
     assert!(states > 100, "the user read {states} of the estimator's states:\n{all}");
     assert_eq!(count("stranger.mcap", "/ft_sensor/wrench"), 0, "a stranger read the wrenches:\n{all}");
     assert_eq!(count("stranger.mcap", "/contact_estimator/state"), 0, "a stranger read the estimator:\n{all}");
+    // Enrolled by another authority: the handshake fails, nothing is read and no goal is heard.
+    assert_eq!(count("other_ca.mcap", "/ft_sensor/wrench"), 0, "another CA's user read the wrenches:\n{all}");
+    for stranger in ["other_ca_force", "stranger_force"] {
+        assert_eq!(log(&format!("{stranger}.status")).trim(), "1", "{stranger}'s force command:\n{all}");
+        assert!(log(&format!("{stranger}.log")).contains("no answer"), "{stranger}:\n{all}");
+    }
+    assert!(!log("graph/lwr_control.log").contains("40.00 N"), "the controller heard a stranger's goal:\n{all}");
     // Refused at once (status 1), not started and stopped by the timeout (124).
     assert_eq!(log("misplaced.status").trim(), "1", "the estimator in /user's enclave:\n{all}");
     assert!(!log("misplaced.log").contains("ready"), "the estimator in /user's enclave came up:\n{all}");
