@@ -5,6 +5,12 @@
 //! lists and gets the controller's parameters and sends a force goal to the action, then prints what it
 //! saw; this test judges it. The peers are built by `tests/peers/<vendor>/build.sh` (its packages are
 //! installed by tools/test.sh).
+//!
+//! The Cyclone DDS peer does it once more on the graph under ROS 2 security (`sim.sh --secure`), enrolled
+//! in the run's keystore as `/user` with Debian's security plugins: the same streams at 1 kHz, the same
+//! parameter calls and a force goal that the controller executes, each authenticated, permitted by
+//! `/user`'s signed permissions and encrypted. That run needs the `security` feature:
+//! `cargo test --release --features softcontact/security -p softcontact --test interop enrolled`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -13,6 +19,9 @@ use std::time::{Duration, Instant};
 use softcontact_msgs::softcontact_msgs::ControllerState;
 use softcontact_msgs::topics;
 use softcontact_nodes::runtime::ros;
+
+#[path = "common/cyclone_security.rs"]
+mod cyclone_security;
 
 /// Set inside the namespace: the peer to run there.
 const PEER: &str = "SOFTCONTACT_INTEROP_PEER";
@@ -31,7 +40,7 @@ fn a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and
         return client(Path::new(&peer));
     }
     let test = "a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
-    let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer");
+    let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer", &[]);
     judge(&output, "enhanced");
 }
 
@@ -41,7 +50,7 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
         return client(Path::new(&peer));
     }
     let test = "a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
-    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer");
+    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &[]);
     judge(&output, "cyclone");
     // The type hash each writer announces (a Jazzy build): the REP-2016 hash of its type — topics,
     // services' replies (rmw_cyclonedds' `rr/…Reply`), the action's and ros2-client's own endpoints.
@@ -69,8 +78,22 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
     }
 }
 
-/// Builds the vendor's peer, starts the graph with `mapping` and runs the peer inside; the peer's output.
-fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str) -> String {
+#[test]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
+fn an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_goal_it_executes() {
+    if let Ok(peer) = std::env::var(PEER) {
+        return client(Path::new(&peer));
+    }
+    let test = "an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_goal_it_executes";
+    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &["--secure"]);
+    assert!(output.contains("launch: secure: keystore"), "the graph ran without security:\n{output}");
+    assert!(output.contains("peer: enrolled as /user"), "the peer ran without credentials:\n{output}");
+    judge(&output, "cyclone");
+}
+
+/// Builds the vendor's peer, starts the graph with `mapping` (and the launch script's `extra` options) and
+/// runs the peer inside; the peer's output.
+fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str, extra: &[&str]) -> String {
     let build = Command::new(root().join(format!("tests/peers/{vendor}/build.sh"))).output().expect("build.sh runs");
     assert!(
         build.status.success(),
@@ -87,7 +110,9 @@ fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str) -> Strin
     std::fs::write(&overlay, section("deformation_controller") + &section("ft_sensor")).unwrap();
     let test = std::env::current_exe().unwrap();
     let out = Command::new(root().join("launch-scripts/sim.sh"))
-        .args(["--isolated", "--params-file"])
+        .arg("--isolated")
+        .args(extra)
+        .arg("--params-file")
         .arg(&overlay)
         .arg("--log-dir")
         .arg(&logs)
@@ -119,8 +144,17 @@ fn client(peer: &Path) {
             in_contact |= s.in_contact;
         }
     }
-    let out =
-        Command::new(peer).args([GOAL.0.to_string(), GOAL.1.to_string(), "3".into()]).output().expect("the peer runs");
+    let mut command = Command::new(peer);
+    command.args([GOAL.0.to_string(), GOAL.1.to_string(), "3".into()]);
+    // On the secure graph the command runs in /user's enclave: the peer is enrolled with its files.
+    if let (Ok(keystore), Ok(enclave)) =
+        (std::env::var("ROS_SECURITY_KEYSTORE"), std::env::var("ROS_SECURITY_ENCLAVE_OVERRIDE"))
+    {
+        let files = Path::new(&keystore).join("enclaves").join(enclave.trim_start_matches('/'));
+        command.env("CYCLONEDDS_URI", cyclone_security::cyclone_config(Some(&files)));
+        eprintln!("peer: enrolled as {enclave} ({})", files.display());
+    }
+    let out = command.output().expect("the peer runs");
     // Between markers, for the outer test to judge.
     println!("peer output >>>\n{}<<< peer output", String::from_utf8_lossy(&out.stdout));
     eprintln!("{}", String::from_utf8_lossy(&out.stderr));
