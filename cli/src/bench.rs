@@ -25,6 +25,19 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 1000))]
         reps: usize,
     },
+    /// The whole graph over DDS, plain and under ROS 2 security in the same run: the FRI loop's answer
+    /// latency and each process's CPU (the secure column needs the `security` feature).
+    Graph {
+        /// Measured seconds of each graph run.
+        #[arg(long, default_value_t = 20.0, value_parser = crate::ranges::real(1.0, 3600.0, " s"))]
+        seconds: f64,
+        /// Seconds before the measurement (discovery, the handshakes, the hand reaching the sponge).
+        #[arg(long, default_value_t = 8.0, value_parser = crate::ranges::real(0.0, 600.0, " s"))]
+        settle: f64,
+        /// Runs of each; the median is kept.
+        #[arg(long, default_value_t = 3, value_parser = crate::ranges::count(1, 100))]
+        reps: usize,
+    },
     /// Rigid-body dynamics: FK + Jacobian, RNEA, CRBA, g, h, forward dynamics and a whole control tick.
     Dynamics {
         /// Calls per repetition.
@@ -237,6 +250,7 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
         BenchCommand::Dynamics { calls, reps, pinocchio, json } => run_dynamics(calls, reps, pinocchio, json),
         BenchCommand::Contact { window, reps, json } => run_contact(window, reps, json),
         BenchCommand::Sim { seconds, reps } => run_sim(seconds, reps),
+        BenchCommand::Graph { seconds, settle, reps } => crate::bench_graph::run(seconds, settle, reps),
         BenchCommand::Driver { calls, reps } => run_driver(calls, reps),
         BenchCommand::Controller { calls, reps } => run_controller(calls, reps),
         BenchCommand::LoadingPaths { reps, calls } => run_loading_paths(reps, calls),

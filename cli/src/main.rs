@@ -3,6 +3,7 @@
 mod any_topic;
 mod arm_effects;
 mod bench;
+mod bench_graph;
 mod climb_cmd;
 mod closed_loop;
 mod demo;
