@@ -11,6 +11,11 @@
 //! parameter calls and a force goal that the controller executes, each authenticated, permitted by
 //! `/user`'s signed permissions and encrypted. That run needs the `security` feature:
 //! `cargo test --release --features softcontact/security -p softcontact --test interop enrolled`.
+//!
+//! And a trespasser: the Cyclone peer enrolled as `/user` with its own access control turned off (a
+//! governance of its own, signed by the keystore's authority), so it creates a client of the sensor's bare
+//! tare, which `/user`'s permissions lack. The graph's nodes hold it to its permissions: no answer. On the
+//! plain graph the same call is answered (`cargo test … --test interop trespass`).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,6 +30,9 @@ mod cyclone_security;
 
 /// Set inside the namespace: the peer to run there.
 const PEER: &str = "SOFTCONTACT_INTEROP_PEER";
+/// Set inside the namespace to run the peer as a trespasser: it only calls the sensor's bare tare, which
+/// only the controller may call (`trespass`, or `trespass-unchecked` with its own access control off).
+const MODE: &str = "SOFTCONTACT_INTEROP_MODE";
 /// The force goal the peers send [N] and its move's duration [s].
 const GOAL: (f64, f64) = (20.0, 1.0);
 
@@ -40,7 +48,7 @@ fn a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and
         return client(Path::new(&peer));
     }
     let test = "a_fast_dds_2_9_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
-    let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer", &[]);
+    let output = run_peer(test, "fastdds", "enhanced", "fastdds_peer", &[], "");
     judge(&output, "enhanced");
 }
 
@@ -50,7 +58,7 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
         return client(Path::new(&peer));
     }
     let test = "a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services_and_sends_a_force_goal";
-    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &[]);
+    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &[], "");
     judge(&output, "cyclone");
     // The type hash each writer announces (a Jazzy build): the REP-2016 hash of its type — topics,
     // services' replies (rmw_cyclonedds' `rr/…Reply`), the action's and ros2-client's own endpoints.
@@ -85,15 +93,39 @@ fn an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_go
         return client(Path::new(&peer));
     }
     let test = "an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_goal_it_executes";
-    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &["--secure"]);
+    let output = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &["--secure"], "");
     assert!(output.contains("launch: secure: keystore"), "the graph ran without security:\n{output}");
     assert!(output.contains("peer: enrolled as /user"), "the peer ran without credentials:\n{output}");
     judge(&output, "cyclone");
 }
 
+#[test]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
+fn a_trespassing_peer_enrolled_without_the_tare_and_skipping_its_own_access_control_gets_no_answer() {
+    if let Ok(peer) = std::env::var(PEER) {
+        return client(Path::new(&peer));
+    }
+    let test = "a_trespassing_peer_enrolled_without_the_tare_and_skipping_its_own_access_control_gets_no_answer";
+    // The control: on the plain graph the same call is answered, so the test can fail.
+    let plain = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &[], "trespass");
+    for answered in ["bias answered", "get answered"] {
+        assert!(peer_output(&plain).lines().any(|l| l == answered), "plain: {}", peer_output(&plain));
+    }
+    // Enrolled as /user, whose permissions lack the tare, with a governance of its own (signed by the
+    // keystore's authority) that turns its own read and write checks off: it creates the writer, and the
+    // graph's nodes, holding it to its permissions, never match it.
+    let secure = run_peer(test, "cyclonedds", "cyclone", "cyclonedds_peer", &["--secure"], "trespass-unchecked");
+    assert!(secure.contains("peer: own access control off"), "{secure}");
+    let body = peer_output(&secure);
+    assert!(!body.contains("no writer or reader"), "the peer checked itself after all: {body}");
+    assert!(body.lines().any(|l| l == "bias unanswered"), "secure: {body}");
+    // What its enclave grants still works: the graph refused the call, not the peer's odd governance.
+    assert!(body.lines().any(|l| l == "get answered"), "secure: {body}");
+}
+
 /// Builds the vendor's peer, starts the graph with `mapping` (and the launch script's `extra` options) and
-/// runs the peer inside; the peer's output.
-fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str, extra: &[&str]) -> String {
+/// runs the peer inside (`mode`: see [`MODE`]); the peer's output.
+fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str, extra: &[&str], mode: &str) -> String {
     let build = Command::new(root().join(format!("tests/peers/{vendor}/build.sh"))).output().expect("build.sh runs");
     assert!(
         build.status.success(),
@@ -120,6 +152,7 @@ fn run_peer(test_name: &str, vendor: &str, mapping: &str, binary: &str, extra: &
         .arg(&test)
         .args(["--exact", test_name, "--nocapture", "--test-threads=1"])
         .env(PEER, &peer)
+        .env(MODE, mode)
         .env("SOFTCONTACT_BIN", Path::new(env!("CARGO_BIN_EXE_softcontact")).parent().unwrap())
         .output()
         .expect("sim.sh runs");
@@ -144,13 +177,21 @@ fn client(peer: &Path) {
             in_contact |= s.in_contact;
         }
     }
+    let mode = std::env::var(MODE).unwrap_or_default();
     let mut command = Command::new(peer);
     command.args([GOAL.0.to_string(), GOAL.1.to_string(), "3".into()]);
+    if mode.starts_with("trespass") {
+        command.arg("trespass");
+    }
     // On the secure graph the command runs in /user's enclave: the peer is enrolled with its files.
     if let (Ok(keystore), Ok(enclave)) =
         (std::env::var("ROS_SECURITY_KEYSTORE"), std::env::var("ROS_SECURITY_ENCLAVE_OVERRIDE"))
     {
-        let files = Path::new(&keystore).join("enclaves").join(enclave.trim_start_matches('/'));
+        let mut files = Path::new(&keystore).join("enclaves").join(enclave.trim_start_matches('/'));
+        if mode == "trespass-unchecked" {
+            files = without_own_access_control(Path::new(&keystore), &files);
+            eprintln!("peer: own access control off");
+        }
         command.env("CYCLONEDDS_URI", cyclone_security::cyclone_config(Some(&files)));
         eprintln!("peer: enrolled as {enclave} ({})", files.display());
     }
@@ -161,9 +202,55 @@ fn client(peer: &Path) {
     assert!(out.status.success(), "the peer failed: {:?}", out.status);
 }
 
+/// A copy of `enclave` whose governance, signed with the keystore's own permissions authority, turns read
+/// and write access control off for the sensor's bare tare: a participant with it creates that service's
+/// client whatever its permissions say, as one that skips its own checks would.
+fn without_own_access_control(keystore: &Path, enclave: &Path) -> PathBuf {
+    let copy = std::env::temp_dir().join(format!("softcontact-unchecked-enclave-{}", std::process::id()));
+    std::fs::create_dir_all(&copy).unwrap();
+    for entry in std::fs::read_dir(enclave).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), copy.join(entry.file_name())).unwrap();
+    }
+    // The rule for every topic, `*`, copied for the tare's two topics with access control off, first.
+    let governance = std::fs::read_to_string(keystore.join("enclaves/governance.xml")).unwrap();
+    let start = governance.find("<topic_rule>").expect("a topic rule");
+    let end = governance.find("</topic_rule>").expect("a topic rule") + "</topic_rule>".len();
+    let every_topic = &governance[start..end];
+    assert!(every_topic.contains("<topic_expression>*</topic_expression>"), "{every_topic}");
+    let unchecked: String =
+        [format!("rq{}Request", topics::FT_BIAS_SERVICE), format!("rr{}Reply", topics::FT_BIAS_SERVICE)]
+            .iter()
+            .map(|topic| {
+                every_topic
+                    .replace("<topic_expression>*<", &format!("<topic_expression>{topic}<"))
+                    .replace("<enable_read_access_control>true", "<enable_read_access_control>false")
+                    .replace("<enable_write_access_control>true", "<enable_write_access_control>false")
+                    + "\n        "
+            })
+            .collect();
+    let unchecked = format!("{}{unchecked}{}", &governance[..start], &governance[start..]);
+    std::fs::write(copy.join("governance.xml"), unchecked).unwrap();
+    let signed = Command::new("openssl")
+        .current_dir(&copy)
+        .args(["smime", "-sign", "-text", "-in", "governance.xml", "-out", "governance.p7s", "-signer"])
+        .arg(keystore.join("public/permissions_ca.cert.pem"))
+        .arg("-inkey")
+        .arg(keystore.join("private/permissions_ca.key.pem"))
+        .status()
+        .expect("openssl runs");
+    assert!(signed.success(), "openssl signed the governance");
+    copy
+}
+
+/// What the peer printed, between the client's markers.
+fn peer_output(text: &str) -> &str {
+    text.split("peer output >>>\n").nth(1).and_then(|t| t.split("<<< peer output").next()).unwrap_or("")
+}
+
 /// The peer's `key value…` lines.
 fn judge(text: &str, mapping: &str) {
-    let body = text.split("peer output >>>\n").nth(1).and_then(|t| t.split("<<< peer output").next()).unwrap_or("");
+    let body = peer_output(text);
     let line = |key: &str| -> Vec<String> {
         let l =
             body.lines().find(|l| l.starts_with(&format!("{key} "))).unwrap_or_else(|| panic!("no `{key}`: {body}"));

@@ -6,7 +6,8 @@
 //! - the user, enrolled, records the F/T node's wrenches and the contact estimator's state, each from
 //!   another process;
 //! - a stranger with no credentials (security off), and one enrolled by another authority, record nothing
-//!   of them, and their force commands get no answer and never reach the controller;
+//!   of them, and their force commands get no answer and never reach the controller; the nodes count
+//!   and log each participant they refused;
 //! - the contact estimator started in the `/user` enclave, whose permissions do not let it write its
 //!   topics, refuses to start.
 //!
@@ -137,6 +138,19 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         assert!(log(&format!("{stranger}.log")).contains("no answer"), "{stranger}:\n{all}");
     }
     assert!(!log("graph/lwr_control.log").contains("40.00 N"), "the controller heard a stranger's goal:\n{all}");
+    // Each process counts and logs the strangers it refused: four processes of two strangers tried it.
+    for node in ["lwr_control", "contact_estimator"] {
+        let text = log(&format!("graph/{node}.log"));
+        // The exit reports' `…; N participants refused by DDS-Security`.
+        let refused = text
+            .lines()
+            .filter_map(|l| l.split_once(" participants refused by DDS-Security"))
+            .filter_map(|(before, _)| before.rsplit(' ').next()?.parse::<usize>().ok())
+            .max()
+            .unwrap_or(0);
+        assert!(refused >= 2, "{node} reported {refused} refused participants:\n{all}");
+        assert!(text.contains("security: refused participant"), "{node} logged no refusal:\n{all}");
+    }
     // Refused at once (status 1), not started and stopped by the timeout (124).
     assert_eq!(log("misplaced.status").trim(), "1", "the estimator in /user's enclave:\n{all}");
     assert!(!log("misplaced.log").contains("ready"), "the estimator in /user's enclave came up:\n{all}");

@@ -21,14 +21,14 @@ const PROCESSES: [&str; 3] = ["sim_arm", "lwr_control", "contact_estimator"];
 /// One run's numbers.
 #[derive(Debug, Clone, Default)]
 struct Run {
-    /// The FRI answer's latency: p50 and p99 [µs], and the share of cycles within 200 µs [%].
+    /// The FRI answer's latency: p50 and p99 in µs, and the share of cycles within 200 µs in %.
     p50_us: f64,
     p99_us: f64,
     within_200us: f64,
     /// The simulated KRC's answers that came after its deadline, of its cycles.
     late_answers: f64,
     cycles: f64,
-    /// CPU of each of [`PROCESSES`] over the window [% of one core].
+    /// CPU of each of [`PROCESSES`] over the window, in % of one core.
     cpu: [f64; 3],
 }
 

@@ -97,7 +97,7 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         }
     }
     eprintln!(
-        "contact_estimator: exit: {} readings, {} without a fresh pose, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB",
+        "contact_estimator: exit: {} readings, {} without a fresh pose, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB{}",
         estimation.samples,
         estimation.unpaired,
         estimation.refits,
@@ -105,7 +105,8 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         pin_poses.refused,
         pin_twists.refused,
         pin_wrenches.refused,
-        ros::peak_rss_mb().unwrap_or(f64::NAN)
+        ros::peak_rss_mb().unwrap_or(f64::NAN),
+        ros::security_report()
     );
     dead.map_or(Ok(()), |d| Err(d.into()))
 }

@@ -113,10 +113,11 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         }
     }
     eprintln!(
-        "deformation_controller: exit: {}; {}; peak RSS {:.1} MB",
+        "deformation_controller: exit: {}; {}; peak RSS {:.1} MB{}",
         control.counters,
         strangers_report(&pin_joint_states, &pin_wrenches, &pin_external),
-        ros::peak_rss_mb().unwrap_or(f64::NAN)
+        ros::peak_rss_mb().unwrap_or(f64::NAN),
+        ros::security_report()
     );
     dead.map_or(Ok(()), |d| Err(d.into()))
 }

@@ -125,7 +125,12 @@ pub fn run(
         }
     }
     let _ = client.stop();
-    eprintln!("ft_sensor: exit: {:?}; peak RSS {:.1} MB", client.node.counters, ros::peak_rss_mb().unwrap_or(f64::NAN));
+    eprintln!(
+        "ft_sensor: exit: {:?}; peak RSS {:.1} MB{}",
+        client.node.counters,
+        ros::peak_rss_mb().unwrap_or(f64::NAN),
+        ros::security_report()
+    );
     Ok(())
 }
 

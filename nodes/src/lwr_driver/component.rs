@@ -210,7 +210,7 @@ fn exit_report(client: &FriClient, commands: &CommandStats, commander: &impl Com
     eprintln!("lwr_driver: send call {}", client.send_duration.summary(1e6, "us"));
     commands.exit_report(client.driver.counters.stale_cycles);
     commander.exit_report();
-    eprintln!("lwr_driver: peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
+    eprintln!("lwr_driver: peak RSS {:.1} MB{}", ros::peak_rss_mb().unwrap_or(f64::NAN), ros::security_report());
 }
 
 /// The applied commands: how old the joint state behind each was when applied (the controller stamps

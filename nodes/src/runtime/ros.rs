@@ -3,14 +3,15 @@
 //! latched), topics by their ROS 2 names and types.
 
 use softcontact_msgs::topics::{self, Topic};
-use std::sync::Arc;
+use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 use ros2_client::qos::{Durability, History, WhenFull};
 pub use ros2_client::ros2::LogLevel;
 use ros2_client::{
-    Context, ContextOptions, Name, Node, NodeName, NodeOptions, ParameterValue, QosProfile, RosoutRaw, ServiceMapping,
-    ServiceTypeName,
+    Context, ContextOptions, Name, Node, NodeEvent, NodeName, NodeOptions, ParameterValue, QosProfile, RosoutRaw,
+    ServiceMapping, ServiceTypeName,
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -52,6 +53,42 @@ pub fn tool_node(name: &str, namespace: &str, enclave: Option<&str>) -> anyhow::
     node_with_parameters(name, Declared { remapping, enclave: enclave.map(str::to_owned), ..Default::default() })
 }
 
+/// Whether this process joined the graph under DDS-Security.
+static SECURE: AtomicBool = AtomicBool::new(false);
+/// The remote participants DDS-Security refused in this process (no credentials, another authority's, a
+/// failed handshake), each once whichever of the process's nodes heard of it.
+static REFUSED: Mutex<BTreeSet<String>> = Mutex::new(BTreeSet::new());
+
+/// For a process's exit report: how many participants DDS-Security refused, on a secure graph; else
+/// nothing.
+pub fn security_report() -> String {
+    if !SECURE.load(Ordering::Relaxed) {
+        return String::new();
+    }
+    let refused = REFUSED.lock().unwrap_or_else(|e| e.into_inner()).len();
+    format!("; {refused} participants refused by DDS-Security")
+}
+
+/// Counts and logs each participant DDS-Security refuses, as `node`'s spinner hears of it.
+fn watch_refusals(node: &Node, name: &str) -> anyhow::Result<()> {
+    let Some(events) = node.status_receiver() else { return Ok(()) };
+    let name = name.to_owned();
+    std::thread::Builder::new().name(format!("{name}-refusals")).spawn(move || {
+        futures::executor::block_on(async {
+            while let Ok(event) = events.recv().await {
+                let NodeEvent::ParticipantRefused(participant) = event else { continue };
+                if REFUSED.lock().unwrap_or_else(|e| e.into_inner()).insert(participant.clone()) {
+                    eprintln!(
+                        "{name}: security: refused participant {participant} (no credentials, another \
+                         authority's, or a failed handshake)"
+                    );
+                }
+            }
+        })
+    })?;
+    Ok(())
+}
+
 /// The participant's options: the domain of `ROS_DOMAIN_ID`, and DDS-Security where `ROS_SECURITY_*`
 /// asks for it ([`security::decide`]); refused under `Enforce` without a usable enclave, or in a build
 /// without the `security` feature.
@@ -65,7 +102,10 @@ fn context_options(enclave: Option<&str>) -> anyhow::Result<ContextOptions> {
             Ok(options)
         }
         #[cfg(feature = "security")]
-        security::Decision::Secure { dir, .. } => Ok(options.enable_security(dir, String::new())),
+        security::Decision::Secure { dir, .. } => {
+            SECURE.store(true, Ordering::Relaxed);
+            Ok(options.enable_security(dir, String::new()))
+        }
         #[cfg(not(feature = "security"))]
         security::Decision::Secure { name, .. } => match environment.strategy() {
             security::Strategy::Enforce => anyhow::bail!(
@@ -129,6 +169,9 @@ pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<No
                 eprintln!("parameter services stopped: {e:?}");
             }
         })?;
+        if SECURE.load(Ordering::Relaxed) {
+            watch_refusals(&node, name)?;
+        }
     }
     Ok(node)
 }

@@ -93,6 +93,10 @@ fn main() -> anyhow::Result<()> {
         let _ = contact_wrench.publish(messages::contact_wrench(&sim.contact().force, stamp));
         !stop.load(Ordering::Relaxed) && cycles.is_none_or(|n| (sim.time() * 1000.0).round() < n)
     })?;
-    eprintln!("sim_arm: exit: {stats:?}; peak RSS {:.1} MB", ros::peak_rss_mb().unwrap_or(f64::NAN));
+    eprintln!(
+        "sim_arm: exit: {stats:?}; peak RSS {:.1} MB{}",
+        ros::peak_rss_mb().unwrap_or(f64::NAN),
+        ros::security_report()
+    );
     Ok(())
 }

@@ -9,7 +9,11 @@
  * `key value...` line each, for the test to judge (tests/interop.rs), and exits 1 when a call went
  * unanswered.
  *
- * Usage: cyclonedds_peer FORCE_N DURATION_S LISTEN_S   (inside the graph's network namespace)
+ * With `trespass` it does none of that: it only calls /ft_sensor/bias, the sensor's bare tare that only the
+ * controller may call, and then gets the controller's force limit, which a user may; it prints `bias
+ * answered|unanswered` and `get answered|unanswered`.
+ *
+ * Usage: cyclonedds_peer FORCE_N DURATION_S LISTEN_S [trespass]   (inside the graph's network namespace)
  */
 
 #include <stdbool.h>
@@ -64,6 +68,10 @@ static bool call(dds_entity_t pp, const char *service, const dds_topic_descripto
   dds_entity_t writer = dds_create_writer(pp, request_topic, q, NULL);
   dds_entity_t replies = dds_create_reader(pp, reply_topic, q, NULL);
   dds_delete_qos(q);
+  if (writer < 0 || replies < 0) {
+    printf("%s: no writer or reader: %s\n", service, dds_strretcode(writer < 0 ? writer : replies));
+    return false;
+  }
   double deadline = now() + seconds;
   for (;;) {
     dds_publication_matched_status_t pm;
@@ -71,7 +79,11 @@ static bool call(dds_entity_t pp, const char *service, const dds_topic_descripto
     dds_get_publication_matched_status(writer, &pm);
     dds_get_subscription_matched_status(replies, &sm);
     if (pm.current_count > 0 && sm.current_count > 0) break;
-    if (now() > deadline) return false;
+    if (now() > deadline) {
+      printf("%s: unmatched (%d servers' readers, %d servers' writers)\n", service, pm.current_count,
+             sm.current_count);
+      return false;
+    }
     dds_sleepfor(DDS_MSECS(20));
   }
   const request_header *sent = request;
@@ -94,8 +106,8 @@ static bool call(dds_entity_t pp, const char *service, const dds_topic_descripto
 }
 
 int main(int argc, char **argv) {
-  if (argc != 4) {
-    fprintf(stderr, "usage: %s FORCE_N DURATION_S LISTEN_S\n", argv[0]);
+  if (argc != 4 && !(argc == 5 && strcmp(argv[4], "trespass") == 0)) {
+    fprintf(stderr, "usage: %s FORCE_N DURATION_S LISTEN_S [trespass]\n", argv[0]);
     return 2;
   }
   double force = atof(argv[1]), duration = atof(argv[2]), listen = atof(argv[3]);
@@ -109,6 +121,26 @@ int main(int argc, char **argv) {
   if (pp < 0) {
     fprintf(stderr, "no DDS participant: %s\n", dds_strretcode(pp));
     return 1;
+  }
+  srand((unsigned)(now() * 1e6));
+  uint64_t client = ((uint64_t)rand() << 32) ^ (uint64_t)rand();
+  if (argc == 5) {
+    std_srvs_srv_dds__Trigger_Request_ tare = {.client = client, .sequence_number = 1};
+    std_srvs_srv_dds__Trigger_Response_ *tared = std_srvs_srv_dds__Trigger_Response___alloc();
+    bool answered = call(pp, "ft_sensor/bias", &std_srvs_srv_dds__Trigger_Request__desc,
+                         &std_srvs_srv_dds__Trigger_Response__desc, &tare, tared, 12.0);
+    printf("bias %s\n", answered ? "answered" : "unanswered");
+    /* A call its enclave has, for contrast: the peer is on the graph. */
+    char *names[] = {"force_limit"};
+    rcl_interfaces_srv_dds__GetParameters_Request_ get = {.client = client, .sequence_number = 2};
+    get.names._length = get.names._maximum = 1;
+    get.names._buffer = names;
+    rcl_interfaces_srv_dds__GetParameters_Response_ *got = rcl_interfaces_srv_dds__GetParameters_Response___alloc();
+    answered = call(pp, "deformation_controller/get_parameters", &rcl_interfaces_srv_dds__GetParameters_Request__desc,
+                    &rcl_interfaces_srv_dds__GetParameters_Response__desc, &get, got, 12.0);
+    printf("get %s\n", answered ? "answered" : "unanswered");
+    dds_delete(pp);
+    return 0;
   }
   dds_entity_t joints = reader(pp, &sensor_msgs_msg_dds__JointState__desc, "rt/lwr/joint_states", false, 1);
   dds_entity_t wrenches = reader(pp, &geometry_msgs_msg_dds__WrenchStamped__desc, "rt/ft_sensor/wrench", false, 1);
@@ -192,8 +224,6 @@ int main(int argc, char **argv) {
 
   /* The controller's parameters, as `ros2 param list` and `ros2 param get` ask for them. */
   int failures = 0;
-  srand((unsigned)(now() * 1e6));
-  uint64_t client = ((uint64_t)rand() << 32) ^ (uint64_t)rand();
   rcl_interfaces_srv_dds__ListParameters_Request_ list = {.client = client, .sequence_number = 1};
   rcl_interfaces_srv_dds__ListParameters_Response_ *listed = rcl_interfaces_srv_dds__ListParameters_Response___alloc();
   if (call(pp, "deformation_controller/list_parameters", &rcl_interfaces_srv_dds__ListParameters_Request__desc,

@@ -53,6 +53,9 @@ pub enum NodeEvent {
   Graph(GraphEvent),
   /// A `ros_discovery_info` update from another Participant.
   ParticipantEntities(ParticipantEntitiesInfo),
+  /// softcontact (VENDORED.md): a remote Participant that DDS-Security refused (no credentials, or
+  /// another authority's, or a failed handshake), by its GUID prefix. Only with the `security` feature.
+  ParticipantRefused(String),
 }
 
 /// Best-effort [`GraphEntity`] for a DDS-matched remote entity.
@@ -379,6 +382,15 @@ impl Spinner {
                 writers.remove(&guid);
               }
               Some(GraphEvent::EntityUndeclared(guid_entity(EntityKind::Publisher, guid)))
+            }
+
+            #[cfg(feature = "security")]
+            DomainParticipantStatusEvent::Authentication {
+              participant,
+              status: rustdds::discovery::AuthenticationStatus::Rejected,
+            } => {
+              self.send_status_event(&NodeEvent::ParticipantRefused(format!("{participant:?}")));
+              None
             }
 
             _ => None,
@@ -1059,7 +1071,7 @@ impl Node {
       .filter_map(|event| async move {
         match event {
           NodeEvent::Graph(g) => Some(g),
-          NodeEvent::ParticipantEntities(_) => None,
+          NodeEvent::ParticipantEntities(_) | NodeEvent::ParticipantRefused(_) => None,
         }
       })
   }

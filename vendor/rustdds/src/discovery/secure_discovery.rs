@@ -373,6 +373,15 @@ impl SecureDiscovery {
 
     // Update authentication status to DB
     discovery_db_write(discovery_db).update_authentication_status(guid_prefix, updated_auth_status);
+    // softcontact: a participant refused at first sight (incompatible security, e.g. none at all) is
+    // reported to the DP event loop as a handshake's outcome is, so the application hears of it
+    // (VENDORED.md).
+    if auth_status_opt.is_none() && updated_auth_status == AuthenticationStatus::Rejected {
+      send_discovery_notification(
+        discovery_updated_sender,
+        DiscoveryNotificationType::ParticipantAuthenticationStatusChanged { guid_prefix },
+      );
+    }
 
     // Decide if normal Discovery can process the participant message
     // If authentication has begun with the remote, we should have already notified
