@@ -70,7 +70,11 @@ pub fn run(seconds: f64, settle: f64, reps: usize) -> anyhow::Result<()> {
             .collect()
     };
     let (plain, secure) = (table(false), table(true));
-    println!("  {:<34} {:>10} {:>10} {:>8}", "", "plain", "secure", "ratio");
+    if secure.is_empty() {
+        println!("  {:<34} {:>10}", "", "plain");
+    } else {
+        println!("  {:<34} {:>10} {:>10} {:>8}", "", "plain", "secure", "ratio");
+    }
     for (i, (name, p)) in plain.iter().enumerate() {
         match secure.get(i) {
             Some((_, s)) => println!("  {name:<34} {p:>10.1} {s:>10.1} {:>8.2}", s / p),
