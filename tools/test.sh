@@ -8,4 +8,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/python-env.sh
 source tools/dds-peers.sh
-cargo test --workspace --release "$@"
+# With DDS-Security compiled in (it stays off unless ROS_SECURITY_* asks for it): the secure graph's tests
+# run too, and every other test shows that nothing changes without it.
+cargo test --workspace --release --features softcontact/security "$@"
