@@ -87,7 +87,7 @@ fn a_cyclone_dds_0_10_peer_reads_the_streams_and_tf_calls_the_parameter_services
 }
 
 #[test]
-#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (tools/test.sh builds with it)")]
 fn an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_goal_it_executes() {
     if let Ok(peer) = std::env::var(PEER) {
         return client(Path::new(&peer));
@@ -100,7 +100,7 @@ fn an_enrolled_cyclone_dds_0_10_peer_reads_the_secure_graph_and_sends_a_force_go
 }
 
 #[test]
-#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (tools/test.sh builds with it)")]
 fn a_trespassing_peer_enrolled_without_the_tare_and_skipping_its_own_access_control_gets_no_answer() {
     if let Ok(peer) = std::env::var(PEER) {
         return client(Path::new(&peer));

@@ -70,7 +70,7 @@ fn every_process_asked_for_security_under_enforce_without_an_enclave_refuses_to_
 }
 
 #[test]
-#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (run by hand, see above)")]
+#[cfg_attr(not(feature = "security"), ignore = "needs the `security` feature (tools/test.sh builds with it)")]
 fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misplaced_process() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path();
@@ -86,7 +86,7 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         echo $? > "$out/misplaced.status"
         "$bin/softcontact" security create-keystore "$out/other_ca" --enclaves > /dev/null || exit 12
         ROS_SECURITY_KEYSTORE="$out/other_ca" \
-            "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/other_ca.mcap" --duration 3 \
+            "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/other_ca.mcap" --duration 14 \
             > "$out/other_ca.log" 2>&1
         ROS_SECURITY_KEYSTORE="$out/other_ca" timeout 30 "$bin/softcontact" force 40 --duration 2 \
             > "$out/other_ca_force.log" 2>&1
@@ -138,7 +138,11 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         assert!(log(&format!("{stranger}.log")).contains("no answer"), "{stranger}:\n{all}");
     }
     assert!(!log("graph/lwr_control.log").contains("40.00 N"), "the controller heard a stranger's goal:\n{all}");
-    // Each process counts and logs the strangers it refused: four processes of two strangers tried it.
+    // Each process counts and logs the strangers it refused: the two without credentials, and the
+    // other authority's recorder, whose handshake fails on whichever side answers it (at once where the
+    // graph's node answers, after the node's ten resends, 10 s, where the node asks and the recorder,
+    // unable to verify the node's certificate, never answers; it stays 14 s for that). The other
+    // authority's force client leaves before ten resends and may go uncounted.
     for node in ["lwr_control", "contact_estimator"] {
         let text = log(&format!("graph/{node}.log"));
         // The exit reports' `…; N participants refused by DDS-Security`.
@@ -148,7 +152,7 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
             .filter_map(|(before, _)| before.rsplit(' ').next()?.parse::<usize>().ok())
             .max()
             .unwrap_or(0);
-        assert!(refused >= 2, "{node} reported {refused} refused participants:\n{all}");
+        assert!(refused >= 3, "{node} reported {refused} refused participants:\n{all}");
         assert!(text.contains("security: refused participant"), "{node} logged no refusal:\n{all}");
     }
     // Refused at once (status 1), not started and stopped by the timeout (124).

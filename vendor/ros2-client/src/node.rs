@@ -388,7 +388,8 @@ impl Spinner {
             DomainParticipantStatusEvent::Authentication {
               participant,
               status: rustdds::discovery::AuthenticationStatus::Rejected,
-            } => {
+            }
+            | DomainParticipantStatusEvent::HandshakeFailed { participant } => {
               self.send_status_event(&NodeEvent::ParticipantRefused(format!("{participant:?}")));
               None
             }

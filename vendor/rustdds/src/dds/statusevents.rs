@@ -396,6 +396,13 @@ pub enum DomainParticipantStatusEvent {
     participant: GuidPrefix,
     status: AuthenticationStatus,
   },
+  /// softcontact: a handshake with the participant failed (its certificate is not of this domain's
+  /// authority, its messages do not verify) or went unanswered through every resend. Its
+  /// authentication status is not changed by this.
+  #[cfg(feature = "security")]
+  HandshakeFailed {
+    participant: GuidPrefix,
+  },
   /// The CA has revoked the identity of some Participant.
   /// We may be currently communicating with the Participant, or it may be
   /// unknown to us.

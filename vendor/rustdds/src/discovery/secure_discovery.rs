@@ -64,6 +64,9 @@ pub enum AuthenticationStatus {
 
 // How many times an authentication message is resent if we don't get an answer
 const STORED_AUTH_MESSAGE_MAX_RESEND_COUNT: u8 = 10;
+/// softcontact: how many remote participants' failed handshakes are remembered, so each is logged
+/// and reported once; past it the memory starts anew.
+const MAX_HANDSHAKE_FAILURES_REMEMBERED: usize = 4096;
 
 struct StoredAuthenticationMessage {
   message: ParticipantStatelessMessage,
@@ -102,6 +105,9 @@ pub(crate) struct SecureDiscovery {
   // Here we store the latest authentication message that we've sent to each remote,
   // in case they need to be sent again
   stored_authentication_messages: HashMap<GuidPrefix, StoredAuthenticationMessage>,
+
+  // softcontact: the remote participants whose failed handshake was logged and reported
+  handshake_failures_reported: HashSet<GuidPrefix>,
 
   cached_key_exchange_messages_for_resend: HashSet<ParticipantVolatileMessageSecure>,
 
@@ -264,6 +270,7 @@ impl SecureDiscovery {
       cached_key_exchange_messages_for_resend: HashSet::new(),
       key_exchange_messages_to_repeat: HashSet::new(),
       stored_authentication_messages: HashMap::new(),
+      handshake_failures_reported: HashSet::new(),
       cached_received_key_exchange_messages: HashMap::new(),
       user_data_endpoints_with_keys_already_sent_to: HashSet::new(),
       relay_only_remote_readers: HashSet::new(),
@@ -1525,6 +1532,7 @@ impl SecureDiscovery {
     &mut self,
     auth_msg_writer: &no_key::DataWriter<ParticipantStatelessMessage>,
     key_exchange_writer: &no_key::DataWriter<ParticipantVolatileMessageSecure>,
+    discovery_updated_sender: &WakeSender<DiscoveryNotificationType>,
   ) {
     // First resend authentication messages
     for (guid_prefix, stored_message) in self.stored_authentication_messages.iter_mut() {
@@ -1551,10 +1559,29 @@ impl SecureDiscovery {
         }
       }
     }
-    // Remove authentication messages with no more resends
-    self
-      .stored_authentication_messages
-      .retain(|_guid_prefix, message| message.remaining_resend_counter > 0);
+    // Remove authentication messages with no more resends. softcontact: a handshake still waiting
+    // for the remote's answer then has failed (a participant of another authority cannot verify our
+    // certificate and never answers), and the application is told so (VENDORED.md).
+    let mut unanswered = Vec::new();
+    self.stored_authentication_messages.retain(|guid_prefix, message| {
+      if message.remaining_resend_counter > 0 {
+        return true;
+      }
+      unanswered.push(*guid_prefix);
+      false
+    });
+    for guid_prefix in unanswered {
+      if matches!(
+        self.handshake_states.get(&guid_prefix),
+        Some(DiscHandshakeState::PendingReplyMessage | DiscHandshakeState::PendingFinalMessage)
+      ) {
+        self.report_handshake_failure(
+          guid_prefix,
+          &format!("no answer to {STORED_AUTH_MESSAGE_MAX_RESEND_COUNT} resent handshake messages"),
+          discovery_updated_sender,
+        );
+      }
+    }
 
     // Then try to send those key exchange messages that we haven't been able to
     // send yet
@@ -1588,6 +1615,32 @@ impl SecureDiscovery {
         );
       }
     }
+  }
+
+  /// softcontact (VENDORED.md): a failed handshake is logged and reported to the application once a
+  /// remote participant (later failures of the same remote, e.g. its resent requests, are not
+  /// logged: a stranger resending cannot flood the log). The participant's authentication status is
+  /// not changed: a stateless message's sender is not authenticated, and a forged one must not lock
+  /// a legitimate participant out.
+  fn report_handshake_failure(
+    &mut self,
+    remote_guid_prefix: GuidPrefix,
+    why: &str,
+    discovery_updated_sender: &WakeSender<DiscoveryNotificationType>,
+  ) {
+    if self.handshake_failures_reported.len() >= MAX_HANDSHAKE_FAILURES_REMEMBERED {
+      self.handshake_failures_reported.clear();
+    }
+    if !self.handshake_failures_reported.insert(remote_guid_prefix) {
+      return;
+    }
+    error!("Handshake with remote participant {remote_guid_prefix:?} failed: {why}");
+    send_discovery_notification(
+      discovery_updated_sender,
+      DiscoveryNotificationType::ParticipantHandshakeFailed {
+        guid_prefix: remote_guid_prefix,
+      },
+    );
   }
 
   fn reset_stored_message_resend_counter(&mut self, remote_guid_prefix: &GuidPrefix) {
@@ -1643,7 +1696,12 @@ impl SecureDiscovery {
         );
       }
       Some(DiscHandshakeState::PendingRequestMessage) => {
-        self.handshake_on_pending_request_message(message, discovery_db, auth_msg_writer);
+        self.handshake_on_pending_request_message(
+          message,
+          discovery_db,
+          auth_msg_writer,
+          discovery_updated_sender,
+        );
       }
       Some(DiscHandshakeState::PendingReplyMessage) => {
         self.handshake_on_pending_reply_message(
@@ -1678,6 +1736,7 @@ impl SecureDiscovery {
     received_message: &ParticipantStatelessMessage,
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
     auth_msg_writer: &no_key::DataWriter<ParticipantStatelessMessage>,
+    discovery_updated_sender: &WakeSender<DiscoveryNotificationType>,
   ) {
     let remote_guid_prefix = received_message.generic.source_guid_prefix();
     debug!(
@@ -1755,8 +1814,10 @@ impl SecureDiscovery {
         );
       }
       Err(e) => {
-        error!(
-          "Replying to a handshake request failed: {e}. Remote guid prefix: {remote_guid_prefix:?}"
+        self.report_handshake_failure(
+          remote_guid_prefix,
+          &format!("replying to its handshake request failed: {e}"),
+          discovery_updated_sender,
         );
       }
     }
@@ -1852,9 +1913,10 @@ impl SecureDiscovery {
         );
       }
       Err(e) => {
-        error!(
-          "Validating handshake reply message failed. Error: {e}. Remote guid prefix: \
-           {remote_guid_prefix:?}"
+        self.report_handshake_failure(
+          remote_guid_prefix,
+          &format!("validating its handshake reply failed: {e}"),
+          discovery_updated_sender,
         );
         // Reset stored message resend counter, so our resends can't be depleted by
         // sending us incorrect messages
@@ -1931,9 +1993,10 @@ impl SecureDiscovery {
         );
       }
       Err(e) => {
-        error!(
-          "Validating final handshake message failed. Error: {e}. Remote guid prefix: \
-           {remote_guid_prefix:?}"
+        self.report_handshake_failure(
+          remote_guid_prefix,
+          &format!("validating its final handshake message failed: {e}"),
+          discovery_updated_sender,
         );
         // Reset stored message resend counter, so our resends can't be depleted by
         // sending us incorrect messages

@@ -504,6 +504,13 @@ pub(crate) enum DiscoveryNotificationType {
   ParticipantAuthenticationStatusChanged {
     guid_prefix: GuidPrefix,
   },
+  /// softcontact: a handshake with the participant failed or was never answered. Its status is left
+  /// as it was (a stateless message's sender is not authenticated, so a forged one must not lock a
+  /// participant out); the application is only told (VENDORED.md).
+  #[cfg(feature = "security")]
+  ParticipantHandshakeFailed {
+    guid_prefix: GuidPrefix,
+  },
 }
 
 pub mod builtin_topic_names {

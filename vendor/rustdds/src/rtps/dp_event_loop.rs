@@ -450,6 +450,12 @@ impl DPEventLoop {
         ParticipantAuthenticationStatusChanged { guid_prefix } => {
           self.on_remote_participant_authentication_status_changed(guid_prefix);
         }
+        #[cfg(feature = "security")]
+        ParticipantHandshakeFailed { guid_prefix } => {
+          self.send_participant_status(DomainParticipantStatusEvent::HandshakeFailed {
+            participant: guid_prefix,
+          });
+        }
       }
     }
 

@@ -108,6 +108,33 @@ impl Default for MessageReceiverState<'_> {
 /// submessages. Then it processes the instructions in the Interpreter
 /// SUbmessages and forwards data in Entity Submessages to the appropriate
 /// Entities. (See RTPS spec Section 8.3.7)
+/// softcontact (VENDORED.md): the refusals of unprotected submessages in a protected domain, logged at
+/// most once a second with a count of those not logged, so a stranger sending cannot flood the log.
+#[cfg(feature = "security")]
+#[derive(Default)]
+struct RefusedLog {
+  last_logged: std::cell::Cell<Option<std::time::Instant>>,
+  not_logged: std::cell::Cell<u64>,
+}
+
+#[cfg(feature = "security")]
+impl RefusedLog {
+  const PERIOD: std::time::Duration = std::time::Duration::from_secs(1);
+
+  fn note(&self, what: std::fmt::Arguments<'_>) {
+    let now = std::time::Instant::now();
+    if self.last_logged.get().is_some_and(|t| now.duration_since(t) < Self::PERIOD) {
+      self.not_logged.set(self.not_logged.get() + 1);
+      return;
+    }
+    match self.not_logged.replace(0) {
+      0 => error!("{what}"),
+      n => error!("{what} ({n} more refused in the last {:?})", Self::PERIOD),
+    }
+    self.last_logged.set(Some(now));
+  }
+}
+
 pub(crate) struct MessageReceiver {
   pub available_readers: BTreeMap<EntityId, Reader>,
   // GuidPrefix sent in this channel needs to be RTPSMessage source_guid_prefix. Writer needs this
@@ -141,6 +168,8 @@ pub(crate) struct MessageReceiver {
   // For certain topics we have to allow unprotected rtps messages even if the domain is
   // rtps-protected
   must_be_rtps_protection_special_case: bool,
+  #[cfg(feature = "security")]
+  refused_log: RefusedLog,
 }
 
 impl MessageReceiver {
@@ -174,6 +203,8 @@ impl MessageReceiver {
       #[cfg(feature = "security")]
       // Protection on by default
       must_be_rtps_protection_special_case: true,
+      #[cfg(feature = "security")]
+      refused_log: RefusedLog::default(),
     }
   }
 
@@ -463,10 +494,10 @@ impl MessageReceiver {
                   {
                     self.handle_writer_submessage(receiver_entity_id, submessage);
                   } else {
-                    error!(
+                    self.refused_log.note(format_args!(
                       "No reader with unprotected submessages found for the GUID \
                        {destination_guid:?}"
-                    );
+                    ));
                   }
                 }
               }
@@ -495,10 +526,10 @@ impl MessageReceiver {
                 if plugins.submessage_not_protected(&destination_guid) {
                   self.handle_reader_submessage(submessage);
                 } else {
-                  error!(
+                  self.refused_log.note(format_args!(
                     "No writer with unprotected submessages found for the GUID \
                      {destination_guid:?}"
-                  );
+                  ));
                 }
               }
             }
@@ -603,10 +634,10 @@ impl MessageReceiver {
         | EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_READER => (),
         // Otherwise we have to reject
         other => {
-          return error!(
+          return self.refused_log.note(format_args!(
             "Received an unprotected message containing a writer submessage for the reader \
              {other:?} in an rtps-protected domain."
-          )
+          ))
         }
       }
     }
@@ -852,10 +883,10 @@ impl MessageReceiver {
         | EntityId::P2P_BUILTIN_PARTICIPANT_VOLATILE_SECURE_WRITER => (),
         // Otherwise we have to reject
         other => {
-          return error!(
+          return self.refused_log.note(format_args!(
             "Received an unprotected message containing a reader submessage for the writer \
              {other:?} in an rtps-protected domain."
-          )
+          ))
         }
       }
     }
