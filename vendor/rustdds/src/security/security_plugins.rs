@@ -1332,27 +1332,43 @@ impl SecurityPlugins {
 #[derive(Clone)]
 pub(crate) struct SecurityPluginsHandle {
   inner: Arc<Mutex<SecurityPlugins>>,
+  who_has_it: Arc<Mutex<Option<String>>>,
 }
 
 impl SecurityPluginsHandle {
   pub(crate) fn new(s: SecurityPlugins) -> Self {
     Self {
       inner: Arc::new(Mutex::new(s)),
+      who_has_it: Arc::new(Mutex::new(None)),
     }
   }
 
-  /// softcontact (VENDORED.md): waits for the lock. Upstream polled `try_lock` and slept 100 ms after
-  /// each miss, so a thread that missed once waited at least 100 ms, and one that kept missing
-  /// behind the busy event loop waited for seconds.
   pub(crate) fn get_plugins(&self) -> MutexGuard<'_, SecurityPlugins> {
-    match self.inner.lock() {
-      Ok(guard) => guard,
-      Err(poisoned) => {
-        create_security_error_and_log!("Security plugins are poisoned! {poisoned:?}");
-        panic!("RustDDS internal bug: SecurityPlugins mutex poisoned after a prior panic");
+    let mut count = 0;
+    loop {
+      match self.try_lock() {
+        Ok(guard) => {
+          *self.who_has_it.lock().unwrap() = std::thread::current().name().map(|s| s.to_owned());
+          return guard;
+        }
+        Err(std::sync::TryLockError::WouldBlock) => {
+          if count > 10 {
+            error!(
+              "I need my lock!! {:?} Looks like {:?} has it.",
+              count,
+              self.who_has_it.lock().unwrap()
+            );
+          }
+          count += 1;
+          std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        Err(poisoned) => {
+          create_security_error_and_log!("Security plugins are poisoned! {poisoned:?}");
+          panic!("RustDDS internal bug: SecurityPlugins mutex poisoned after a prior panic");
+        }
       }
-    }
-  }
+    } // loop
+  } // fn
 }
 
 impl fmt::Debug for SecurityPluginsHandle {
