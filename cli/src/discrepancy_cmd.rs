@@ -94,7 +94,10 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 tares.push(m.decode::<WrenchStamped>()?.header.stamp.as_secs_f64());
                 at_tare = newest.or(at_tare);
             }
-            TWIST => pairing.twist(geometry::vector_of(&m.decode::<TwistStamped>()?.twist.linear)),
+            TWIST => {
+                let t = m.decode::<TwistStamped>()?;
+                pairing.twist(t.header.stamp.as_secs_f64(), geometry::vector_of(&t.twist.linear));
+            }
             WRENCH => {
                 let w = m.decode::<WrenchStamped>()?;
                 let stamp = w.header.stamp.as_secs_f64();

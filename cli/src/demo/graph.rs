@@ -20,8 +20,8 @@ use std::collections::VecDeque;
 use anyhow::Context;
 use nalgebra::Vector3;
 use softcontact_msgs::geometry_msgs::WrenchStamped;
-use softcontact_msgs::softcontact_msgs::{ContactModel, ControllerState, ForceCommand};
-use softcontact_msgs::std_srvs::TriggerRequest;
+use softcontact_msgs::softcontact_msgs::{ContactModel, ContactState, ControllerState, ForceCommand};
+use softcontact_msgs::std_srvs::{TriggerRequest, TriggerResponse};
 use softcontact_nodes::deformation_controller;
 use softcontact_nodes::geometry::ContactGeometry;
 use softcontact_nodes::runtime::ros;
@@ -184,6 +184,9 @@ impl Drop for Recorder {
 struct Heard {
     state: Option<ControllerState>,
     model: Option<ContactModel>,
+    /// A state of the estimator's has arrived: it pairs readings, and it has seen free space (joined while
+    /// the hand presses, it publishes nothing until the hand has left the surface).
+    estimator_heard: bool,
     /// The last few normal forces of the controller's 100 Hz state (the sensor's reading).
     recent: Vec<f64>,
     /// The last 10 ms of the simulator's true normal force (/sim_arm/contact_wrench, 1 kHz).
@@ -200,6 +203,7 @@ fn mean<'a>(v: impl ExactSizeIterator<Item = &'a f64>) -> f64 {
 struct Client {
     node: ros2_client::Node,
     states: ros2_client::Subscription<ControllerState>,
+    estimator_states: ros2_client::Subscription<ContactState>,
     models: ros2_client::Subscription<ContactModel>,
     truth: ros2_client::Subscription<WrenchStamped>,
     commands: ros2_client::Publisher<ForceCommand>,
@@ -212,14 +216,21 @@ impl Client {
     fn new(enclave: Option<&str>) -> anyhow::Result<Self> {
         let mut node = ros::tool_node("softcontact_demo", "/", enclave)?;
         let states = ros::subscription(&mut node, &topics::CONTROLLER_STATE, ros::sensor_qos())?;
+        let estimator_states = ros::subscription(&mut node, &topics::CONTACT_STATE, ros::sensor_qos())?;
         let models = ros::subscription(&mut node, &topics::CONTACT_MODEL, ros::reliable_qos())?;
         let truth = ros::subscription(&mut node, &topics::CONTACT_WRENCH, ros::sensor_qos())?;
         let commands = ros::publisher(&mut node, &topics::FORCE_COMMAND, ros::reliable_qos())?;
         let geometry = ContactGeometry::lwr4(Vector3::from(deformation_controller::Params::default().normal))
             .context("the controller's normal")?;
-        let heard =
-            Heard { state: None, model: None, recent: Vec::new(), recent_true: VecDeque::new(), max_force: 0.0 };
-        Ok(Self { node, states, models, truth, commands, geometry, heard })
+        let heard = Heard {
+            state: None,
+            model: None,
+            estimator_heard: false,
+            recent: Vec::new(),
+            recent_true: VecDeque::new(),
+            max_force: 0.0,
+        };
+        Ok(Self { node, states, estimator_states, models, truth, commands, geometry, heard })
     }
 
     /// Takes what arrives for `seconds`.
@@ -229,6 +240,9 @@ impl Client {
         loop {
             while let Ok(Some((m, _))) = self.models.take() {
                 heard.model = Some(m);
+            }
+            while let Ok(Some(_)) = self.estimator_states.take() {
+                heard.estimator_heard = true;
             }
             while let Ok(Some((w, _))) = self.truth.take() {
                 let f = w.wrench.force;
@@ -268,6 +282,43 @@ impl Client {
         self.listen(0.3)?;
         eprintln!("{name}: contact after {:.1} s", start.elapsed().as_secs_f64());
         Ok(())
+    }
+
+    /// Whether a state of the estimator's arrives within `seconds`.
+    fn estimator_heard(&mut self, seconds: f64) -> anyhow::Result<bool> {
+        let start = Instant::now();
+        while !self.heard.estimator_heard && start.elapsed().as_secs_f64() < seconds {
+            self.listen(0.05)?;
+        }
+        Ok(self.heard.estimator_heard)
+    }
+
+    /// Has the controller re-tare the sensor (it lifts the hand clear, tares and approaches again) and
+    /// waits until the hand is back in contact; the controller's answer.
+    fn retare_and_touch_again(
+        &mut self,
+        retare: &ros2_client::service::Client<TriggerRequest, TriggerResponse>,
+    ) -> anyhow::Result<String> {
+        let request = retare.send_request(TriggerRequest::default()).map_err(|e| anyhow::anyhow!("re-tare: {e:?}"))?;
+        let asked = Instant::now();
+        let response = loop {
+            if let Ok(Some((id, r))) = retare.receive_response()
+                && id == request
+            {
+                break r;
+            }
+            anyhow::ensure!(asked.elapsed() < Duration::from_secs(10), "no answer to the re-tare in 10 s");
+            self.listen(0.01)?;
+        };
+        anyhow::ensure!(response.success, "re-tare: {}", response.message);
+        let mut approached = false;
+        while !(approached && self.in_contact()) {
+            anyhow::ensure!(asked.elapsed() < Duration::from_secs(20), "no contact again after the re-tare");
+            approached |= !self.in_contact();
+            self.listen(0.01)?;
+        }
+        self.listen(0.5)?;
+        Ok(response.message)
     }
 
     /// The force-control paper's force commands, ratios of `max_force`, each graded at the end of its move on the true
@@ -314,6 +365,15 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path, enclave: Option<&str>)
     let retare_name = ros::resolve(&c.node, softcontact_msgs::topics::RETARE_SERVICE)?;
     let retare = ros::trigger_client(&mut c.node, ros::service_mapping("cyclone")?, &retare_name)?;
     c.wait_for_contact(spec.name)?;
+    // The pushes start once the estimator is heard. One that joined after the hand touched (a secure
+    // graph's handshakes take seconds) and while it presses stays silent, with no onset: the hand leaves
+    // the surface and touches it again.
+    if !c.estimator_heard(5.0)? {
+        eprintln!("{}: no state from the estimator: the hand leaves the surface and touches it again", spec.name);
+        let message = c.retare_and_touch_again(&retare)?;
+        eprintln!("{}: {message}", spec.name);
+        anyhow::ensure!(c.estimator_heard(5.0)?, "no state from the estimator after the second touch");
+    }
     eprintln!("{}: identification pushes at 1 Hz", spec.name);
     let (high, low) = spec.push_forces;
     for _ in 0..plan.identification_runs * plan.push_periods as usize {
@@ -325,26 +385,8 @@ pub fn client(spec: &SurfaceSpec, plan: Plan, out: &Path, enclave: Option<&str>)
     c.listen(1.1)?; // one more refit
     let model = c.heard.model.clone().context("the estimator published no model")?;
     // As on the robot (and in-process): the sensor re-tared with the hand free before the control run.
-    let request = retare.send_request(TriggerRequest::default()).map_err(|e| anyhow::anyhow!("re-tare: {e:?}"))?;
-    let asked = Instant::now();
-    let response = loop {
-        if let Ok(Some((id, r))) = retare.receive_response()
-            && id == request
-        {
-            break r;
-        }
-        anyhow::ensure!(asked.elapsed() < Duration::from_secs(10), "no answer to the re-tare in 10 s");
-        c.listen(0.01)?;
-    };
-    anyhow::ensure!(response.success, "re-tare: {}", response.message);
-    let mut approached = false;
-    while !(approached && c.in_contact()) {
-        anyhow::ensure!(asked.elapsed() < Duration::from_secs(20), "no contact again after the re-tare");
-        approached |= !c.in_contact();
-        c.listen(0.01)?;
-    }
-    c.listen(0.5)?;
-    eprintln!("{}: {}", spec.name, response.message);
+    let message = c.retare_and_touch_again(&retare)?;
+    eprintln!("{}: {message}", spec.name);
     let max_force = c.heard.max_force;
     eprintln!(
         "{}: estimator chose {} (k {:.0}); maximum force {max_force:.1} N",

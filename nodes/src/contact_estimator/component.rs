@@ -45,6 +45,9 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
 
     let mut estimation = Estimation {
         estimator,
+        onset_threshold: p.onset_threshold,
+        free_seen: false,
+        joined_pressing: 0,
         state_period: 1.0 / p.state_rate,
         next_state: f64::NEG_INFINITY,
         was_in_contact: false,
@@ -62,28 +65,28 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
     let (mut pin_poses, mut pin_twists, mut pin_wrenches) = <(WriterPin, WriterPin, WriterPin)>::default();
     while !ros::stopping(&stop) {
         ros::wait(&mut poll, &mut events, Duration::from_millis(50))?;
-        // Pairing by arrival, aged by this process's clock (stamps of other processes may differ).
+        // Paired by the messages' stamps (bursts of one stream do not shift it against another); the
+        // streams' liveness by arrival, on this process's clock.
         while let Ok(Some((m, info))) = poses.take() {
             if pin_poses.admit(info.publisher_gid().to_bytes16(), || poses.get_publisher_count(&node)).is_err() {
                 continue;
             }
             pose_watch.seen(start.elapsed().as_secs_f64());
             let (position, rotation) = geometry::pose_of(&m.pose);
-            pairing.pose(start.elapsed().as_secs_f64(), position, rotation);
+            pairing.pose(m.header.stamp.as_secs_f64(), position, rotation);
         }
         while let Ok(Some((m, info))) = twists.take() {
             if pin_twists.admit(info.publisher_gid().to_bytes16(), || twists.get_publisher_count(&node)).is_err() {
                 continue;
             }
-            pairing.twist(geometry::vector_of(&m.twist.linear));
+            pairing.twist(m.header.stamp.as_secs_f64(), geometry::vector_of(&m.twist.linear));
         }
         while let Ok(Some((w, info))) = wrenches.take() {
             if pin_wrenches.admit(info.publisher_gid().to_bytes16(), || wrenches.get_publisher_count(&node)).is_err() {
                 continue;
             }
             wrench_watch.seen(start.elapsed().as_secs_f64());
-            let Some(paired) = pairing.force(start.elapsed().as_secs_f64(), geometry::vector_of(&w.wrench.force))
-            else {
+            let Some(paired) = pairing.force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force)) else {
                 estimation.unpaired += 1;
                 continue;
             };
@@ -97,9 +100,10 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         }
     }
     eprintln!(
-        "contact_estimator: exit: {} readings, {} without a fresh pose, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB{}",
+        "contact_estimator: exit: {} readings, {} without a fresh pose, {} before free space was seen, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB{}",
         estimation.samples,
         estimation.unpaired,
+        estimation.joined_pressing,
         estimation.refits,
         estimation.refit_failures,
         pin_poses.refused,
@@ -121,6 +125,12 @@ struct Estimation {
     unpaired: u64,
     refits: u64,
     refit_failures: u64,
+    onset_threshold: f64,
+    /// A reading at or below the onset threshold has been seen. Until then the hand may have been pressing
+    /// since before this node joined (a late match, a restart): its position is deformed, not the onset,
+    /// and such readings are not fed to the estimator.
+    free_seen: bool,
+    joined_pressing: u64,
 }
 
 type StatePublisher = ros2_client::Publisher<softcontact_msgs::softcontact_msgs::ContactState>;
@@ -138,6 +148,18 @@ impl Estimation {
         clock: &mut ros::Clock,
     ) -> anyhow::Result<()> {
         let t = stamp.as_secs_f64();
+        self.free_seen |= paired.normal_force <= self.onset_threshold;
+        if !self.free_seen {
+            if self.joined_pressing == 0 {
+                ros::log(
+                    node,
+                    LogLevel::Warn,
+                    "joined with the hand pressing on the surface: no onset until it leaves the surface and touches it again",
+                );
+            }
+            self.joined_pressing += 1;
+            return Ok(());
+        }
         let out = match self.estimator.update(t, &paired.position, &paired.velocity, paired.normal_force) {
             Ok(out) => out,
             Err(e) => {

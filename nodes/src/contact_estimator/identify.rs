@@ -80,7 +80,7 @@ impl Identifier {
     }
 
     pub fn twist(&mut self, msg: &TwistStamped) {
-        self.pairing.twist(geometry::vector_of(&msg.twist.linear));
+        self.pairing.twist(msg.header.stamp.as_secs_f64(), geometry::vector_of(&msg.twist.linear));
     }
 
     pub fn wrench(&mut self, msg: &WrenchStamped) -> Result<(), ContactError> {

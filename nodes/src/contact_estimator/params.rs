@@ -129,7 +129,7 @@ impl crate::runtime::params::NodeParams for Params {
             "stale_after",
             self.stale_after,
             (0.0, 10.0),
-            "a pose older than this when a force arrives is not paired with it [s]",
+            "a force reading with no pose within this of its stamp is not paired (stamps of one clock: the driver's and the sensor node's) [s]",
         );
         crate::runtime::liveness::declare_dead_after(
             d,
