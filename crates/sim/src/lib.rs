@@ -10,6 +10,7 @@
 //! ω·dt = 0.3 at 1 ms: a margin of more than 6. `SimConfig::step` can be made finer.
 
 pub mod excitation;
+pub mod foreign;
 mod krc;
 mod sensor;
 mod specimen;
