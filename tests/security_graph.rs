@@ -4,7 +4,7 @@
 //! command in the `/user` enclave. That command checks, on the running graph:
 //!
 //! - the user, enrolled, records the F/T node's wrenches and the contact estimator's state, each from
-//!   another process;
+//!   another process, and replays a recorded force command, which the controller executes;
 //! - a stranger with no credentials (security off), and one enrolled by another authority, record nothing
 //!   of them, and their force commands get no answer and never reach the controller; the nodes count
 //!   and log each participant they refused;
@@ -28,19 +28,20 @@ fn bin_dir() -> &'static Path {
 fn every_process_asked_for_security_under_enforce_without_an_enclave_refuses_to_start() {
     let dir = tempfile::tempdir().unwrap();
     let keystore = dir.path().join("keystore");
-    let run = |bin: &str, args: &[&str]| {
+    let run_with = |enable: &str, strategy: &str, bin: &str, args: &[&str]| {
         // In a network namespace of its own (no interface up): a process that did start would reach nothing.
         Command::new("unshare")
             .args(["--map-root-user", "--net", "timeout", "20"])
             .arg(bin_dir().join(bin))
             .args(args)
-            .env("ROS_SECURITY_ENABLE", "true")
-            .env("ROS_SECURITY_STRATEGY", "Enforce")
+            .env("ROS_SECURITY_ENABLE", enable)
+            .env("ROS_SECURITY_STRATEGY", strategy)
             .env("ROS_SECURITY_KEYSTORE", &keystore)
             .env_remove("ROS_SECURITY_ENCLAVE_OVERRIDE")
             .output()
             .unwrap()
     };
+    let run = |bin: &str, args: &[&str]| run_with("true", "Enforce", bin, args);
     let check = |what: &str, out: std::process::Output, why: &str| {
         let text = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{what} started:\n{text}");
@@ -53,6 +54,15 @@ fn every_process_asked_for_security_under_enforce_without_an_enclave_refuses_to_
         run("softcontact", &["record", "/ft_sensor/wrench", "--duration", "1"]),
         "has no folder",
     );
+    // Slips rcl would read as "security off" or "not enforced": refused too, and said.
+    for (enable, strategy) in [("TRUE", "Enforce"), ("1", "Enforce"), ("true ", "Enforce"), ("true", "enforce")] {
+        let out = run_with(enable, strategy, "softcontact", &["force", "10", "--duration", "2", "--enclave", "/user"]);
+        let text = String::from_utf8_lossy(&out.stderr).into_owned();
+        check(&format!("softcontact force, {enable:?} {strategy:?}"), out, "has no folder");
+        assert!(text.contains("warning: ROS_SECURITY_"), "{enable:?} {strategy:?}: no warning:\n{text}");
+    }
+    let out = run_with("maybe", "Permissive", "lwr_control", &["--enclave", "/lwr_control"]);
+    check("lwr_control, ROS_SECURITY_ENABLE=maybe", out, "neither true nor false");
     // A keystore without the enclave asked for.
     let made = Command::new(bin_dir().join("softcontact"))
         .args(["security", "create-keystore"])
@@ -78,6 +88,8 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         out="$1"; bin="$2"
         "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/user.mcap" --duration 10 \
             > "$out/user.log" 2>&1 || exit 11
+        for _ in $(seq 150); do grep -q "contact: holding" "$out/graph/lwr_control.log" && break; sleep 0.2; done
+        "$bin/softcontact" replay "$out/command.mcap" --actuators > "$out/replay.log" 2>&1 || exit 13
         env -u ROS_SECURITY_ENABLE -u ROS_SECURITY_ENCLAVE_OVERRIDE \
             "$bin/softcontact" record /ft_sensor/wrench /contact_estimator/state -o "$out/stranger.mcap" --duration 3 \
             > "$out/stranger.log" 2>&1
@@ -95,6 +107,12 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
             > "$out/stranger_force.log" 2>&1
         echo $? > "$out/stranger_force.status"
     "#;
+    // One recorded force command, replayed by the user (whose permissions send force commands).
+    let mut command = softcontact_bag::BagWriter::create(&out.join("command.mcap")).unwrap();
+    let channel = command.add(&softcontact_msgs::topics::FORCE_COMMAND).unwrap();
+    let replayed = softcontact_msgs::softcontact_msgs::ForceCommand { force: 33.0, duration: 2.0 };
+    command.write(channel, 1_700_000_000_000_000_000, &replayed).unwrap();
+    command.finish().unwrap();
     let run = Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("../launch-scripts/sim.sh"))
         .args(["--isolated", "--secure", "--log-dir"])
         .arg(out.join("graph"))
@@ -107,9 +125,10 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
         .unwrap();
     let log = |name: &str| std::fs::read_to_string(out.join(name)).unwrap_or_default();
     let all = format!(
-        "{}\n--- user\n{}\n--- stranger\n{}\n--- misplaced\n{}\n--- lwr_control\n{}\n--- contact_estimator\n{}",
+        "{}\n--- user\n{}\n--- replay\n{}\n--- stranger\n{}\n--- misplaced\n{}\n--- lwr_control\n{}\n--- contact_estimator\n{}",
         String::from_utf8_lossy(&run.stderr),
         log("user.log"),
+        log("replay.log"),
         log("stranger.log"),
         log("misplaced.log"),
         log("graph/lwr_control.log"),
@@ -129,6 +148,14 @@ fn the_secure_graph_serves_its_enrolled_user_and_nothing_to_a_stranger_or_a_misp
     // From another process than the wrenches' (RustDDS to RustDDS: vendor/rustdds/VENDORED.md).
     let states = count("user.mcap", "/contact_estimator/state");
     assert!(states > 100, "the user read {states} of the estimator's states:\n{all}");
+    // The replayed command reached the controller through the handshake and was executed (replay waits
+    // for its subscriber, then for the acknowledgment).
+    assert!(log("replay.log").contains("replayed 1 messages"), "the user's replay:\n{all}");
+    assert!(!log("replay.log").contains("no subscriber yet"), "the user's replay started too soon:\n{all}");
+    assert!(
+        log("graph/lwr_control.log").contains("force command 33.00 N over 2.00 s"),
+        "the replayed force command was not executed:\n{all}"
+    );
     assert_eq!(count("stranger.mcap", "/ft_sensor/wrench"), 0, "a stranger read the wrenches:\n{all}");
     assert_eq!(count("stranger.mcap", "/contact_estimator/state"), 0, "a stranger read the estimator:\n{all}");
     // Enrolled by another authority: the handshake fails, nothing is read and no goal is heard.

@@ -60,6 +60,22 @@ macro_rules! any_topic {
                 anyhow::bail!("{topic}: type {type_name} is not one the project knows")
             }
 
+            /// How many subscriptions match this publisher, as `node` (its creator, spinning: `ros::spin`)
+            /// sees the graph.
+            pub fn subscription_count(&self, node: &Node) -> usize {
+                match self {
+                    $(Self::$variant(p) => p.get_subscription_count(node)),+
+                }
+            }
+
+            /// Waits until the matched reliable subscriptions acknowledged all that was published, at
+            /// most `max_wait`; whether they all did.
+            pub fn wait_for_acknowledgments(&self, max_wait: std::time::Duration) -> bool {
+                match self {
+                    $(Self::$variant(p) => p.wait_for_acknowledgments(max_wait).unwrap_or(false)),+
+                }
+            }
+
             /// Publishes `msg`; a message of another type than the publisher's is an error.
             pub fn publish(&self, msg: AnyMessage) -> anyhow::Result<()> {
                 match (self, msg) {

@@ -40,8 +40,10 @@ pub struct ReplayArgs {
     /// Replay only these topics (default: all whose type the project knows, but the actuator topics).
     #[arg(long, value_delimiter = ',')]
     pub topics: Vec<String>,
-    /// Seconds to wait for subscribers to match before the first message, 0 to 3600.
-    #[arg(long, default_value_t = 1.0, value_parser = wait)]
+    /// Longest wait for subscribers before the first message [s], 0 to 3600: the replay starts once every
+    /// replayed topic has one, or once some have and none gained one for a second (a secure graph's
+    /// handshakes take seconds).
+    #[arg(long, default_value_t = 10.0, value_parser = wait)]
     pub wait: f64,
     /// Also publish the recorded commands to the arm (see ACTUATOR_TOPICS): into a live graph they move
     /// it. Without this flag they are never published.
@@ -213,6 +215,43 @@ pub fn record(args: &RecordArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Waits until every publisher has a subscription, or some have and no new one matched for a second, or
+/// `longest` has passed; says which topics have none.
+fn wait_for_subscribers(
+    node: &ros2_client::Node,
+    publishers: &[(String, AnyPublisher)],
+    longest: Duration,
+    stop: &std::sync::atomic::AtomicBool,
+) {
+    const QUIET: Duration = Duration::from_secs(1);
+    let start = Instant::now();
+    let mut matched = 0;
+    let mut last_match = start;
+    loop {
+        let counts: Vec<usize> = publishers.iter().map(|(_, p)| p.subscription_count(node)).collect();
+        let total: usize = counts.iter().sum();
+        if total > matched {
+            matched = total;
+            last_match = Instant::now();
+        }
+        let all = counts.iter().all(|&c| c > 0);
+        let settled = matched > 0 && last_match.elapsed() >= QUIET;
+        if all || settled || start.elapsed() >= longest || ros::stopping(stop) {
+            let unmatched: Vec<&str> =
+                publishers.iter().zip(&counts).filter(|(_, c)| **c == 0).map(|((n, _), _)| n.as_str()).collect();
+            if !unmatched.is_empty() {
+                eprintln!(
+                    "after {:.1} s, no subscriber yet for {} (replayed all the same)",
+                    start.elapsed().as_secs_f64(),
+                    unmatched.join(", ")
+                );
+            }
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     // The parsers hold these; a caller building ReplayArgs itself is checked too.
     rate(&args.rate.to_string()).map_err(anyhow::Error::msg)?;
@@ -263,7 +302,8 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         publishers.push((topic.name.clone(), publisher));
     }
     let span = recording.time_range().map_or(0.0, |(a, b)| b.saturating_sub(a) as f64 * 1e-9);
-    std::thread::sleep(Duration::from_secs_f64(args.wait));
+    ros::spin(&mut node, "softcontact_replay")?;
+    wait_for_subscribers(&node, &publishers, Duration::from_secs_f64(args.wait), &stop);
     let mut sent = 0u64;
     'replay: loop {
         let start = Instant::now();
@@ -301,6 +341,16 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
         if !args.looping {
             break;
         }
+    }
+    // The last messages of a reliable topic may still await their acknowledgment: leaving now would
+    // take them along.
+    let unacknowledged: Vec<&str> = publishers
+        .iter()
+        .filter(|(_, p)| !p.wait_for_acknowledgments(Duration::from_secs(2)))
+        .map(|(n, _)| n.as_str())
+        .collect();
+    if !unacknowledged.is_empty() {
+        eprintln!("not acknowledged within 2 s by every subscriber: {}", unacknowledged.join(", "));
     }
     println!("\nreplayed {sent} messages");
     Ok(())

@@ -43,8 +43,8 @@ pub enum LimitError {
     Duration(f64, f64, f64),
     #[error("a move at {0:?} m/s is faster than {1:?} m/s: give it more time")]
     Rate(f64, f64),
-    #[error("the command is not a finite number")]
-    NonFinite,
+    #[error("{0} is not a finite number")]
+    NonFinite(&'static str),
     #[error("torque for joint {0} is not a finite number: the driver holds")]
     NonFiniteTorque(usize),
 }
@@ -52,7 +52,7 @@ pub enum LimitError {
 impl Limits {
     pub fn check_force(&self, force: f64) -> Result<f64, LimitError> {
         if !force.is_finite() {
-            return Err(LimitError::NonFinite);
+            return Err(LimitError::NonFinite("the force command"));
         }
         if !(0.0..=self.max_force).contains(&force) {
             return Err(LimitError::Force(force, self.max_force));
@@ -62,7 +62,7 @@ impl Limits {
 
     pub fn check_deformation(&self, z: f64) -> Result<f64, LimitError> {
         if !z.is_finite() {
-            return Err(LimitError::NonFinite);
+            return Err(LimitError::NonFinite("the deformation command"));
         }
         if z > self.max_deformation {
             return Err(LimitError::Deformation(z, self.max_deformation));
@@ -75,7 +75,7 @@ impl Limits {
 
     pub fn check_rate(&self, speed: f64) -> Result<f64, LimitError> {
         if !speed.is_finite() {
-            return Err(LimitError::NonFinite);
+            return Err(LimitError::NonFinite("the move's speed"));
         }
         if speed.abs() > self.max_deformation_rate {
             return Err(LimitError::Rate(speed.abs(), self.max_deformation_rate));
@@ -86,7 +86,7 @@ impl Limits {
     pub fn check_duration(&self, duration: f64) -> Result<f64, LimitError> {
         let (shortest, longest) = self.move_duration;
         if !duration.is_finite() {
-            return Err(LimitError::NonFinite);
+            return Err(LimitError::NonFinite("the move duration"));
         }
         if !(shortest..=longest).contains(&duration) {
             return Err(LimitError::Duration(duration, shortest, longest));

@@ -222,7 +222,7 @@ fn limits_refuse_bad_commands_and_bound_torques() {
     assert_eq!(limits.check_force(100.0), Ok(100.0));
     assert_eq!(limits.check_force(300.0), Err(LimitError::Force(300.0, 250.0)));
     assert_eq!(limits.check_force(-1.0), Err(LimitError::Force(-1.0, 250.0)));
-    assert_eq!(limits.check_force(f64::NAN), Err(LimitError::NonFinite));
+    assert_eq!(limits.check_force(f64::NAN), Err(LimitError::NonFinite("the force command")));
     assert!(limits.check_deformation(0.07).is_err());
     assert_eq!(limits.check_deformation(-0.06), Err(LimitError::Lift(0.06, 0.05)));
     assert_eq!(limits.check_deformation(-1e300), Err(LimitError::Lift(1e300, 0.05)));
@@ -230,7 +230,10 @@ fn limits_refuse_bad_commands_and_bound_torques() {
     for bad in [0.0, 0.05, -1.0, 601.0, 1e200] {
         assert_eq!(limits.check_duration(bad), Err(LimitError::Duration(bad, 0.1, 600.0)));
     }
-    assert_eq!(limits.check_duration(f64::INFINITY), Err(LimitError::NonFinite));
+    assert_eq!(limits.check_duration(f64::INFINITY), Err(LimitError::NonFinite("the move duration")));
+    assert_eq!(limits.check_deformation(f64::NAN), Err(LimitError::NonFinite("the deformation command")));
+    assert_eq!(limits.check_rate(f64::NEG_INFINITY), Err(LimitError::NonFinite("the move's speed")));
+    assert_eq!(LimitError::NonFinite("the move duration").to_string(), "the move duration is not a finite number");
     assert_eq!(limits.check_rate(-0.05), Ok(-0.05));
     assert_eq!(limits.check_rate(0.2), Err(LimitError::Rate(0.2, 0.1)));
     // A rest-to-rest quintic peaks at 15/8 of the mean speed, at mid-move.

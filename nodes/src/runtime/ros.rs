@@ -95,6 +95,9 @@ fn watch_refusals(node: &Node, name: &str) -> anyhow::Result<()> {
 fn context_options(enclave: Option<&str>) -> anyhow::Result<ContextOptions> {
     let options = ContextOptions::new().domain_id(domain_id()?);
     let environment = security::Environment::from_process();
+    for warning in environment.warnings() {
+        eprintln!("warning: {warning}");
+    }
     match security::decide(&environment, enclave).map_err(anyhow::Error::msg)? {
         security::Decision::Off => Ok(options),
         security::Decision::Unsecured { why } => {
@@ -109,7 +112,7 @@ fn context_options(enclave: Option<&str>) -> anyhow::Result<ContextOptions> {
         #[cfg(not(feature = "security"))]
         security::Decision::Secure { name, .. } => match environment.strategy() {
             security::Strategy::Enforce => anyhow::bail!(
-                "ROS_SECURITY_ENABLE=true with ROS_SECURITY_STRATEGY=Enforce, and this build has no DDS-Security \
+                "ROS_SECURITY_ENABLE with ROS_SECURITY_STRATEGY=Enforce, and this build has no DDS-Security \
                  (enclave {name}): not starting (build with `--features security`)"
             ),
             security::Strategy::Permissive => {
@@ -163,17 +166,25 @@ pub fn node_with_parameters(name: &str, declared: Declared) -> anyhow::Result<No
     let mut node = context.new_node(node_name, options)?;
     REMAPPINGS.lock().unwrap_or_else(|e| e.into_inner()).push((node.fully_qualified_name(), remapping));
     if serve {
-        let spinner = node.spinner()?;
-        std::thread::Builder::new().name(format!("{name}-spinner")).spawn(move || {
-            if let Err(e) = futures::executor::block_on(spinner.spin()) {
-                eprintln!("parameter services stopped: {e:?}");
-            }
-        })?;
-        if SECURE.load(Ordering::Relaxed) {
-            watch_refusals(&node, name)?;
-        }
+        spin(&mut node, name)?;
     }
     Ok(node)
+}
+
+/// Runs `node`'s spinner on a thread of its own: it serves the node's parameters, and keeps the node's
+/// view of the graph (which subscriptions match its publishers: `Publisher::get_subscription_count`).
+/// Once a node.
+pub fn spin(node: &mut Node, name: &str) -> anyhow::Result<()> {
+    let spinner = node.spinner()?;
+    std::thread::Builder::new().name(format!("{name}-spinner")).spawn(move || {
+        if let Err(e) = futures::executor::block_on(spinner.spin()) {
+            eprintln!("the node's spinner stopped: {e:?}");
+        }
+    })?;
+    if SECURE.load(Ordering::Relaxed) {
+        watch_refusals(node, name)?;
+    }
+    Ok(())
 }
 
 /// Logs to stderr and to /rosout.

@@ -1,14 +1,19 @@
-//! Whether a process joins the graph with DDS-Security, and as which enclave, read as ROS 2's rcl reads
-//! it (`rcl/src/rcl/security.c`), so that the same environment secures these nodes and any other ROS 2
-//! node beside them:
+//! Whether a process joins the graph with DDS-Security, and as which enclave. The variables are ROS 2's
+//! (rcl's `rcl/src/rcl/security.c`), so the same environment secures these nodes and any ROS 2 node beside
+//! them; where rcl would read a slip as "off" these nodes fail closed instead, and say so:
 //!
-//! - `ROS_SECURITY_ENABLE=true` (exactly) turns security on; anything else, or unset, leaves it off and
-//!   changes nothing.
-//! - `ROS_SECURITY_STRATEGY=Enforce` (exactly): a process that cannot find its enclave refuses to start.
-//!   Anything else is `Permissive`: it starts without security and says why.
+//! - `ROS_SECURITY_ENABLE`: `true` turns security on, unset or empty leaves it off and changes nothing.
+//!   rcl enables only on exactly `true`; here `TRUE`, `1`, `yes`, `on` (any case, spaces trimmed) also
+//!   enable, `false`, `0`, `no`, `off` leave it off, and any other value refuses to start.
+//! - `ROS_SECURITY_STRATEGY`: unset, empty or `Permissive` — a process that cannot find its enclave starts
+//!   without security and says why. `Enforce`, and any other value (`enforce`, a typo) — it refuses to
+//!   start. rcl reads everything but exactly `Enforce` as permissive.
 //! - `ROS_SECURITY_KEYSTORE`: the keystore (`softcontact security create-keystore`).
 //! - The enclave: `ROS_SECURITY_ENCLAVE_OVERRIDE` if set and not empty, else `--enclave NAME` of the
 //!   command line (`--ros-args --enclave`), else `/`. Its folder is the keystore's `enclaves/NAME`.
+//!
+//! Every place where this reading differs from rcl's is a warning ([`Environment::warnings`]): a ROS 2
+//! node started with the same environment would run without security, or without enforcement.
 
 use std::path::{Path, PathBuf};
 
@@ -43,11 +48,45 @@ impl Environment {
         }
     }
 
-    pub fn strategy(&self) -> Strategy {
-        match self.strategy.as_deref() {
-            Some("Enforce") => Strategy::Enforce,
-            _ => Strategy::Permissive,
+    /// Whether security is asked for; an error for a value that is neither yes nor no.
+    pub fn enabled(&self) -> Result<bool, String> {
+        let Some(value) = self.enable.as_deref() else { return Ok(false) };
+        match value.trim().to_ascii_lowercase().as_str() {
+            "true" | "1" | "yes" | "on" => Ok(true),
+            "" | "false" | "0" | "no" | "off" => Ok(false),
+            _ => Err(format!(
+                "ROS_SECURITY_ENABLE={value:?} is neither true nor false: not starting (set it to `true` for \
+                 DDS-Security, unset it for none)"
+            )),
         }
+    }
+
+    pub fn strategy(&self) -> Strategy {
+        match self.strategy.as_deref().map(str::trim) {
+            None | Some("") => Strategy::Permissive,
+            Some(s) if s.eq_ignore_ascii_case("permissive") => Strategy::Permissive,
+            Some(_) => Strategy::Enforce,
+        }
+    }
+
+    /// Where this reading differs from rcl's: what a ROS 2 node given the same environment would do.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if let Some(value) = self.enable.as_deref().filter(|v| *v != "true" && self.enabled() == Ok(true)) {
+            warnings.push(format!(
+                "ROS_SECURITY_ENABLE={value:?} read as true; rcl enables security only on exactly `true`: a \
+                 ROS 2 node given this environment runs without DDS-Security"
+            ));
+        }
+        if let Some(value) =
+            self.strategy.as_deref().filter(|v| *v != "Enforce" && self.strategy() == Strategy::Enforce)
+        {
+            warnings.push(format!(
+                "ROS_SECURITY_STRATEGY={value:?} read as Enforce; rcl enforces only on exactly `Enforce`: a ROS 2 \
+                 node given this environment would start without security where its enclave is missing"
+            ));
+        }
+        warnings
     }
 }
 
@@ -69,7 +108,7 @@ pub const ENCLAVE_FILES: [&str; 6] =
 /// Decides for `env` and the command line's `--enclave` (if any). An error is the refusal to start
 /// under `Enforce`, saying what is missing and how to make it.
 pub fn decide(env: &Environment, enclave_arg: Option<&str>) -> Result<Decision, String> {
-    if env.enable.as_deref() != Some("true") {
+    if !env.enabled()? {
         return Ok(Decision::Off);
     }
     let name = match (env.enclave_override.as_deref(), enclave_arg) {
@@ -82,7 +121,7 @@ pub fn decide(env: &Environment, enclave_arg: Option<&str>) -> Result<Decision, 
         (Ok(dir), _) => Ok(Decision::Secure { name, dir }),
         (Err(why), Strategy::Permissive) => Ok(Decision::Unsecured { why }),
         (Err(why), Strategy::Enforce) => Err(format!(
-            "ROS_SECURITY_ENABLE=true with ROS_SECURITY_STRATEGY=Enforce, and {why}: not starting \
+            "ROS_SECURITY_ENABLE with ROS_SECURITY_STRATEGY=Enforce, and {why}: not starting \
              (make it with `softcontact security create-keystore DIR --enclaves`, or `create-enclave DIR {name}`)"
         )),
     }
@@ -116,11 +155,48 @@ mod tests {
     }
 
     #[test]
-    fn without_ros_security_enable_true_nothing_changes() {
-        for e in [env(&[]), env(&[("ROS_SECURITY_ENABLE", "True")]), env(&[("ROS_SECURITY_ENABLE", "1")])] {
-            let e = Environment { strategy: Some("Enforce".into()), keystore: Some("/nowhere".into()), ..e };
-            assert_eq!(decide(&e, Some("/user")), Ok(Decision::Off));
+    fn without_ros_security_enable_nothing_changes() {
+        for off in [None, Some(""), Some("false"), Some(" FALSE "), Some("0"), Some("no"), Some("off")] {
+            let e = Environment {
+                enable: off.map(str::to_owned),
+                strategy: Some("Enforce".into()),
+                keystore: Some("/nowhere".into()),
+                enclave_override: None,
+            };
+            assert_eq!(decide(&e, Some("/user")), Ok(Decision::Off), "{off:?}");
+            assert!(e.warnings().is_empty(), "{off:?}: {:?}", e.warnings());
         }
+    }
+
+    #[test]
+    fn a_slip_in_the_variables_fails_closed_and_is_said() {
+        let missing_keystore = |enable: &str, strategy: &str| {
+            env(&[
+                ("ROS_SECURITY_ENABLE", enable),
+                ("ROS_SECURITY_STRATEGY", strategy),
+                ("ROS_SECURITY_KEYSTORE", "/nowhere"),
+            ])
+        };
+        for enable in ["TRUE", "True", "1", "true ", "yes", "ON"] {
+            let e = missing_keystore(enable, "Enforce");
+            let refusal = decide(&e, Some("/user")).unwrap_err();
+            assert!(refusal.contains("not starting"), "{enable:?}: {refusal}");
+            assert!(e.warnings().iter().any(|w| w.contains("exactly `true`")), "{enable:?}: {:?}", e.warnings());
+        }
+        for strategy in ["enforce", "Enforce ", "ENFORCE", "Enforced", "strict"] {
+            let e = missing_keystore("true", strategy);
+            assert_eq!(e.strategy(), Strategy::Enforce, "{strategy:?}");
+            assert!(decide(&e, Some("/user")).unwrap_err().contains("not starting"), "{strategy:?}");
+            assert!(e.warnings().iter().any(|w| w.contains("exactly `Enforce`")), "{strategy:?}: {:?}", e.warnings());
+        }
+        for permissive in ["", "Permissive", "permissive"] {
+            assert_eq!(missing_keystore("true", permissive).strategy(), Strategy::Permissive, "{permissive:?}");
+        }
+        for garbage in ["maybe", "truee", "2"] {
+            let refusal = decide(&missing_keystore(garbage, "Permissive"), None).unwrap_err();
+            assert!(refusal.contains("neither true nor false"), "{garbage:?}: {refusal}");
+        }
+        assert!(missing_keystore("true", "Enforce").warnings().is_empty());
     }
 
     #[test]

@@ -49,6 +49,13 @@ impl<M: Serialize> Publisher<M> {
     self.guid().into()
   }
 
+  /// Waits until every matched reliable subscription has acknowledged all that was published, at most
+  /// `max_wait`: `Ok(true)` if all did (RustDDS's `DataWriter::wait_for_acknowledgments`). A process
+  /// that exits right after publishing may otherwise take unsent samples with it.
+  pub fn wait_for_acknowledgments(&self, max_wait: std::time::Duration) -> WriteResult<bool, ()> {
+    self.datawriter.wait_for_acknowledgments(max_wait).map_err(Into::into)
+  }
+
   /// Returns the count of currently matched subscribers.
   ///
   /// `my_node` must be the Node that created this Publisher, or the result is
