@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use softcontact_bag::{AnyMessage, BagWriter, Qos, Recording};
+use softcontact_bag::{AnyMessage, BagWriter, Qos, Recording, Topic};
 use softcontact_nodes::runtime::ros;
 
 use crate::any_topic::{AnyPublisher, AnySubscription, graph_topics};
@@ -261,36 +261,7 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     for w in &said {
         eprintln!("warning: {w}");
     }
-    let mut plan = Vec::new();
-    for topic in recording.topics() {
-        if !args.topics.is_empty() && !args.topics.contains(&topic.name) {
-            continue;
-        }
-        if !AnyMessage::is_known(&topic.type_name) {
-            eprintln!("skipping {} ({}): not a type the project knows", topic.name, topic.type_name);
-            continue;
-        }
-        if let Some(why) = actuator(&topic.name, &topic.type_name)
-            && !args.actuators
-        {
-            anyhow::ensure!(
-                args.topics.is_empty(),
-                "{} commands the arm ({why}): replaying it into a live graph moves the arm; add --actuators if \
-                 that is what you want",
-                topic.name
-            );
-            eprintln!(
-                "skipping {} ({}, {} messages): it commands the arm ({why}); --actuators replays it",
-                topic.name, topic.type_name, topic.message_count
-            );
-            continue;
-        }
-        plan.push(topic);
-    }
-    for wanted in &args.topics {
-        anyhow::ensure!(plan.iter().any(|t| &t.name == wanted), "the recording has no {wanted} to replay");
-    }
-    anyhow::ensure!(!plan.is_empty(), "nothing to replay");
+    let plan = replay_plan(&recording, args)?;
     let stop = ros::shutdown_flag()?;
     let mut node = ros::tool_node("softcontact_replay", "/", args.enclave.as_deref())?;
     let mut publishers = Vec::new();
@@ -354,4 +325,40 @@ pub fn replay(args: &ReplayArgs) -> anyhow::Result<()> {
     }
     println!("\nreplayed {sent} messages");
     Ok(())
+}
+
+/// The recording's topics `args` asks for and the project can publish; a topic that commands the arm only
+/// with `--actuators` (an error when named, skipped and said otherwise).
+fn replay_plan<'a>(recording: &'a Recording, args: &ReplayArgs) -> anyhow::Result<Vec<&'a Topic>> {
+    let mut plan = Vec::new();
+    for topic in recording.topics() {
+        if !args.topics.is_empty() && !args.topics.contains(&topic.name) {
+            continue;
+        }
+        if !AnyMessage::is_known(&topic.type_name) {
+            eprintln!("skipping {} ({}): not a type the project knows", topic.name, topic.type_name);
+            continue;
+        }
+        if let Some(why) = actuator(&topic.name, &topic.type_name)
+            && !args.actuators
+        {
+            anyhow::ensure!(
+                args.topics.is_empty(),
+                "{} commands the arm ({why}): replaying it into a live graph moves the arm; add --actuators if \
+                 that is what you want",
+                topic.name
+            );
+            eprintln!(
+                "skipping {} ({}, {} messages): it commands the arm ({why}); --actuators replays it",
+                topic.name, topic.type_name, topic.message_count
+            );
+            continue;
+        }
+        plan.push(topic);
+    }
+    for wanted in &args.topics {
+        anyhow::ensure!(plan.iter().any(|t| &t.name == wanted), "the recording has no {wanted} to replay");
+    }
+    anyhow::ensure!(!plan.is_empty(), "nothing to replay");
+    Ok(plan)
 }
