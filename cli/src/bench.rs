@@ -142,6 +142,10 @@ pub enum BenchCommand {
         /// the committed table uses 2.
         #[arg(long, default_value_t = 2, value_parser = crate::ranges::count(1, 100))]
         slow_noise_seeds: usize,
+        /// Only the foreign-effect corpus (effects written outside the library), not today's corpus nor
+        /// the timing.
+        #[arg(long)]
+        foreign: bool,
     },
 }
 
@@ -265,8 +269,9 @@ pub fn run(cmd: BenchCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        BenchCommand::Discrepancy { threads, json, timing_only, case, keep, real: None, slow_noise_seeds } => {
-            crate::demo::corpus::bench(threads, json, timing_only, case.as_deref(), keep.as_deref(), slow_noise_seeds)
+        BenchCommand::Discrepancy { threads, json, timing_only, case, keep, real: None, slow_noise_seeds, foreign } => {
+            let corpora = crate::demo::corpus::Corpora { timing_only, foreign_only: foreign, slow_noise_seeds };
+            crate::demo::corpus::bench(threads, json, corpora, case.as_deref(), keep.as_deref())
         }
     }
 }

@@ -207,7 +207,7 @@ fn replay(
     let (controller_model, identified) = (&analysis.baseline, analysis.surface);
     let sim = SimConfig {
         initial_q: start.q,
-        surface: Some(SurfaceConfig { point: surface, normal, model: surface_model.clone() }),
+        surface: Some(SurfaceConfig::new(surface, normal, surface_model.clone())),
         sensor: FtSensorConfig::gamma(),
         ..SimConfig::above_surface(surface_model.clone(), 1)
     };

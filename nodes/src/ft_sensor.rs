@@ -576,11 +576,11 @@ mod tests {
 
     impl Scene {
         fn new() -> Self {
-            let surface = Surface::new(SurfaceConfig {
-                point: Vector3::zeros(),
-                normal: Vector3::new(0.0, 0.0, -1.0),
-                model: softcontact_sim::sponge(),
-            })
+            let surface = Surface::new(SurfaceConfig::new(
+                Vector3::zeros(),
+                Vector3::new(0.0, 0.0, -1.0),
+                softcontact_sim::sponge(),
+            ))
             .unwrap();
             Self {
                 sensor: FtSensor::new(FtSensorConfig::gamma(), lwr4::tool_load()),

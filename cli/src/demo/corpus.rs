@@ -12,8 +12,9 @@ use std::path::Path;
 use serde::Serialize;
 use softcontact_contact::{ContactModel, Effect, Exponents, Tangential};
 use softcontact_sim::FtSensorConfig;
+use softcontact_sim::foreign::ForeignEffect;
 
-use super::experiment::{Plan, SurfaceSpec, run_hold, run_surface};
+use super::experiment::{Across, Plan, SurfaceSpec, run_hold, run_surface};
 use super::record::Recorder;
 use crate::discrepancy_cmd::{self, DiscrepancyArgs};
 use crate::identify_cmd::IdentifyArgs;
@@ -30,8 +31,8 @@ pub struct Case {
     pub expected: Vec<&'static str>,
     /// The excitation that shows the effect.
     pub visible_in: &'static str,
-    /// The plan adds lateral sway and tilts ([`Plan::across`]).
-    pub across: bool,
+    /// The plan's lateral sway and tilts ([`Plan::across`]).
+    pub across: Across,
     /// An effect outside the library: the answer must be no name and `unexplained`.
     pub out_of_library: bool,
     /// [`Plan::start_pressed`].
@@ -44,7 +45,25 @@ pub struct Case {
     /// A null whose recording really shows this effect of the sensor, though no effect was hidden: naming
     /// it is no false name (an offset that wanders as far as a steady drift would within the record).
     pub may_name: Option<&'static str>,
+    /// Surface effects outside the library, added to `truth`'s force (the foreign cases).
+    pub foreign: Vec<ForeignEffect>,
+    /// Parameters the answer must carry within their tolerance.
+    pub parameters: Vec<ExpectedParameter>,
+    /// The least shrink of the gap, over the ideal one, of an answer as expected (0: the names alone).
+    pub min_shrink_of_ideal: f64,
     pub seed: u64,
+}
+
+/// A parameter of a named effect the answer must carry: the effect's `id`, its parameter `name`s (one, or
+/// the components of a vector, compared by the distance between vectors), the truth and the tolerance.
+#[derive(Debug, Clone)]
+pub struct ExpectedParameter {
+    pub id: &'static str,
+    pub names: Vec<&'static str>,
+    pub truth: Vec<f64>,
+    pub tolerance: f64,
+    /// How the table shows it: the unit's name and its size in the parameter's unit (ms: 1e-3).
+    pub unit: (&'static str, f64),
 }
 
 /// What the workflow answered on one case.
@@ -66,6 +85,9 @@ pub struct Outcome {
     pub rms_after: f64,
     /// Gap shrink over the ideal one, (1 − after/before) / (1 − σ/before); for effect cases.
     pub shrink_of_ideal: Option<f64>,
+    /// The parameters checked, "name found (truth ± tolerance)" each, and whether all were within it.
+    pub parameters: Vec<String>,
+    pub parameters_within: bool,
     pub out_of_library: bool,
     pub exact: bool,
 }
@@ -84,7 +106,7 @@ fn with(mut m: ContactModel, effects: &[Effect]) -> ContactModel {
 }
 
 /// The law with a Walton tangential law and friction (the sway then loads the sensor sideways).
-fn gripping(mut m: ContactModel) -> ContactModel {
+pub(super) fn gripping(mut m: ContactModel) -> ContactModel {
     m.tangential = Some(Tangential::walton(1.0e4, 0.8));
     m
 }
@@ -96,8 +118,8 @@ fn noisy(scale: f64) -> FtSensorConfig {
 }
 
 /// A push plan's depth range \[m\] and largest force \[N\] on each of the force-control paper's laws.
-const SPONGE: ((f64, f64), f64) = ((0.01, 0.05), 300.0);
-const DICE: ((f64, f64), f64) = ((0.015, 0.07), 150.0);
+pub(super) const SPONGE: ((f64, f64), f64) = ((0.01, 0.05), 300.0);
+pub(super) const DICE: ((f64, f64), f64) = ((0.015, 0.07), 150.0);
 
 /// The corpus: every effect of the cell's surface and sensor alone on both the force-control paper's laws, two-effect cases,
 /// the demo's lab surfaces, an effect outside the library, and 40 nulls (two laws each: four noise levels,
@@ -144,7 +166,8 @@ impl Corpus {
         visible_in: &'static str,
     ) {
         self.seed += 1;
-        let across = visible_in.contains("sway") || visible_in.contains("tilt");
+        let across =
+            if visible_in.contains("sway") || visible_in.contains("tilt") { Across::AlongX } else { Across::No };
         let out_of_library = visible_in.contains("out of library");
         // A tare taken touching: the hand starts pressed 2 mm (dice: 1 mm) and is never tared again.
         let start_pressed =
@@ -163,6 +186,9 @@ impl Corpus {
             hold: None,
             ambiguous: None,
             may_name: None,
+            foreign: vec![],
+            parameters: vec![],
+            min_shrink_of_ideal: 0.0,
             seed: self.seed,
         });
     }
@@ -421,7 +447,7 @@ const PLAN: Plan = Plan {
     push_periods: 5,
     commands: 6,
     move_duration: 2.0,
-    across: false,
+    across: Across::No,
     start_pressed: None,
     augmented: false,
 };
@@ -454,6 +480,7 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
         max_force: case.max_force,
         max_deformation: 0.08,
         sensor: case.sensor.clone(),
+        foreign: case.foreign.clone(),
     };
     let path = dir.join(format!("case{}.mcap", case.seed));
     let mut recorder = Recorder::create(&path, 1_700_000_000_000_000_000)?;
@@ -493,11 +520,16 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
     };
     let ambiguous: Vec<String> = r.ambiguous.iter().map(|a| pair(&a.between)).collect();
     let expected_ambiguous = case.ambiguous.map(|p| pair(&p.map(String::from)));
-    let exact = match &expected_ambiguous {
-        Some(p) => named.is_empty() && remaining == "ambiguous" && ambiguous.contains(p),
-        None if case.expected.is_empty() => named.iter().all(|n| case.may_name == Some(n.as_str())),
-        None => named == expected && (!case.out_of_library || remaining == "unexplained"),
-    };
+    let shrink_of_ideal = (!case.expected.is_empty() && case.ambiguous.is_none() && ideal > 0.0)
+        .then(|| (1.0 - r.final_rms / before) / ideal);
+    let (parameters, parameters_within) = check_parameters(r, &case.parameters);
+    let exact = parameters_within
+        && shrink_of_ideal.is_none_or(|x| x >= case.min_shrink_of_ideal)
+        && match &expected_ambiguous {
+            Some(p) => named.is_empty() && remaining == "ambiguous" && ambiguous.contains(p),
+            None if case.expected.is_empty() => named.iter().all(|n| case.may_name == Some(n.as_str())),
+            None => named == expected && (!case.out_of_library || remaining == "unexplained"),
+        };
     Ok(Outcome {
         case: case.name.clone(),
         exact,
@@ -512,9 +544,33 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
         noise_floor: r.noise_floor,
         rms_before: before,
         rms_after: r.final_rms,
-        shrink_of_ideal: (!case.expected.is_empty() && case.ambiguous.is_none() && ideal > 0.0)
-            .then(|| (1.0 - r.final_rms / before) / ideal),
+        shrink_of_ideal,
+        parameters,
+        parameters_within,
     })
+}
+
+/// Each expected parameter as found against its truth, and whether every one is within its tolerance (a
+/// parameter of an effect not named is not within it).
+fn check_parameters(r: &softcontact_discrepancy::Report, expected: &[ExpectedParameter]) -> (Vec<String>, bool) {
+    let mut within = true;
+    let shown = expected
+        .iter()
+        .map(|p| {
+            let effect = r.effects.iter().find(|e| e.id == p.id);
+            let found: Vec<f64> = p
+                .names
+                .iter()
+                .map(|n| effect.and_then(|e| e.parameters.get(*n)).copied().unwrap_or(f64::NAN))
+                .collect();
+            let distance = found.iter().zip(&p.truth).map(|(f, t)| (f - t).powi(2)).sum::<f64>().sqrt();
+            within &= distance <= p.tolerance;
+            let (unit, size) = p.unit;
+            let list = |v: &[f64]| v.iter().map(|x| format!("{:.3}", x / size)).collect::<Vec<_>>().join(", ");
+            format!("{} {} {unit} ({} ± {:.2})", p.names.join("/"), list(&found), list(&p.truth), p.tolerance / size)
+        })
+        .collect();
+    (shown, within)
 }
 
 /// The goals of the corpus (issue 16): ≥ 90 % of effect cases named exactly, no false name on a null,
@@ -535,14 +591,9 @@ pub struct Summary {
     pub outcomes: Vec<Outcome>,
 }
 
-/// Runs the corpus on `threads` threads (each case is an independent cell): every case, or those whose
-/// name contains `only`; with `keep`, each case's recording stays in that folder.
-pub fn run(
-    threads: usize,
-    only: Option<&str>,
-    keep: Option<&Path>,
-    slow_noise_seeds: usize,
-) -> anyhow::Result<Summary> {
+/// Runs `cases` on `threads` threads (each case is an independent cell): every one, or those whose name
+/// contains `only`; with `keep`, each case's recording stays in that folder.
+pub fn run(cases: Vec<Case>, threads: usize, only: Option<&str>, keep: Option<&Path>) -> anyhow::Result<Summary> {
     let dir = match keep {
         Some(dir) => {
             std::fs::create_dir_all(dir)?;
@@ -550,8 +601,7 @@ pub fn run(
         }
         None => tempfile_dir()?,
     };
-    let cases: Vec<Case> =
-        cases(slow_noise_seeds).into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o))).collect();
+    let cases: Vec<Case> = cases.into_iter().filter(|c| only.is_none_or(|o| c.name.contains(o))).collect();
     let next = std::sync::atomic::AtomicUsize::new(0);
     let mut outcomes: Vec<(usize, Outcome)> = std::thread::scope(|scope| {
         let workers: Vec<_> = (0..threads.max(1))
@@ -606,9 +656,13 @@ fn tempfile_dir() -> anyhow::Result<std::path::PathBuf> {
 
 /// The table printed by `softcontact bench discrepancy` (and committed in docs/discrepancy-corpus.md).
 pub fn table(s: &Summary) -> String {
+    let with_parameters = s.outcomes.iter().any(|o| !o.parameters.is_empty());
     let mut t = String::from(
-        "| case | hidden | expected answer | named | remaining | visible in | gap/σ | σ [N] | RMS before → after [N] | shrink/ideal |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        "| case | hidden | expected answer | named | remaining | visible in | gap/σ | σ [N] | RMS before → after [N] | shrink/ideal |",
     );
+    t += if with_parameters { " parameters found (truth ± tolerance) |\n" } else { "\n" };
+    t += "|---|---|---|---|---|---|---|---|---|---|";
+    t += if with_parameters { "---|\n" } else { "\n" };
     for o in &s.outcomes {
         let list = |v: &[String]| if v.is_empty() { "—".to_string() } else { v.join(", ") };
         let answer = match &o.expected_ambiguous {
@@ -636,6 +690,11 @@ pub fn table(s: &Summary) -> String {
             o.rms_after,
             o.shrink_of_ideal.map_or("—".into(), |x| format!("{:.0} %", 100.0 * x)),
         );
+        if with_parameters {
+            t.pop();
+            let shown = if o.parameters.is_empty() { "—".to_string() } else { o.parameters.join("; ") };
+            t += &format!(" {shown} |\n");
+        }
     }
     t += &format!(
         "\nEffect cases named exactly: {}/{} ({:.0} %; of them answered ambiguous as expected: {}/{}); false names on nulls: {}/{}; out of library left unexplained: {}/{}; median shrink of the ideal: {:.0} %\n",
@@ -675,17 +734,27 @@ pub fn time_workflow() -> anyhow::Result<(f64, usize, f64)> {
     Ok((run.simulated, samples, best))
 }
 
-/// `softcontact bench discrepancy`.
+/// What `softcontact bench discrepancy` runs.
+pub struct Corpora {
+    /// Only the workflow's time.
+    pub timing_only: bool,
+    /// Only the foreign-effect corpus.
+    pub foreign_only: bool,
+    /// Seeds of each null whose noise is not white.
+    pub slow_noise_seeds: usize,
+}
+
+/// `softcontact bench discrepancy`: the workflow's time, today's corpus and the foreign-effect corpus.
 pub fn bench(
     threads: usize,
     json: Option<std::path::PathBuf>,
-    timing_only: bool,
+    corpora: Corpora,
     only: Option<&str>,
     keep: Option<&Path>,
-    slow_noise_seeds: usize,
 ) -> anyhow::Result<()> {
+    let Corpora { timing_only, foreign_only, slow_noise_seeds } = corpora;
     let mut value = serde_json::json!({});
-    if only.is_none() {
+    if only.is_none() && !foreign_only {
         let (seconds, samples, wall) = time_workflow()?;
         println!(
             "workflow on a {seconds:.0} s recording at 1 kHz ({samples} samples): {wall:.2} s (the delay screened on a second core where there is one; {:.2} s per 60 s; goal < 2 s)",
@@ -696,10 +765,16 @@ pub fn bench(
         });
     }
     if !timing_only {
-        let started = std::time::Instant::now();
-        let summary = run(threads, only, keep, slow_noise_seeds)?;
-        println!("\nhidden-effect corpus ({:.1} s wall):\n{}", started.elapsed().as_secs_f64(), table(&summary));
-        value["corpus"] = serde_json::to_value(&summary)?;
+        let mut corpora = vec![("foreign-effect corpus", "foreign_corpus", super::foreign_corpus::cases())];
+        if !foreign_only {
+            corpora.insert(0, ("hidden-effect corpus", "corpus", cases(slow_noise_seeds)));
+        }
+        for (what, key, cases) in corpora {
+            let started = std::time::Instant::now();
+            let summary = run(cases, threads, only, keep)?;
+            println!("\n{what} ({:.1} s wall):\n{}", started.elapsed().as_secs_f64(), table(&summary));
+            value[key] = serde_json::to_value(&summary)?;
+        }
     }
     if let Some(path) = json {
         crate::identify_cmd::write_json(&path, &value)?;

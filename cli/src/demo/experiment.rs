@@ -32,6 +32,9 @@ pub struct SurfaceSpec {
     pub max_deformation: f64,
     /// The simulated F/T sensor (the demo's drifts as a Gamma warming up; tared before each experiment).
     pub sensor: FtSensorConfig,
+    /// Surface effects outside the library ([`softcontact_sim::foreign`]), added to `truth`'s force: the
+    /// corpus's foreign cases.
+    pub foreign: Vec<softcontact_sim::foreign::ForeignEffect>,
 }
 
 /// How much of the experiments to run (the full set is the force-control paper's).
@@ -46,7 +49,7 @@ pub struct Plan {
     /// free space after every push run (the sensor's orientation against gravity): the excitation
     /// crosstalk and an unknown tool weight need, spread through the recording so that every fold of the
     /// workflow's cross-validation sees some.
-    pub across: bool,
+    pub across: Across,
     /// The hand starts this deep \[m\] in the surface instead of 4 cm above it, so that the start-up tare
     /// takes the contact force for the sensor's zero, and control starts without a second tare: the
     /// whole recording then reads a constant offset (a sensor bias, as after a tare taken touching).
@@ -62,10 +65,46 @@ impl Plan {
         push_periods: 5,
         commands: 30,
         move_duration: 2.0,
-        across: false,
+        across: Across::No,
         start_pressed: None,
         augmented: true,
     };
+}
+
+/// Which ways [`Plan::across`] moves the hand across the surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Across {
+    No,
+    /// Sway along x, each way in turn, and tilts about y.
+    AlongX,
+    /// Sway along x, y, −x, −y in turn, and tilts about y and x in turn: a tangential load in every
+    /// direction of the surface's plane, for a sensor turned about any axis.
+    AlongXAndY,
+}
+
+impl Across {
+    /// The lateral offset of the `i`-th push run or force command \[m\].
+    fn sway(self, i: usize) -> Vector3<f64> {
+        match self {
+            Across::No => Vector3::zeros(),
+            Across::AlongX => Vector3::new(SWAY * if i.is_multiple_of(2) { 1.0 } else { -1.0 }, 0.0, 0.0),
+            Across::AlongXAndY => {
+                let way = if i % 4 < 2 { SWAY } else { -SWAY };
+                if i.is_multiple_of(2) { Vector3::new(way, 0.0, 0.0) } else { Vector3::new(0.0, way, 0.0) }
+            }
+        }
+    }
+
+    /// The tilt of the hand in free space after the `i`-th push run \[rad\].
+    fn tilt(self, i: usize) -> Vector3<f64> {
+        let way = if i.is_multiple_of(2) { TILT } else { -TILT };
+        match self {
+            Across::No => Vector3::zeros(),
+            Across::AlongX => Vector3::new(0.0, way, 0.0),
+            Across::AlongXAndY if i % 4 < 2 => Vector3::new(0.0, way, 0.0),
+            Across::AlongXAndY => Vector3::new(way, 0.0, 0.0),
+        }
+    }
 }
 
 /// Which model a command went through (docs/contracts.md: a command's `model`).
@@ -208,7 +247,7 @@ impl Observer for NoObserver {
 
 const CYCLE: f64 = 1e-3;
 const RETREAT: f64 = -0.01;
-/// [`Plan::across`]: the lateral sway \[m\] (each way) and the tilt of the hand \[rad\] about y.
+/// [`Plan::across`]: the lateral sway \[m\] (each way) and the tilt of the hand \[rad\].
 const SWAY: f64 = 0.008;
 const TILT: f64 = 0.35;
 
@@ -262,6 +301,9 @@ fn start<'a, O: Observer>(
     observer: &'a mut O,
 ) -> anyhow::Result<Runner<'a, O>> {
     sim.sensor = spec.sensor.clone();
+    if let Some(surface) = sim.surface.as_mut() {
+        surface.foreign = spec.foreign.clone();
+    }
     let controller =
         DeformationController::new(ControllerConfig::lwr4(spec.max_force, spec.max_deformation), controller_model)?;
     let mut cell = Cell::new(sim, controller, ContactEstimatorNode::new(estimator)?)?;
@@ -337,18 +379,17 @@ pub fn run_surface(
             k += 1;
         };
         r.cell.controller.law.command_pushes(low, high, 1.0, plan.push_periods)?;
-        let sway = Vector3::new(SWAY * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0, 0.0);
-        if plan.across {
+        let sway = plan.across.sway(run);
+        if plan.across != Across::No {
             // Across the surface while pushing: the tangential load, in every run.
             r.cell.controller.law.command_across(sway, Vector3::zeros(), 2.0)?;
         }
         r.run(1.0 + f64::from(plan.push_periods), &mut watch)?;
         r.cell.controller.law.command_deformation(RETREAT, 1.0)?;
         r.run(1.5, &mut watch)?;
-        if plan.across {
+        if plan.across != Across::No {
             // Tilt the hand in free space and back: the sensor's orientation against gravity.
-            let tilt = Vector3::new(0.0, TILT * if run % 2 == 0 { 1.0 } else { -1.0 }, 0.0);
-            for to in [tilt, Vector3::zeros()] {
+            for to in [plan.across.tilt(run), Vector3::zeros()] {
                 r.cell.controller.law.command_across(sway, to, 3.0)?;
                 r.run(3.5, &mut watch)?;
             }
@@ -456,9 +497,8 @@ fn run_control<O: Observer>(
         }
         let stiffness = r.cell.controller.law.contact_model().stiffness;
         r.cell.controller.law.command_force(command, plan.move_duration)?;
-        if plan.across {
-            let sway = SWAY * if i % 2 == 0 { 1.0 } else { -1.0 };
-            r.cell.controller.law.command_across(Vector3::new(sway, 0.0, 0.0), Vector3::zeros(), plan.move_duration)?;
+        if plan.across != Across::No {
+            r.cell.controller.law.command_across(plan.across.sway(i), Vector3::zeros(), plan.move_duration)?;
         }
         r.observer.force_command(r.last.time, command, plan.move_duration)?;
         run.command_times.push(r.last.time);

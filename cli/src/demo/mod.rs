@@ -5,6 +5,7 @@ mod arm;
 pub mod corpus;
 mod experiment;
 mod figures;
+mod foreign_corpus;
 mod graph;
 mod paper;
 mod record;
@@ -65,6 +66,7 @@ fn surfaces() -> [SurfaceSpec; 2] {
             max_force: 300.0,
             max_deformation: 0.06,
             sensor: FtSensorConfig::gamma_drifting(),
+            foreign: vec![],
         },
         SurfaceSpec {
             name: "dice",
@@ -74,6 +76,7 @@ fn surfaces() -> [SurfaceSpec; 2] {
             max_force: 150.0,
             max_deformation: 0.08,
             sensor: FtSensorConfig::gamma_drifting(),
+            foreign: vec![],
         },
     ]
 }

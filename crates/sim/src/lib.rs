@@ -80,7 +80,7 @@ impl SimConfig {
             friction: None,
             payload: None,
             krc: KrcConfig::default(),
-            surface: Some(SurfaceConfig { point: sole + 0.04 * normal, normal, model }),
+            surface: Some(SurfaceConfig::new(sole + 0.04 * normal, normal, model)),
             sensor: FtSensorConfig::gamma(),
             seed,
         }

@@ -26,6 +26,13 @@ pub struct FtSensorConfig {
     /// The sensor as mounted, turned from the frame the URDF gives it by this rotation (the snake paper's
     /// misalignment of the sensor's axes with the pushing axes: a mounting error no tool knows of).
     pub mounting: UnitQuaternion<f64>,
+    /// A warm-up of the electronics: per axis, an offset that settles exponentially to this value,
+    /// w(t) = warm_up·(1 − e^{−t/τ}) with τ = [`Self::warm_up_time_constant`]; zeros for none.
+    pub warm_up: [f64; 6],
+    pub warm_up_time_constant: f64,
+    /// The converter's lag \[s\]: each reading is the wrench of this long ago, linearly interpolated
+    /// between the simulator's steps (any value, not a whole number of them); 0 for none.
+    pub delay: f64,
 }
 
 impl FtSensorConfig {
@@ -39,6 +46,9 @@ impl FtSensorConfig {
             coloured_noise: [0.0; 6],
             coloured_time_constant: 0.0,
             mounting: UnitQuaternion::identity(),
+            warm_up: [0.0; 6],
+            warm_up_time_constant: 0.0,
+            delay: 0.0,
         }
     }
 
@@ -72,6 +82,9 @@ impl FtSensorConfig {
             coloured_noise: [0.0; 6],
             coloured_time_constant: 0.0,
             mounting: UnitQuaternion::identity(),
+            warm_up: [0.0; 6],
+            warm_up_time_constant: 0.0,
+            delay: 0.0,
         }
     }
 }
@@ -88,11 +101,22 @@ pub struct FtSensor {
     /// The coloured noise's state and the time it was last advanced to.
     coloured: [f64; 6],
     coloured_at: Option<f64>,
+    /// The exact wrenches of the last [`FtSensorConfig::delay`] (time, wrench), oldest first.
+    history: std::collections::VecDeque<(f64, [f64; 6])>,
 }
 
 impl FtSensor {
     pub fn new(config: FtSensorConfig, load: BodyInertia) -> Self {
-        Self { config, load, rdt_sequence: 0, ft_sequence: 0, tare: [0; 6], coloured: [0.0; 6], coloured_at: None }
+        Self {
+            config,
+            load,
+            rdt_sequence: 0,
+            ft_sequence: 0,
+            tare: [0; 6],
+            coloured: [0.0; 6],
+            coloured_at: None,
+            history: Default::default(),
+        }
     }
 
     /// A new stream starts (RDT start request): the stream counter restarts.
@@ -182,19 +206,65 @@ impl FtSensor {
         rng: &mut impl Rng,
     ) -> ([i32; 6], bool) {
         let exact = self.true_wrench(sensor, tool, contact_force, gravity);
+        let exact = self.delayed(time, exact);
         self.advance_coloured(time, rng);
         let c = &self.config;
+        let warmed = if c.warm_up_time_constant > 0.0 { 1.0 - (-time / c.warm_up_time_constant).exp() } else { 0.0 };
         let reading: [f64; 6] = std::array::from_fn(|i| {
             let noise =
                 if c.noise[i] > 0.0 { Normal::new(0.0, c.noise[i]).expect("finite σ").sample(rng) } else { 0.0 };
-            exact[i] + c.bias[i] + c.drift[i] * time + noise + self.coloured[i]
+            exact[i] + c.bias[i] + c.drift[i] * time + c.warm_up[i] * warmed + noise + self.coloured[i]
         });
         let (raw, saturated) = c.calibration.to_counts(&reading);
         self.ft_sequence = self.ft_sequence.wrapping_add(1);
         (raw, saturated)
     }
 
+    /// The wrench of [`FtSensorConfig::delay`] before `time`, given this step's `exact` one: linear between
+    /// the two steps around it, the oldest kept before the first; the history holds no more than the delay.
+    fn delayed(&mut self, time: f64, exact: [f64; 6]) -> [f64; 6] {
+        let delay = self.config.delay;
+        if delay.is_nan() || delay <= 0.0 {
+            return exact;
+        }
+        if self.history.back().is_some_and(|&(t, _)| t > time) {
+            self.history.clear(); // time went back: a new run
+        }
+        self.history.push_back((time, exact));
+        let at = time - delay;
+        while self.history.len() > 2 && self.history[1].0 <= at {
+            self.history.pop_front();
+        }
+        let (t0, w0) = self.history[0];
+        let Some(&(t1, w1)) = self.history.get(1).filter(|_| at > t0) else { return w0 };
+        let s = ((at - t0) / (t1 - t0)).clamp(0.0, 1.0);
+        std::array::from_fn(|i| w0[i] + s * (w1[i] - w0[i]))
+    }
+
     pub fn calibration(&self) -> &rdt::Calibration {
         &self.config.calibration
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ramp read 17.3 ms late at 1 ms steps: the reading is the ramp 17.3 ms earlier, exactly (linear
+    /// interpolation is exact on a ramp), and before the first step the first wrench.
+    #[test]
+    fn a_delay_between_steps_reads_the_ramp_of_that_long_ago() {
+        let config = FtSensorConfig { delay: 0.0173, ..FtSensorConfig::ideal() };
+        let mut sensor = FtSensor::new(config, BodyInertia::ZERO);
+        let ramp = |t: f64| std::array::from_fn(|i| (i as f64 + 1.0) * t);
+        for step in 0..200 {
+            let t = 1.0 + step as f64 * 1e-3;
+            let read = sensor.delayed(t, ramp(t));
+            let expected = ramp((t - 0.0173).max(1.0));
+            for i in 0..6 {
+                assert!((read[i] - expected[i]).abs() < 1e-12, "t {t}: {read:?} against {expected:?}");
+            }
+            assert!(sensor.history.len() <= 20, "the history holds the delay, not the run");
+        }
     }
 }

@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 use softcontact_contact::{ContactModel, EffectState, SensorInputs, TangentialMemory};
 
 use crate::SimError;
+use crate::foreign::{ForeignEffect, ForeignSurface};
 
 /// Where the surface is and what it is made of.
 #[derive(Debug, Clone)]
@@ -14,6 +15,16 @@ pub struct SurfaceConfig {
     /// The contact direction n: the way the hand moves to compress the surface (unit, world).
     pub normal: Vector3<f64>,
     pub model: ContactModel,
+    /// Effects written outside the library, added to the model's force ([`crate::foreign`]): the hidden
+    /// truth of the discrepancy corpus's foreign cases; empty for every other surface.
+    pub foreign: Vec<ForeignEffect>,
+}
+
+impl SurfaceConfig {
+    /// A surface of `model` alone through `point` with contact direction `normal`.
+    pub fn new(point: Vector3<f64>, normal: Vector3<f64>, model: ContactModel) -> Self {
+        Self { point, normal, model, foreign: vec![] }
+    }
 }
 
 /// The contact of one step.
@@ -41,6 +52,7 @@ pub struct Surface {
     config: SurfaceConfig,
     normal: Vector3<f64>,
     effects: EffectState,
+    foreign: ForeignSurface,
     tangential: TangentialMemory,
 }
 
@@ -52,7 +64,8 @@ impl Surface {
         }
         config.model.validate()?;
         let effects = config.model.effect_state();
-        Ok(Self { normal: config.normal / norm, effects, tangential: TangentialMemory::default(), config })
+        let foreign = ForeignSurface::new(config.foreign.clone()).map_err(SimError::Config)?;
+        Ok(Self { normal: config.normal / norm, effects, foreign, tangential: TangentialMemory::default(), config })
     }
 
     pub fn config(&self) -> &SurfaceConfig {
@@ -72,7 +85,11 @@ impl Surface {
         let n = self.normal;
         let z = (position - self.config.point).dot(&n);
         let zd = velocity.dot(&n);
-        let f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
+        let mut f = self.config.model.step_surface(&mut self.effects, z, zd, dt)?;
+        if !self.foreign.is_empty() {
+            let elastic = self.config.model.force(z, 0.0)?;
+            f = self.foreign.step(f, elastic, z, zd, dt);
+        }
         let (tangential, sliding) =
             self.config.model.tangential_step(&mut self.tangential, (*position).into(), n.into(), z, f.max(0.0))?;
         let force = -f * n + Vector3::from(tangential);

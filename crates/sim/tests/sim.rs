@@ -244,8 +244,7 @@ fn the_walton_tangential_law_sticks_then_slides_at_the_friction_cone() {
         tangential: Some(Tangential::walton(4.0e4, 0.5)),
         ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
     };
-    let mut surface =
-        Surface::new(SurfaceConfig { point: Vector3::zeros(), normal: Vector3::new(0.0, 0.0, -1.0), model }).unwrap();
+    let mut surface = Surface::new(SurfaceConfig::new(Vector3::zeros(), Vector3::new(0.0, 0.0, -1.0), model)).unwrap();
     // Press 1 cm in, then drag along x.
     let v = Vector3::zeros();
     let c = surface.contact(&Vector3::new(0.0, 0.0, -0.01), &v, 1e-3).unwrap();
@@ -299,8 +298,7 @@ fn a_surface_models_crosstalk_reads_tangential_load_as_normal_force() {
         effects: vec![Effect::SensorCrosstalk { coupling: [0.02, 0.0, 0.0] }],
         ..ContactModel::new(Kind::HertzWalton, 2.0e4, 0.0).unwrap()
     };
-    let mut surface =
-        Surface::new(SurfaceConfig { point: Vector3::zeros(), normal: Vector3::new(0.0, 0.0, -1.0), model }).unwrap();
+    let mut surface = Surface::new(SurfaceConfig::new(Vector3::zeros(), Vector3::new(0.0, 0.0, -1.0), model)).unwrap();
     let v = Vector3::zeros();
     surface.contact(&Vector3::new(0.0, 0.0, -0.01), &v, 1e-3).unwrap();
     let c = surface.contact(&Vector3::new(0.0005, 0.0, -0.01), &v, 1e-3).unwrap();
