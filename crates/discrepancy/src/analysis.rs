@@ -95,14 +95,16 @@ impl<'a> Analysis<'a> {
             offset_rate: 0.0,
             delay: 0.0,
             terms: vec![Term::Shift],
+            crosstalk_both_axes: data.second_axis.is_some(),
             clamped: data.clamped.clone(),
         };
         let (mut structure, _, _) = refine_surface(&data, &start);
-        let first = to_model(baseline, data.lateral_axis, &structure, &fit::fit(&data, &structure), &[]);
+        let first =
+            to_model(baseline, [data.lateral_axis, data.second_axis], &structure, &fit::fit(&data, &structure), &[]);
         structure.clamped = clamp_mask(&first, &series.shifted(structure.shift))?;
         let (structure, shift_se, _) = refine_surface(&data, &structure);
         let fit = fit::fit(&data, &structure);
-        let model = to_model(baseline, data.lateral_axis, &structure, &fit, &[]);
+        let model = to_model(baseline, [data.lateral_axis, data.second_axis], &structure, &fit, &[]);
         let surface = at_surface(series, options, velocity_threshold, force_scale, structure.shift);
         let gap = gap(series, &surface.phases, &simulate(&model, &series.shifted(structure.shift))?);
         let refit = Refit {
@@ -142,7 +144,7 @@ impl<'a> Analysis<'a> {
     }
 
     fn model_of(&self, structure: &Structure, fit: &Fit, named: &[(Family, f64)]) -> ContactModel {
-        to_model(self.baseline, self.data.lateral_axis, structure, fit, named)
+        to_model(self.baseline, [self.data.lateral_axis, self.data.second_axis], structure, fit, named)
     }
 
     /// The simulated gap of `model` with the surface moved by `shift`, over the current phases.
@@ -583,7 +585,7 @@ impl<'a> Analysis<'a> {
             .map(|(&(f, sh), &(before, after))| {
                 let parameters = parameters(&self.model, f, sh);
                 let uncertainty = uncertainty(&self.data, structure, fit, f, sh, *rate_se);
-                let not_identifiable = parameters
+                let mut not_identifiable: Vec<String> = parameters
                     .iter()
                     .filter(|(k, v)| {
                         uncertainty
@@ -592,6 +594,14 @@ impl<'a> Analysis<'a> {
                     })
                     .map(|(k, _)| k.clone())
                     .collect();
+                if f == Family::Crosstalk {
+                    // Of the sensor's small rotation, the normal reading shows the tilts the tangential load
+                    // reaches: never the turn about the normal, and one tilt where the load has one axis.
+                    not_identifiable.push("rotation_about_the_normal".into());
+                    if !structure.crosstalk_both_axes {
+                        not_identifiable.push("coupling_across_the_lateral_axis".into());
+                    }
+                }
                 NamedEffect {
                     id: f.id().to_string(),
                     parameters,

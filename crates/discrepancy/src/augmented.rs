@@ -3,10 +3,11 @@
 
 use super::*;
 
-/// The augmented model of a structure and its fit; `order` lists the accepted families in order.
+/// The augmented model of a structure and its fit; `order` lists the accepted families in order; `axes`
+/// the record's lateral axes ([`Data::lateral_axis`], [`Data::second_axis`]).
 pub(crate) fn to_model(
     base: &ContactModel,
-    d_axis: Option<[f64; 3]>,
+    axes: [Option<[f64; 3]>; 2],
     st: &Structure,
     fit: &Fit,
     order: &[(Family, f64)],
@@ -35,8 +36,11 @@ pub(crate) fn to_model(
                 Family::OffsetDrift => Some(Effect::ContactOffsetDrift { rate: st.offset_rate }),
                 Family::TimeDelay => Some(Effect::TimeDelay { delay: st.delay }),
                 Family::Crosstalk => {
-                    let u = d_axis.unwrap_or_default();
-                    Some(Effect::SensorCrosstalk { coupling: u.map(|x| x * b(f)) })
+                    // A small rotation of the sensor: the coupling along each axis the record loads.
+                    let along = |term: Term| st.terms.iter().position(|t| *t == term).map_or(0.0, |j| fit.beta[j + 2]);
+                    let (u, v) = (axes[0].unwrap_or_default(), axes[1].unwrap_or_default());
+                    let (b1, b2) = (along(Term::Crosstalk), along(Term::CrosstalkSecond));
+                    Some(Effect::SensorCrosstalk { coupling: std::array::from_fn(|i| u[i] * b1 + v[i] * b2) })
                 }
                 Family::ToolGravity => Some(Effect::ToolGravity { mass: b(f) }),
                 Family::Adhesion => Some(Effect::Adhesion { force: b(f).max(0.0), range: sh }),
@@ -182,9 +186,11 @@ pub(crate) fn uncertainty(
             u.insert("delay_s".into(), z * f.se[f.se.len() - 1]);
         }
         Family::Crosstalk => {
-            let se = fit.se[term_index(st, fam, sh).unwrap_or(2)];
+            let se = |term: Term| st.terms.iter().position(|t| *t == term).map_or(0.0, |j| fit.se[j + 2]);
+            let (se1, se2) = (se(Term::Crosstalk), se(Term::CrosstalkSecond));
             for (i, axis) in ["coupling_x", "coupling_y", "coupling_z"].into_iter().enumerate() {
-                u.insert(axis.into(), z * se * d.lateral_axis.map_or(0.0, |a| a[i].abs()));
+                let (a, b) = (d.lateral_axis.map_or(0.0, |a| a[i]), d.second_axis.map_or(0.0, |a| a[i]));
+                u.insert(axis.into(), z * (se1 * a).hypot(se2 * b));
             }
         }
         Family::ToolGravity => {

@@ -33,6 +33,12 @@ pub(crate) fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: 
     let mut stable = Vec::new();
     for &(f, sh) in fams {
         if let Some(j) = term_index(&st, f, sh) {
+            // Crosstalk along two axes is judged by the coupling the record shows best.
+            let t_of = |j: usize| (fit.beta[j] / fit.se[j]).abs();
+            let j = match st.terms.iter().position(|t| *t == Term::CrosstalkSecond) {
+                Some(k) if f == Family::Crosstalk && t_of(k + 2) > t_of(j) => k + 2,
+                _ => j,
+            };
             let b = fit.beta[j];
             t.push(b / fit.se[j]);
             stable.push(fit.fold_beta.iter().all(|fb| fb[j].signum() == b.signum()));

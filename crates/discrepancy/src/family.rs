@@ -58,20 +58,10 @@ impl Family {
     /// Whether the series can show this family at all: crosstalk needs tangential force, the tool's
     /// weight a change of orientation, a moving surface zero contact that recurs or lasts.
     pub(crate) fn observable(self, d: &Data) -> bool {
-        let varies = |x: &[f64]| x.iter().any(|v| *v != x[0]);
-        let spread = |keep: &dyn Fn(usize) -> bool| {
-            let v: Vec<f64> = (0..d.lateral.len()).filter(|&i| keep(i)).map(|i| d.lateral[i]).collect();
-            let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
-            (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
-        };
         match self {
             // A tangential load: the tangential force in contact varies well beyond the sensor's own
             // tangential noise and drift in free space (ten times).
-            Family::Crosstalk => {
-                !d.lateral.is_empty()
-                    && varies(&d.lateral)
-                    && spread(&|i| d.s.z[i] > 0.0) > 10.0 * spread(&|i| d.s.z[i] <= 0.0)
-            }
+            Family::Crosstalk => crate::fit::loads(&d.s.z, &d.lateral),
             // A tilt: gravity along the normal changes by at least 0.05 m/s² (a tilt of about 6° from the
             // tare's orientation); the hand's wobble under an impedance shows nothing of its weight.
             Family::ToolGravity => {
@@ -125,7 +115,7 @@ impl Family {
         }
         let term = self.term(shape)?;
         let mut st = st.clone();
-        st.terms.retain(|t| *t != term);
+        st.terms.retain(|t| *t != term && !(term == Term::Crosstalk && *t == Term::CrosstalkSecond));
         if self == Family::OffsetDrift {
             st.offset_rate = 0.0;
         }
@@ -135,6 +125,9 @@ impl Family {
     pub(crate) fn apply(self, st: &Structure, shape: f64) -> Structure {
         let mut st = st.clone();
         match self.term(shape) {
+            Some(Term::Crosstalk) if st.crosstalk_both_axes => {
+                st.terms.extend([Term::Crosstalk, Term::CrosstalkSecond])
+            }
             Some(t) => st.terms.push(t),
             None if self == Family::TimeDelay => st.delay = shape,
             None => st.a = shape,

@@ -37,6 +37,9 @@ pub(crate) enum Term {
     ExpDeriv,
     /// The tangential force along the recording's lateral axis [N]; coefficient the crosstalk coupling.
     Crosstalk,
+    /// The tangential force along the second lateral axis, across the first in the surface's plane, where
+    /// the record loads that way too ([`Data::second_axis`]); coefficient the coupling along it.
+    CrosstalkSecond,
     /// The change of gravity along the normal since the last tare [m/s²]; coefficient the unknown mass [kg].
     Gravity,
     /// Minus the share of an adhesion's pull-off force with range δ [m] ([`softcontact_contact::Effect::Adhesion`]);
@@ -47,7 +50,7 @@ pub(crate) enum Term {
 impl Term {
     /// A term of the sensor alone: it acts out of contact too.
     fn of_sensor(self) -> bool {
-        matches!(self, Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::Gravity)
+        matches!(self, Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::CrosstalkSecond | Term::Gravity)
     }
 
     /// A term the law's clamp at zero leaves alone: the sensor's, and an adhesion, which pulls on what the
@@ -69,6 +72,9 @@ pub(crate) struct Structure {
     /// The reading's delay [s]: every column is read at t − delay.
     pub delay: f64,
     pub terms: Vec<Term>,
+    /// Crosstalk is fitted along both lateral axes (the record loads the hand both ways across the
+    /// surface: [`Data::second_axis`]), else along the first alone.
+    pub crosstalk_both_axes: bool,
     /// In contact but the law would pull (fast unloading of a shallow contact): [`ContactModel::step`]
     /// clamps the surface force to 0 there, so the contact columns are zeroed. Where that happens moves
     /// with the surface position: [`Structure::remask`] after moving it.
@@ -114,26 +120,50 @@ pub(crate) struct Data<'a> {
     /// series carries tangential force.
     pub lateral_axis: Option<[f64; 3]>,
     pub lateral: Vec<f64>,
+    /// The axis across the first in the plane of the tangential forces (their second principal direction)
+    /// and the force along it, where that force is a load, not noise: it varies in contact ten times as
+    /// much as in free space (the rule of [`crate::family::Family::observable`] for the first).
+    pub second_axis: Option<[f64; 3]>,
+    pub second: Vec<f64>,
     /// Columns already computed (see [`ColumnCache`]).
     pub cache: std::cell::RefCell<ColumnCache>,
     /// Their products (see [`ProductCache`]).
     pub products: std::cell::RefCell<ProductCache>,
 }
 
-/// The principal direction u of the tangential forces (largest Σ(F_t·u)²): the leading eigenvector of
-/// Σ F_t F_tᵀ, its largest component made positive; `None` without tangential force.
-fn principal_axis(forces: &[[f64; 3]]) -> Option<[f64; 3]> {
+/// The principal directions of the tangential forces: u₁ with the largest Σ(F_t·u)², the leading
+/// eigenvector of Σ F_t F_tᵀ, and u₂ the second; each with its largest component made positive; `None`
+/// without tangential force (u₂: without force across u₁).
+fn principal_axes(forces: &[[f64; 3]]) -> [Option<[f64; 3]>; 2] {
     let m = forces.iter().fold(nalgebra::Matrix3::<f64>::zeros(), |m, f| {
         let v = nalgebra::Vector3::from(*f);
         m + v * v.transpose()
     });
     if m.trace().is_nan() || m.trace() <= 0.0 {
-        return None;
+        return [None, None];
     }
     let eigen = nalgebra::SymmetricEigen::new(m);
-    let u = eigen.eigenvectors.column(eigen.eigenvalues.imax()).into_owned();
-    let u = if u[u.iamax()] < 0.0 { -u } else { u };
-    Some([u.x, u.y, u.z])
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| eigen.eigenvalues[j].total_cmp(&eigen.eigenvalues[i]));
+    let axis = |k: usize| {
+        let u = eigen.eigenvectors.column(order[k]).into_owned();
+        let u = if u[u.iamax()] < 0.0 { -u } else { u };
+        (eigen.eigenvalues[order[k]] > 0.0).then_some([u.x, u.y, u.z])
+    };
+    [axis(0), axis(1)]
+}
+
+/// Whether a tangential force `along` an axis is a load: in contact (z > 0) it varies ten times as much
+/// as out of contact, where it is the sensor's noise and drift.
+pub(crate) fn loads(z: &[f64], along: &[f64]) -> bool {
+    let spread = |keep: &dyn Fn(usize) -> bool| {
+        let v: Vec<f64> = (0..along.len()).filter(|&i| keep(i)).map(|i| along[i]).collect();
+        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    !along.is_empty()
+        && along.iter().any(|v| *v != along[0])
+        && spread(&|i| z[i] > 0.0) > 10.0 * spread(&|i| z[i] <= 0.0)
 }
 
 impl<'a> Data<'a> {
@@ -169,11 +199,14 @@ impl<'a> Data<'a> {
         let force_squares = folds.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
-        let lateral_axis = principal_axis(&s.tangential);
-        let lateral = match lateral_axis {
+        let [lateral_axis, second_axis] = principal_axes(&s.tangential);
+        let along = |axis: Option<[f64; 3]>| match axis {
             Some(u) => s.tangential.iter().map(|f| f[0] * u[0] + f[1] * u[1] + f[2] * u[2]).collect(),
             None => Vec::new(),
         };
+        let lateral = along(lateral_axis);
+        let second = along(second_axis);
+        let (second_axis, second) = if loads(&s.z, &second) { (second_axis, second) } else { (None, Vec::new()) };
         Data {
             s,
             time,
@@ -184,6 +217,8 @@ impl<'a> Data<'a> {
             clamped,
             lateral_axis,
             lateral,
+            second_axis,
+            second,
             cache: Default::default(),
             products: Default::default(),
         }
@@ -204,6 +239,8 @@ impl<'a> Data<'a> {
             clamped: self.clamped.clone(),
             lateral_axis: self.lateral_axis,
             lateral: self.lateral.clone(),
+            second_axis: self.second_axis,
+            second: self.second.clone(),
             cache: Default::default(),
             products: Default::default(),
         }
@@ -468,8 +505,9 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
             (0..n).map(|i| if zeff[i] > 0.0 { pow(zeff[i], st.a) * zeff[i].max(zmin).ln() } else { 0.0 }).collect()
         }
         Term::Crosstalk if d.lateral.len() == n => d.lateral.clone(),
+        Term::CrosstalkSecond if d.second.len() == n => d.second.clone(),
         Term::Gravity if s.gravity_change.len() == n => s.gravity_change.clone(),
-        Term::Crosstalk | Term::Gravity => vec![0.0; n],
+        Term::Crosstalk | Term::CrosstalkSecond | Term::Gravity => vec![0.0; n],
     }
 }
 
