@@ -152,7 +152,7 @@ fn a_damaged_chunk_is_reported_by_discrepancy_as_by_identify() {
 
 /// The hidden-effect corpus made in the lockstep cell (`softcontact bench discrepancy`, the table in
 /// docs/discrepancy-corpus.md) meets the issue's goals: ≥ 90 % of effect cases named exactly, no false
-/// name on ≥ 20 nulls, median gap shrink ≥ 80 % of the ideal.
+/// name on ≥ 20 nulls, median gap shrink ≥ 80 % of the ideal; and the foreign-effect corpus beside it.
 #[test]
 fn the_hidden_effect_corpus_meets_its_goals() {
     let dir = tempfile::tempdir().unwrap();
@@ -199,6 +199,36 @@ fn the_hidden_effect_corpus_meets_its_goals() {
         assert!(hidden.contains(id), "{id} is never hidden: {shown}");
     }
     assert!(c["median_shrink_of_ideal"].as_f64().unwrap() >= 0.8, "{shown}");
+
+    // The foreign-effect corpus (effects written outside the library): no false name on its coloured
+    // nulls, and where a parameter is checked — the sensor turned about an arbitrary axis (the coupling
+    // within 0.05° of n × ω, the gap closed by 90 % of the ideal), a lag of no whole number of steps
+    // (within 0.5 ms) — it is found.
+    let f = &v["foreign_corpus"];
+    let count = |key: &str| f[key].as_u64().unwrap();
+    assert!(count("effect_cases") >= 13 && count("null_cases") >= 4, "{shown}");
+    assert_eq!(count("false_names_on_nulls"), 0, "{shown}");
+    // Both corpora together (issue 37's goals): ≥ 90 % answered as expected, no false name on ≥ 30 nulls,
+    // median shrink ≥ 85 % of the ideal.
+    let both = |key: &str| c[key].as_u64().unwrap() + f[key].as_u64().unwrap();
+    assert!(both("named_exactly") * 10 >= 9 * both("effect_cases"), "{shown}");
+    assert!(both("null_cases") >= 30, "{shown}");
+    let mut shrinks: Vec<f64> = [c, f]
+        .iter()
+        .flat_map(|corpus| corpus["outcomes"].as_array().unwrap())
+        .filter_map(|o| o["shrink_of_ideal"].as_f64())
+        .collect();
+    shrinks.sort_by(f64::total_cmp);
+    assert!(shrinks[shrinks.len() / 2] >= 0.85, "median shrink {}\n{shown}", shrinks[shrinks.len() / 2]);
+    let checked: Vec<&serde_json::Value> =
+        f["outcomes"].as_array().unwrap().iter().filter(|o| !o["parameters"].as_array().unwrap().is_empty()).collect();
+    assert!(checked.len() >= 4, "{shown}");
+    for o in checked {
+        assert!(o["exact"].as_bool().unwrap() && o["parameters_within"].as_bool().unwrap(), "{o}\n{shown}");
+        if o["expected"][0] == "sensor_crosstalk" {
+            assert!(o["shrink_of_ideal"].as_f64().unwrap() >= 0.9, "{o}\n{shown}");
+        }
+    }
 }
 
 /// Recordings a lab's own logger would write, by both Python writers (mcap-ros2-support: one .mcap file;

@@ -424,12 +424,15 @@ impl Corpus {
                 vec!["adhesion"],
                 "unloading and lift-off (pushes)",
             );
+            // On the dice's linear law Fung's form is a Maxwell branch of g·k exactly (`Effect::
+            // QuasiLinearRelaxation`): no recording tells them apart, and the answer is the default form.
+            let form = if law == "dice" { "viscoelastic_relaxation" } else { "quasi_linear_relaxation" };
             self.case(
                 format!("{law}: quasi-linear relaxation, 15 % of the elastic force, τ 1 s"),
                 with(base.clone(), &[Effect::QuasiLinearRelaxation { fraction: 0.15, time_constant: 1.0 }]),
                 FtSensorConfig::gamma(),
                 geometry,
-                vec!["quasi_linear_relaxation"],
+                vec![form],
                 "holds after moves to several depths",
             );
         }
@@ -524,7 +527,9 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
         .then(|| (1.0 - r.final_rms / before) / ideal);
     let (parameters, parameters_within) = check_parameters(r, &case.parameters);
     let exact = parameters_within
-        && shrink_of_ideal.is_none_or(|x| x >= case.min_shrink_of_ideal)
+        && (case.expected.is_empty()
+            || case.min_shrink_of_ideal <= 0.0
+            || shrink_of_ideal.is_some_and(|x| x >= case.min_shrink_of_ideal))
         && match &expected_ambiguous {
             Some(p) => named.is_empty() && remaining == "ambiguous" && ambiguous.contains(p),
             None if case.expected.is_empty() => named.iter().all(|n| case.may_name == Some(n.as_str())),

@@ -585,23 +585,7 @@ impl<'a> Analysis<'a> {
             .map(|(&(f, sh), &(before, after))| {
                 let parameters = parameters(&self.model, f, sh);
                 let uncertainty = uncertainty(&self.data, structure, fit, f, sh, *rate_se);
-                let mut not_identifiable: Vec<String> = parameters
-                    .iter()
-                    .filter(|(k, v)| {
-                        uncertainty
-                            .get(*k)
-                            .is_some_and(|u| !u.is_finite() || *u > v.abs() || (k.ends_with("_s") && *u > duration))
-                    })
-                    .map(|(k, _)| k.clone())
-                    .collect();
-                if f == Family::Crosstalk {
-                    // Of the sensor's small rotation, the normal reading shows the tilts the tangential load
-                    // reaches: never the turn about the normal, and one tilt where the load has one axis.
-                    not_identifiable.push("rotation_about_the_normal".into());
-                    if !structure.crosstalk_both_axes {
-                        not_identifiable.push("coupling_across_the_lateral_axis".into());
-                    }
-                }
+                let not_identifiable = not_identifiable(&parameters, &uncertainty, duration, f, structure);
                 NamedEffect {
                     id: f.id().to_string(),
                     parameters,
@@ -673,4 +657,31 @@ fn at_surface(series: &Series, options: &Options, velocity_threshold: f64, force
     let free: Vec<usize> = (0..series.len()).filter(|&i| !phases[i].in_contact()).collect();
     let sigma = noise.sigma.max(1e-9 * force_scale).max(1e-300);
     AtSurface { phases, noise, free, sigma }
+}
+
+/// The parameters of a named effect the record does not pin down: an interval wider than the value, not
+/// finite, or a time longer than the record; and of crosstalk, the parts of the sensor's small rotation
+/// the normal reading cannot show: never the turn about the normal, and one tilt where the load has one
+/// axis.
+fn not_identifiable(
+    parameters: &std::collections::BTreeMap<String, f64>,
+    uncertainty: &std::collections::BTreeMap<String, f64>,
+    duration: f64,
+    f: Family,
+    structure: &Structure,
+) -> Vec<String> {
+    let mut out: Vec<String> = parameters
+        .iter()
+        .filter(|(k, v)| {
+            uncertainty.get(*k).is_some_and(|u| !u.is_finite() || *u > v.abs() || (k.ends_with("_s") && *u > duration))
+        })
+        .map(|(k, _)| k.clone())
+        .collect();
+    if f == Family::Crosstalk {
+        out.push("rotation_about_the_normal".into());
+        if !structure.crosstalk_both_axes {
+            out.push("coupling_across_the_lateral_axis".into());
+        }
+    }
+    out
 }

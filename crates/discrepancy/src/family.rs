@@ -61,7 +61,7 @@ impl Family {
         match self {
             // A tangential load: the tangential force in contact varies well beyond the sensor's own
             // tangential noise and drift in free space (ten times).
-            Family::Crosstalk => crate::fit::loads(&d.s.z, &d.lateral),
+            Family::Crosstalk => crate::lateral::loads(&d.s.z, &d.lateral),
             // A tilt: gravity along the normal changes by at least 0.05 m/s² (a tilt of about 6° from the
             // tare's orientation); the hand's wobble under an impedance shows nothing of its weight.
             Family::ToolGravity => {

@@ -122,48 +122,13 @@ pub(crate) struct Data<'a> {
     pub lateral: Vec<f64>,
     /// The axis across the first in the plane of the tangential forces (their second principal direction)
     /// and the force along it, where that force is a load, not noise: it varies in contact ten times as
-    /// much as in free space (the rule of [`crate::family::Family::observable`] for the first).
+    /// much as in free space (the rule of [`crate::lateral::loads`], as for the first).
     pub second_axis: Option<[f64; 3]>,
     pub second: Vec<f64>,
     /// Columns already computed (see [`ColumnCache`]).
     pub cache: std::cell::RefCell<ColumnCache>,
     /// Their products (see [`ProductCache`]).
     pub products: std::cell::RefCell<ProductCache>,
-}
-
-/// The principal directions of the tangential forces: u₁ with the largest Σ(F_t·u)², the leading
-/// eigenvector of Σ F_t F_tᵀ, and u₂ the second; each with its largest component made positive; `None`
-/// without tangential force (u₂: without force across u₁).
-fn principal_axes(forces: &[[f64; 3]]) -> [Option<[f64; 3]>; 2] {
-    let m = forces.iter().fold(nalgebra::Matrix3::<f64>::zeros(), |m, f| {
-        let v = nalgebra::Vector3::from(*f);
-        m + v * v.transpose()
-    });
-    if m.trace().is_nan() || m.trace() <= 0.0 {
-        return [None, None];
-    }
-    let eigen = nalgebra::SymmetricEigen::new(m);
-    let mut order = [0, 1, 2];
-    order.sort_by(|&i, &j| eigen.eigenvalues[j].total_cmp(&eigen.eigenvalues[i]));
-    let axis = |k: usize| {
-        let u = eigen.eigenvectors.column(order[k]).into_owned();
-        let u = if u[u.iamax()] < 0.0 { -u } else { u };
-        (eigen.eigenvalues[order[k]] > 0.0).then_some([u.x, u.y, u.z])
-    };
-    [axis(0), axis(1)]
-}
-
-/// Whether a tangential force `along` an axis is a load: in contact (z > 0) it varies ten times as much
-/// as out of contact, where it is the sensor's noise and drift.
-pub(crate) fn loads(z: &[f64], along: &[f64]) -> bool {
-    let spread = |keep: &dyn Fn(usize) -> bool| {
-        let v: Vec<f64> = (0..along.len()).filter(|&i| keep(i)).map(|i| along[i]).collect();
-        let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
-        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
-    };
-    !along.is_empty()
-        && along.iter().any(|v| *v != along[0])
-        && spread(&|i| z[i] > 0.0) > 10.0 * spread(&|i| z[i] <= 0.0)
 }
 
 impl<'a> Data<'a> {
@@ -199,14 +164,15 @@ impl<'a> Data<'a> {
         let force_squares = folds.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
-        let [lateral_axis, second_axis] = principal_axes(&s.tangential);
+        let [lateral_axis, second_axis] = crate::lateral::principal_axes(&s.tangential);
         let along = |axis: Option<[f64; 3]>| match axis {
             Some(u) => s.tangential.iter().map(|f| f[0] * u[0] + f[1] * u[1] + f[2] * u[2]).collect(),
             None => Vec::new(),
         };
         let lateral = along(lateral_axis);
         let second = along(second_axis);
-        let (second_axis, second) = if loads(&s.z, &second) { (second_axis, second) } else { (None, Vec::new()) };
+        let (second_axis, second) =
+            if crate::lateral::loads(&s.z, &second) { (second_axis, second) } else { (None, Vec::new()) };
         Data {
             s,
             time,

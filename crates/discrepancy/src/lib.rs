@@ -61,6 +61,7 @@ mod augmented;
 mod candidate;
 mod family;
 mod fit;
+mod lateral;
 mod loading_paths;
 mod phase;
 mod refine;
