@@ -10,6 +10,11 @@ pub const INNER: &str = "SOFTCONTACT_INSIDE_NETNS";
 /// Runs the named test of this binary again, inside a fresh network namespace with only `lo` (in a user
 /// namespace too, so that it needs no root).
 pub fn in_isolated_namespace(test: &str) {
+    in_isolated_namespace_with(test, &[]);
+}
+
+/// [`in_isolated_namespace`], the re-run with the environment variables `vars` set.
+pub fn in_isolated_namespace_with(test: &str, vars: &[(&str, &std::ffi::OsStr)]) {
     let exe = std::env::current_exe().unwrap();
     let script = format!(
         "ip link set lo up && ip link set lo multicast on && ip route add 224.0.0.0/4 dev lo && exec '{}' --exact {test} --nocapture --test-threads=1",
@@ -18,6 +23,7 @@ pub fn in_isolated_namespace(test: &str) {
     let out = Command::new("unshare")
         .args(["--map-root-user", "--net", "sh", "-c", &script])
         .env(INNER, "1")
+        .envs(vars.iter().copied())
         .output()
         .expect("unshare runs");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));

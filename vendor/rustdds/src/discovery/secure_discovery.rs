@@ -2620,13 +2620,13 @@ impl SecureDiscovery {
     remote_guid_prefix: GuidPrefix,
     discovery_db: &Arc<RwLock<DiscoveryDB>>,
   ) -> SecurityResult<()> {
-    let mut sec_plugins = self.security_plugins.get_plugins();
-
-    // Get PermissionsToken
+    // Get PermissionsToken, before the plugins' lock: the Discovery DB's lock is never taken inside it.
     let permissions_token = discovery_db_read(discovery_db)
       .find_participant_proxy(remote_guid_prefix)
       .and_then(|data| data.permissions_token.clone())
       .ok_or_else(|| security_error("Could not get PermissionsToken from DiscoveryDB"))?;
+
+    let mut sec_plugins = self.security_plugins.get_plugins();
 
     // Get AuthenticatedPeerCredentialToken
     let auth_credential_token =
