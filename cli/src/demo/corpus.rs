@@ -12,59 +12,12 @@ use std::path::Path;
 use serde::Serialize;
 use softcontact_contact::{ContactModel, Effect, Exponents, Tangential};
 use softcontact_sim::FtSensorConfig;
-use softcontact_sim::foreign::ForeignEffect;
 
+pub use super::case::{Case, ExpectedParameter};
 use super::experiment::{Across, Plan, SurfaceSpec, run_hold, run_surface};
 use super::record::Recorder;
 use crate::discrepancy_cmd::{self, DiscrepancyArgs};
 use crate::identify_cmd::IdentifyArgs;
-
-/// One recording to make and what the workflow should answer.
-pub struct Case {
-    pub name: String,
-    pub truth: ContactModel,
-    pub sensor: FtSensorConfig,
-    /// The base law's push range \[m\] and the controller's force limit \[N\].
-    pub push: (f64, f64),
-    pub max_force: f64,
-    /// The effect ids the workflow should name (empty: a null case).
-    pub expected: Vec<&'static str>,
-    /// The excitation that shows the effect.
-    pub visible_in: &'static str,
-    /// The plan's lateral sway and tilts ([`Plan::across`]).
-    pub across: Across,
-    /// An effect outside the library: the answer must be no name and `unexplained`.
-    pub out_of_library: bool,
-    /// [`Plan::start_pressed`].
-    pub start_pressed: Option<f64>,
-    /// Instead of the plan, one long hold of this many seconds on a surface identified earlier (the law
-    /// without its effects, given with `--model`): see [`super::experiment::run_hold`].
-    pub hold: Option<f64>,
-    /// The answer is no name and "ambiguous between these two" (the recording cannot separate them).
-    pub ambiguous: Option<[&'static str; 2]>,
-    /// A null whose recording really shows this effect of the sensor, though no effect was hidden: naming
-    /// it is no false name (an offset that wanders as far as a steady drift would within the record).
-    pub may_name: Option<&'static str>,
-    /// Surface effects outside the library, added to `truth`'s force (the foreign cases).
-    pub foreign: Vec<ForeignEffect>,
-    /// Parameters the answer must carry within their tolerance.
-    pub parameters: Vec<ExpectedParameter>,
-    /// The least shrink of the gap, over the ideal one, of an answer as expected (0: the names alone).
-    pub min_shrink_of_ideal: f64,
-    pub seed: u64,
-}
-
-/// A parameter of a named effect the answer must carry: the effect's `id`, its parameter `name`s (one, or
-/// the components of a vector, compared by the distance between vectors), the truth and the tolerance.
-#[derive(Debug, Clone)]
-pub struct ExpectedParameter {
-    pub id: &'static str,
-    pub names: Vec<&'static str>,
-    pub truth: Vec<f64>,
-    pub tolerance: f64,
-    /// How the table shows it: the unit's name and its size in the parameter's unit (ms: 1e-3).
-    pub unit: (&'static str, f64),
-}
 
 /// What the workflow answered on one case.
 #[derive(Debug, Clone, Serialize)]
@@ -172,25 +125,8 @@ impl Corpus {
         // A tare taken touching: the hand starts pressed 2 mm (dice: 1 mm) and is never tared again.
         let start_pressed =
             visible_in.contains("tare taken touching").then_some(if max_force > 200.0 { 0.002 } else { 0.001 });
-        self.out.push(Case {
-            name,
-            truth,
-            sensor,
-            push,
-            max_force,
-            expected,
-            visible_in,
-            across,
-            out_of_library,
-            start_pressed,
-            hold: None,
-            ambiguous: None,
-            may_name: None,
-            foreign: vec![],
-            parameters: vec![],
-            min_shrink_of_ideal: 0.0,
-            seed: self.seed,
-        });
+        let case = Case::new(name, truth, sensor, (push, max_force), expected, self.seed);
+        self.out.push(Case { visible_in, across, out_of_library, start_pressed, ..case });
     }
 
     /// The surface's own effects on `base`, one at a time, then relaxation with hysteresis.

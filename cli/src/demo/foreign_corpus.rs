@@ -161,25 +161,8 @@ fn push<'a>(
     expected: Vec<&'static str>,
 ) -> &'a mut Case {
     let seed = 1001 + out.len() as u64;
-    out.push(Case {
-        name,
-        truth,
-        sensor,
-        push,
-        max_force,
-        expected,
-        visible_in: "",
-        across: Across::No,
-        out_of_library: false,
-        start_pressed: None,
-        hold: None,
-        ambiguous: None,
-        may_name: None,
-        foreign,
-        parameters: vec![],
-        min_shrink_of_ideal: MIN_SHRINK_OF_IDEAL,
-        seed,
-    });
+    let case = Case::new(name, truth, sensor, (push, max_force), expected, seed);
+    out.push(Case { foreign, min_shrink_of_ideal: MIN_SHRINK_OF_IDEAL, ..case });
     out.last_mut().expect("just pushed")
 }
 

@@ -2,6 +2,7 @@
 //! sponge and a dice, printed in the paper's table layouts beside the paper's numbers.
 
 mod arm;
+mod case;
 pub mod corpus;
 mod experiment;
 mod figures;
