@@ -19,11 +19,11 @@ pub struct Case {
     pub expected: Vec<&'static str>,
     /// The excitation that shows the effect.
     pub visible_in: &'static str,
-    /// The plan's lateral sway and tilts ([`Plan::across`]).
+    /// The plan's lateral sway and tilts ([`super::experiment::Plan::across`]).
     pub across: Across,
     /// An effect outside the library: the answer must be no name and `unexplained`.
     pub out_of_library: bool,
-    /// [`Plan::start_pressed`].
+    /// [`super::experiment::Plan::start_pressed`].
     pub start_pressed: Option<f64>,
     /// Instead of the plan, one long hold of this many seconds on a surface identified earlier (the law
     /// without its effects, given with `--model`): see [`super::experiment::run_hold`].
