@@ -144,6 +144,19 @@ fn print_report(report: &Report, name: &str) {
 fn print_refit_and_effects(report: &Report, name: &str) {
     let n = |v: f64| si(v, "N");
     println!("{name}: baseline {} — in-contact residual RMS {}", report.baseline.kind.id(), n(report.baseline.rms));
+    if let Some(c) = &report.law_rechosen {
+        println!(
+            "the law's kind re-chosen: {} → {} (refitted, held-out RMS {} → {}; the whole workflow on each, final \
+             RMS over the record {} → {}); what follows is on {}",
+            c.from.id(),
+            c.to.id(),
+            n(c.held_out_rms_from),
+            n(c.held_out_rms_to),
+            n(c.final_rms_from),
+            n(c.final_rms_to),
+            c.to.id()
+        );
+    }
     println!(
         "noise floor {} (from {}; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
          {:.4e}, {:.4e}, {} ± {} → RMS {}",

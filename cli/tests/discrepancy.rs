@@ -220,6 +220,14 @@ fn the_hidden_effect_corpus_meets_its_goals() {
         .collect();
     shrinks.sort_by(f64::total_cmp);
     assert!(shrinks[shrinks.len() / 2] >= 0.85, "median shrink {}\n{shown}", shrinks[shrinks.len() / 2]);
+    // A baseline of the wrong kind given (issue 37: fixed, not patched): the kind is re-chosen as the
+    // truth's and only what is hidden is named.
+    let given: Vec<&serde_json::Value> =
+        f["outcomes"].as_array().unwrap().iter().filter(|o| !o["expected_law"].is_null()).collect();
+    assert!(given.len() >= 3, "{shown}");
+    for o in given {
+        assert!(o["exact"].as_bool().unwrap() && o["law_rechosen"].is_string(), "{o}\n{shown}");
+    }
     let checked: Vec<&serde_json::Value> =
         f["outcomes"].as_array().unwrap().iter().filter(|o| !o["parameters"].as_array().unwrap().is_empty()).collect();
     assert!(checked.len() >= 4, "{shown}");

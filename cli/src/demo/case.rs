@@ -1,7 +1,7 @@
 //! A case of the discrepancy corpora: one recording to make (the truth the simulator hides, the sensor,
 //! the excitation) and what the workflow should answer on it.
 
-use softcontact_contact::ContactModel;
+use softcontact_contact::{ContactModel, Kind};
 use softcontact_sim::FtSensorConfig;
 use softcontact_sim::foreign::ForeignEffect;
 
@@ -35,6 +35,9 @@ pub struct Case {
     pub may_name: Option<&'static str>,
     /// Surface effects outside the library, added to `truth`'s force (the foreign cases).
     pub foreign: Vec<ForeignEffect>,
+    /// The baseline given with `--model` instead of identify's: `truth`'s law, without its effects, in this
+    /// wrong kind. The answer must re-choose `truth`'s kind.
+    pub given_kind: Option<Kind>,
     /// Parameters the answer must carry within their tolerance.
     pub parameters: Vec<ExpectedParameter>,
     /// The least shrink of the gap, over the ideal one, of an answer as expected (0: the names alone).
@@ -68,6 +71,7 @@ impl Case {
             ambiguous: None,
             may_name: None,
             foreign: vec![],
+            given_kind: None,
             parameters: vec![],
             min_shrink_of_ideal: 0.0,
             seed,
@@ -85,4 +89,14 @@ pub struct ExpectedParameter {
     pub tolerance: f64,
     /// How the table shows it: the unit's name and its size in the parameter's unit (ms: 1e-3).
     pub unit: (&'static str, f64),
+}
+
+/// `law` without its effects in `kind`'s exponents, its stiffness and damping scaled to give the same
+/// force at `depth` (at any one speed): a plausible wrong choice, as a fit of that kind would find.
+pub fn in_kind(law: &ContactModel, kind: Kind, depth: f64) -> ContactModel {
+    let exponents = kind.exponents().expect("a named kind");
+    let mut out = ContactModel { kind, exponents, effects: vec![], ..law.clone() };
+    out.stiffness = law.stiffness * depth.powf(law.exponents.a - exponents.a);
+    out.damping = law.damping * depth.powf(law.exponents.b - exponents.b);
+    out
 }

@@ -42,6 +42,10 @@ pub struct Outcome {
     pub parameters: Vec<String>,
     pub parameters_within: bool,
     pub out_of_library: bool,
+    /// The kind the law had to be re-chosen as (a case given a wrong kind), and the re-choice made
+    /// ("from → to"), if any.
+    pub expected_law: Option<String>,
+    pub law_rechosen: Option<String>,
     pub exact: bool,
 }
 
@@ -424,6 +428,11 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
     let path = dir.join(format!("case{}.mcap", case.seed));
     let mut recorder = Recorder::create(&path, 1_700_000_000_000_000_000)?;
     let mut args = args(&path, dir, 0.01);
+    if let Some(kind) = case.given_kind {
+        let model = dir.join(format!("case{}.model.yaml", case.seed));
+        std::fs::write(&model, super::case::in_kind(&case.truth, kind, 0.5 * (case.push.0 + case.push.1)).to_yaml())?;
+        args.model = Some(model);
+    }
     if let Some(hold) = case.hold {
         // The surface as identified before: its law without the hidden effects.
         let mut known = case.truth.clone();
@@ -462,7 +471,11 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
     let shrink_of_ideal = (!case.expected.is_empty() && case.ambiguous.is_none() && ideal > 0.0)
         .then(|| (1.0 - r.final_rms / before) / ideal);
     let (parameters, parameters_within) = check_parameters(r, &case.parameters);
+    let law_rechosen = r.law_rechosen.as_ref().map(|c| format!("{} → {}", c.from.id(), c.to.id()));
+    let expected_law = case.given_kind.map(|_| case.truth.kind.id().to_string());
+    let law_as_expected = expected_law.as_ref().is_none_or(|k| r.refit.kind.id() == k);
     let exact = parameters_within
+        && law_as_expected
         && (case.expected.is_empty()
             || case.min_shrink_of_ideal <= 0.0
             || shrink_of_ideal.is_some_and(|x| x >= case.min_shrink_of_ideal))
@@ -488,6 +501,8 @@ pub fn run_case(case: &Case, dir: &Path, keep: bool) -> anyhow::Result<Outcome> 
         shrink_of_ideal,
         parameters,
         parameters_within,
+        expected_law,
+        law_rechosen,
     })
 }
 
@@ -606,16 +621,22 @@ pub fn table(s: &Summary) -> String {
     t += if with_parameters { "---|\n" } else { "\n" };
     for o in &s.outcomes {
         let list = |v: &[String]| if v.is_empty() { "—".to_string() } else { v.join(", ") };
-        let answer = match &o.expected_ambiguous {
+        let mut answer = match &o.expected_ambiguous {
             Some(p) => format!("ambiguous: {p}"),
             None if o.out_of_library => "unexplained".into(),
             None => list(&o.expected),
         };
-        let named = if o.ambiguous.is_empty() {
+        let mut named = if o.ambiguous.is_empty() {
             list(&o.named)
         } else {
             format!("{} (ambiguous: {})", list(&o.named), o.ambiguous.join("; "))
         };
+        if let Some(kind) = &o.expected_law {
+            answer += &format!("; the law re-chosen as {kind}");
+        }
+        if let Some(choice) = &o.law_rechosen {
+            named += &format!("; the law re-chosen: {choice}");
+        }
         t += &format!(
             "| {}{} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.3} → {:.3} | {} |\n",
             o.case,

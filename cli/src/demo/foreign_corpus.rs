@@ -7,10 +7,11 @@
 //! a coupling of the normal reading with the tangential load, a delay, a linear drift): every case has a
 //! fixed expected answer, the library id nearest to what was hidden. As expected means: the named set is the
 //! expected one, the gap shrinks by at least 60 % of the ideal, and the parameters checked are within
-//! their tolerance.
+//! their tolerance. Beside them, baselines of the wrong kind given instead of identify's: the answer
+//! re-chooses the kind, and names only what is hidden.
 
 use nalgebra::{UnitQuaternion, Vector3};
-use softcontact_contact::ContactModel;
+use softcontact_contact::{ContactModel, Effect, Kind};
 use softcontact_dynamics::lwr4;
 use softcontact_sim::FtSensorConfig;
 use softcontact_sim::foreign::ForeignEffect;
@@ -73,10 +74,37 @@ pub fn cases() -> Vec<Case> {
         vec!["viscoelastic_relaxation"],
     )
     .hold = Some(40.0);
+    wrong_kinds(&mut out);
     for c in out.iter_mut() {
         c.visible_in = visible_in(&c.expected);
+        if c.given_kind.is_some() {
+            c.visible_in = "moves at several speeds (the damping's form)";
+        }
     }
     out
+}
+
+/// A wrong baseline given instead of identify's (issue 37: fixed, not patched): the sponge's law
+/// (Azad–Featherstone's damping, λ z^{1/2} ż) given as Hunt–Crossley (λ z^{3/2} ż), alone and under a
+/// relaxation branch of the library's own form; the dice's linear law given as Hunt–Crossley. Each answer
+/// re-chooses the truth's kind and names what is hidden, nothing else.
+fn wrong_kinds(out: &mut Vec<Case>) {
+    let gamma = FtSensorConfig::gamma;
+    let branch = Effect::ViscoelasticRelaxation { stiffness: 1300.0, time_constant: 1.0 };
+    let mut relaxing = softcontact_sim::sponge();
+    relaxing.effects.push(branch);
+    for (name, truth, geometry, expected) in [
+        ("sponge: the law given as hunt_crossley (it is azad_featherstone)", softcontact_sim::sponge(), SPONGE, vec![]),
+        (
+            "sponge: the law given as hunt_crossley, a relaxation branch of 1.3 kN/m and 1 s hidden",
+            relaxing,
+            SPONGE,
+            vec!["viscoelastic_relaxation"],
+        ),
+        ("dice: the law given as hunt_crossley (it is kelvin_voigt)", softcontact_sim::dice(), DICE, vec![]),
+    ] {
+        push(out, name.into(), truth, vec![], gamma(), geometry, expected).given_kind = Some(Kind::HuntCrossley);
+    }
 }
 
 /// The sensor's foreign effects on `law` (`base`): a warm-up, a lag between steps, the frame turned about

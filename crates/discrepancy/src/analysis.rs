@@ -47,7 +47,10 @@ struct AtSurface {
 /// One analysis: the record, the baseline and the method's thresholds, and what the steps move.
 pub(crate) struct Analysis<'a> {
     series: &'a Series,
-    baseline: &'a ContactModel,
+    /// The baseline as given: what the result is never worse than, and what the report compares with.
+    given: &'a ContactModel,
+    /// The law the structure is built on: the given one, or another kind's ([`crate::law`]).
+    law: ContactModel,
     options: &'a Options,
     data: Data<'a>,
     scales: Scales,
@@ -73,41 +76,26 @@ pub(crate) struct Analysis<'a> {
 }
 
 impl<'a> Analysis<'a> {
-    /// The baseline's k, λ and the surface position refitted (the position's column stays in every later
-    /// fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more;
-    /// the phases and the noise floor at the refitted surface (recomputed whenever it moves): samples the
-    /// given surface put in free space but that carry contact force would otherwise inflate σ.
+    /// The law's k, λ and the surface position refitted ([`refit_law`]); the phases and the noise floor
+    /// at the refitted surface (recomputed whenever it moves): samples the given surface put in free space
+    /// but that carry contact force would otherwise inflate σ. `law` is `given`, or the law of another
+    /// kind [`crate::law::rivals`] found.
     pub(crate) fn refit_baseline(
         series: &'a Series,
-        baseline: &'a ContactModel,
+        given: &'a ContactModel,
+        law: &ContactModel,
         options: &'a Options,
         velocity_threshold: f64,
     ) -> Result<Self, DiscrepancyError> {
         let force_scale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
         let scales = Scales::of(series, velocity_threshold);
-        let data = Data::new(series, options.folds, baseline);
-        let ex = baseline.exponents;
-        let start = Structure {
-            a: ex.a,
-            b: ex.b,
-            c: ex.c,
-            shift: 0.0,
-            offset_rate: 0.0,
-            delay: 0.0,
-            terms: vec![Term::Shift],
-            crosstalk_both_axes: data.second_axis.is_some(),
-            clamped: data.clamped.clone(),
-        };
-        let (mut structure, _, _) = refine_surface(&data, &start);
-        let first =
-            to_model(baseline, [data.lateral_axis, data.second_axis], &structure, &fit::fit(&data, &structure), &[]);
-        structure.clamped = clamp_mask(&first, &series.shifted(structure.shift))?;
-        let (structure, shift_se, _) = refine_surface(&data, &structure);
-        let fit = fit::fit(&data, &structure);
-        let model = to_model(baseline, [data.lateral_axis, data.second_axis], &structure, &fit, &[]);
+        let data = Data::new(series, options.folds, law);
+        let (structure, shift_se, fit) = refit_law(&data, law)?;
+        let model = to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit, &[]);
         let surface = at_surface(series, options, velocity_threshold, force_scale, structure.shift);
         let gap = gap(series, &surface.phases, &simulate(&model, &series.shifted(structure.shift))?);
         let refit = Refit {
+            kind: law.kind,
             stiffness: model.stiffness,
             damping: model.damping,
             contact_shift: structure.shift,
@@ -116,7 +104,8 @@ impl<'a> Analysis<'a> {
         };
         Ok(Analysis {
             series,
-            baseline,
+            given,
+            law: law.clone(),
             options,
             data,
             scales,
@@ -144,7 +133,7 @@ impl<'a> Analysis<'a> {
     }
 
     fn model_of(&self, structure: &Structure, fit: &Fit, named: &[(Family, f64)]) -> ContactModel {
-        to_model(self.baseline, [self.data.lateral_axis, self.data.second_axis], structure, fit, named)
+        to_model(&self.law, [self.data.lateral_axis, self.data.second_axis], structure, fit, named)
     }
 
     /// The simulated gap of `model` with the surface moved by `shift`, over the current phases.
@@ -508,9 +497,7 @@ impl<'a> Analysis<'a> {
         while let Some(i) = self.now.named.iter().position(|&(f, sh)| self.scales.at_edge(f, sh).is_some()) {
             let (f, shape) = self.now.named[i];
             let reduced = match f {
-                Family::StiffnessExponent => {
-                    Some(Structure { a: self.baseline.exponents.a, ..self.now.structure.clone() })
-                }
+                Family::StiffnessExponent => Some(Structure { a: self.law.exponents.a, ..self.now.structure.clone() }),
                 _ => f.remove(&self.now.structure, shape),
             };
             let Some(reduced) = reduced else { break };
@@ -537,16 +524,16 @@ impl<'a> Analysis<'a> {
             let pred = simulate(m, &series.shifted(shift))?;
             Ok((pred.iter().zip(&series.f).map(|(p, f)| (f - p).powi(2)).sum::<f64>() / series.len() as f64).sqrt())
         };
-        self.kept_baseline = whole_rms(&self.model, self.now.structure.shift)? > whole_rms(self.baseline, 0.0)?;
+        self.kept_baseline = whole_rms(&self.model, self.now.structure.shift)? > whole_rms(self.given, 0.0)?;
         if self.kept_baseline {
             self.now.named.clear();
             self.now.stages.clear();
             self.ambiguous.clear();
             self.bounds.clear();
-            self.model = self.baseline.clone();
+            self.model = self.given.clone();
             self.now.structure.shift = 0.0;
             self.now.shift_se = 0.0;
-            self.now.gap = self.gap_of(self.baseline, 0.0)?;
+            self.now.gap = self.gap_of(self.given, 0.0)?;
         }
         Ok(())
     }
@@ -554,7 +541,7 @@ impl<'a> Analysis<'a> {
     /// What is reported: the effects with their parameters and intervals, the rivals, the gap per phase
     /// before and after, where what is left lies, and the augmented model.
     pub(crate) fn report(self) -> Result<Report, DiscrepancyError> {
-        let (series, baseline) = (self.series, self.baseline);
+        let (series, baseline) = (self.series, self.given);
         let base_gap = self.gap_of(baseline, 0.0)?;
         let Progress { structure, fit, named, stages, gap: final_gap, shift_se, rate_se } = &self.now;
         // A form named over its rival is reported while the model still carries it (in either relaxation
@@ -637,6 +624,7 @@ impl<'a> Analysis<'a> {
             final_lag1: final_gap.lag1,
             kept_baseline: self.kept_baseline,
             bounds: self.bounds.clone(),
+            law_rechosen: None,
         })
     }
 }
@@ -647,6 +635,30 @@ enum Round {
     NothingNamed,
     /// Rivals that name nothing: the rounds stop.
     Ambiguous,
+}
+
+/// The law's k, λ and the surface position refitted on `data` (the position's column stays in every
+/// later fit), then the samples re-masked where the refitted law clamps at zero, and refitted once more:
+/// the structure, the surface position's standard error and the fit.
+pub(crate) fn refit_law(data: &Data, law: &ContactModel) -> Result<(Structure, f64, Fit), DiscrepancyError> {
+    let ex = law.exponents;
+    let start = Structure {
+        a: ex.a,
+        b: ex.b,
+        c: ex.c,
+        shift: 0.0,
+        offset_rate: 0.0,
+        delay: 0.0,
+        terms: vec![Term::Shift],
+        crosstalk_both_axes: data.second_axis.is_some(),
+        clamped: data.clamped.clone(),
+    };
+    let (mut structure, _, _) = refine_surface(data, &start);
+    let first = to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit::fit(data, &structure), &[]);
+    structure.clamped = clamp_mask(&first, &data.s.shifted(structure.shift))?;
+    let (structure, shift_se, _) = refine_surface(data, &structure);
+    let fit = fit::fit(data, &structure);
+    Ok((structure, shift_se, fit))
 }
 
 /// The phases, noise floor and free samples with the surface moved by `shift`.

@@ -40,6 +40,10 @@
 //!    an effect outside the library ends here) or `ambiguous`.
 //! 7. **Add**: the augmented [`ContactModel`] (same type; `stiffness_exponent` makes the kind `general`)
 //!    is re-simulated with [`ContactModel::step`] for the RMS after, overall and per phase.
+//! 8. **A wrong kind fixed, not patched** (`law.rs`): where another kind of the force-control paper's three,
+//!    refitted, predicts held-out data better than the given law by [`Options::min_gain`], steps 4–7 run
+//!    on it too, and it replaces the given kind if its final model fits the record better by that margin
+//!    ([`Report::law_rechosen`]).
 //!
 //! The lessons behind these choices (columns made dimensionless, joint fits, blocked folds, AICc, margins,
 //! collinearity, refusing out-of-library effects) are summarised in the crate's README.md (crates/discrepancy).
@@ -51,7 +55,8 @@
 //! and judged, the rules it must pass) → `refine.rs` (the named shapes refined together) →
 //! `augmented.rs` (the augmented model, its simulated gap, the surface, parameters and intervals) →
 //! `report.rs` (what is reported, where the gap is) → `analysis.rs` (the steps [`analyse`] runs, one
-//! method each: refit the baseline, the rounds of naming and adding, the checks after them). Beside them:
+//! method each: refit the baseline, the rounds of naming and adding, the checks after them) → `law.rs`
+//! (the other kinds, refitted, as rivals of the given one). Beside them:
 //! `wrench.rs` (every wrench channel), `arm.rs` (the arm's own effects), `loading_paths.rs` (tangential
 //! path effects).
 
@@ -62,6 +67,7 @@ mod candidate;
 mod family;
 mod fit;
 mod lateral;
+mod law;
 mod loading_paths;
 mod phase;
 mod refine;
@@ -201,12 +207,35 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     if series.len() < MIN_SAMPLES.max(10 * options.folds) || in_contact < MIN_CONTACT_SAMPLES {
         return Err(DiscrepancyError::TooShort { got: series.len(), in_contact });
     }
-    let mut analysis = Analysis::refit_baseline(series, baseline, options, velocity_threshold(series))?;
-    analysis.name_and_add()?;
-    analysis.polish_once_more()?;
-    analysis.undo_rounds_that_simulate_worse();
-    analysis.try_the_quasi_linear_form()?;
-    analysis.drop_shapes_at_an_edge()?;
-    analysis.keep_the_baseline_if_better()?;
-    analysis.report()
+    let velocity = velocity_threshold(series);
+    let on_law = |law: &ContactModel| -> Result<Report, DiscrepancyError> {
+        let mut analysis = Analysis::refit_baseline(series, baseline, law, options, velocity)?;
+        analysis.name_and_add()?;
+        analysis.polish_once_more()?;
+        analysis.undo_rounds_that_simulate_worse();
+        analysis.try_the_quasi_linear_form()?;
+        analysis.drop_shapes_at_an_edge()?;
+        analysis.keep_the_baseline_if_better()?;
+        analysis.report()
+    };
+    let report = on_law(baseline)?;
+    // A wrong kind is fixed, not patched: a rival kind replaces it where it fits better before and after.
+    let (held_out_rms_from, rivals) = law::rivals(series, baseline, options)?;
+    let final_rms_from = law::whole_rms(series, &report)?;
+    for rival in rivals {
+        let other = on_law(&rival.law)?;
+        let final_rms_to = law::whole_rms(series, &other)?;
+        if !other.kept_baseline && final_rms_to < final_rms_from * (1.0 - options.min_gain) {
+            let choice = LawChoice {
+                from: baseline.kind,
+                to: rival.law.kind,
+                held_out_rms_from,
+                held_out_rms_to: rival.held_out_rms,
+                final_rms_from,
+                final_rms_to,
+            };
+            return Ok(Report { law_rechosen: Some(choice), ..other });
+        }
+    }
+    Ok(report)
 }

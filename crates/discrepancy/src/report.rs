@@ -22,9 +22,11 @@ pub struct Baseline {
     pub rms: f64,
 }
 
-/// The baseline's k and λ refitted on this recording (exponents fixed), before any effect.
+/// The baseline's k and λ refitted on this recording (exponents fixed), before any effect; of the kind
+/// the workflow re-chose where it did ([`Report::law_rechosen`]).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Refit {
+    pub kind: Kind,
     pub stiffness: f64,
     pub damping: f64,
     /// The surface position refitted along the normal \[m\] (positive: deeper than the given one), and the
@@ -256,6 +258,22 @@ pub struct Report {
     pub kept_baseline: bool,
     /// Effects whose shape ended at an end of the range screened: bounds, not findings, not named.
     pub bounds: Vec<Bound>,
+    /// Where the given law's kind was wrong and another kind's, refitted, fitted the record better before
+    /// any effect and after the whole workflow (`law.rs`): which, and by how much. Everything else in
+    /// the report is then the analysis on that kind's law.
+    pub law_rechosen: Option<LawChoice>,
+}
+
+/// The base law's kind re-chosen: from the given kind to another, with the held-out RMS of each refitted
+/// law before any effect and the RMS over the whole record of each one's final model \[N\].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LawChoice {
+    pub from: Kind,
+    pub to: Kind,
+    pub held_out_rms_from: f64,
+    pub held_out_rms_to: f64,
+    pub final_rms_from: f64,
+    pub final_rms_to: f64,
 }
 
 /// An effect whose shape (a time constant, a hysteresis scale, a delay, an exponent) ended at an end of

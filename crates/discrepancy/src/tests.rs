@@ -326,8 +326,8 @@ fn null_cases_name_nothing() {
         let r = analyse(&s, &base, &Options::default()).unwrap();
         show(&format!("null {i} {:?} fs={}", truth.kind, exc.fs), &r);
         n += 1;
-        if !r.effects.is_empty() {
-            false_names.push(format!("null {i}: {:?}", ids(&r)));
+        if !r.effects.is_empty() || r.law_rechosen.is_some() {
+            false_names.push(format!("null {i}: {:?}, law re-chosen {:?}", ids(&r), r.law_rechosen));
         }
     }
     eprintln!("{n} null cases, {} false names", false_names.len());
@@ -876,4 +876,49 @@ fn the_largest_share_of_the_residual_is_located_by_phase_and_time() {
     assert!((w.share - 20.0 / 20.5).abs() < 1e-12, "{w:?}");
     assert!((w.mean + 0.4).abs() < 1e-12 && (w.rms - 0.4f64.sqrt()).abs() < 1e-12, "{w:?}");
     assert!((w.around_s - 0.69).abs() < 1e-9, "{w:?}");
+}
+
+/// A law written here, not by `ContactModel`: f = k zᵃ + λ zᵇ ż in contact, clamped at zero, with
+/// Gaussian noise σ.
+fn written(exc: Exc, (k, lambda, a, b): (f64, f64, f64, f64), sigma: f64, seed: u64) -> Series {
+    let (t, z, zd) = exc.trajectory();
+    let mut rng = SmallRng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sigma).unwrap();
+    let f = z
+        .iter()
+        .zip(&zd)
+        .map(|(&z, &v)| {
+            let law = if z > 0.0 { (k * z.powf(a) + lambda * z.powf(b) * v).max(0.0) } else { 0.0 };
+            law + noise.sample(&mut rng)
+        })
+        .collect();
+    Series::new(t, z, zd, f).unwrap()
+}
+
+#[test]
+fn a_wrong_damping_form_is_re_chosen_not_patched() {
+    // (truth's kind, its k, λ, a, b as written here) given as Hunt–Crossley.
+    let cases = [
+        (Kind::AzadFeatherstone, (3.0e4, 2.0e3, 1.5, 0.5)),
+        (Kind::KelvinVoigt, (2000.0, 30.0, 1.0, 0.0)),
+        (Kind::AzadFeatherstone, (6.0e4, 4.0e3, 1.5, 0.5)),
+    ];
+    for (i, (kind, law)) in cases.into_iter().enumerate() {
+        let fs = [100.0, 200.0, 500.0][i];
+        let s = written(Exc::new(fs), law, 0.1, 40 + i as u64);
+        let depth: f64 = 0.005;
+        let wrong = ContactModel::new(Kind::HuntCrossley, law.0 * depth.powf(law.2 - 1.5), 1e-3).unwrap();
+        let r = analyse(&s, &wrong, &Options::default()).unwrap();
+        show(&format!("{kind:?} given as hunt_crossley, fs={fs}"), &r);
+        let choice = r.law_rechosen.as_ref().unwrap_or_else(|| panic!("case {i}: the kind was not re-chosen"));
+        assert_eq!((choice.from, choice.to, r.refit.kind), (Kind::HuntCrossley, kind, kind), "case {i}");
+        assert!(choice.final_rms_to < choice.final_rms_from && choice.held_out_rms_to < choice.held_out_rms_from);
+        assert!(ids(&r).is_empty(), "case {i}: {:?} named on top of a law re-chosen", ids(&r));
+        assert_eq!(r.remaining, Remaining::None, "case {i}");
+        assert!(!r.kept_baseline);
+        // Given the right kind, nothing is re-chosen.
+        let right = ContactModel::new(kind, law.0, law.1).unwrap();
+        let r = analyse(&s, &right, &Options::default()).unwrap();
+        assert!(r.law_rechosen.is_none() && ids(&r).is_empty(), "case {i} given its own kind: {:?}", r.law_rechosen);
+    }
 }
