@@ -243,9 +243,10 @@ fn central_differences(t: &[f64], x: &[f64]) -> Vec<f64> {
 fn malformed(path: &Path, e: csv::Error) -> anyhow::Error {
     match e.kind() {
         csv::ErrorKind::UnequalLengths { pos, expected_len, len } => anyhow::anyhow!(
-            "{}: line {}: {len} cells where the header has {expected_len}",
+            "{}: line {}: {len} cell{} where the header has {expected_len}",
             path.display(),
-            pos.as_ref().map_or(0, |p| p.line())
+            pos.as_ref().map_or(0, |p| p.line()),
+            if *len == 1 { "" } else { "s" }
         ),
         csv::ErrorKind::Utf8 { pos, .. } => anyhow::anyhow!(
             "{}: line {}: not UTF-8 text (save the table as UTF-8)",

@@ -545,7 +545,13 @@ impl ContactModel {
     }
 
     pub fn from_yaml(text: &str) -> Result<Self, ContactError> {
-        serde_yaml_ng::from_str(text).map_err(|e| ContactError::InvalidModel(e.to_string()))
+        serde_yaml_ng::from_str(text).map_err(|e| {
+            // A model that parses but fails its check already says "invalid contact model".
+            let said = e.to_string();
+            ContactError::InvalidModel(
+                said.strip_prefix("invalid contact model: ").map_or(said.clone(), str::to_string),
+            )
+        })
     }
 
     pub fn to_yaml(&self) -> String {

@@ -177,6 +177,7 @@ fn yaml_mistakes_are_named() {
     ] {
         let err = ContactModel::from_yaml(yaml).unwrap_err().to_string();
         assert!(err.contains(words), "`{yaml}`: expected `{words}` in `{err}`");
+        assert_eq!(err.matches("invalid contact model").count(), 1, "said once: `{err}`");
     }
 }
 

@@ -591,8 +591,14 @@ impl<'a> Analysis<'a> {
         let residual = |m: &ContactModel, shift: f64| -> Result<Vec<f64>, DiscrepancyError> {
             Ok(simulate(m, &series.shifted(shift))?.iter().zip(&series.f).map(|(p, f)| f - p).collect())
         };
-        let given = simulate(baseline, series)?;
         let (refit_shift, shift) = (self.refit.contact_shift, structure.shift);
+        // The lag is read against the law as given, or, where its kind was re-chosen, against the law of
+        // the kind chosen (the given one's wrong damping form would read as a lag).
+        let given = if self.law.kind == baseline.kind {
+            simulate(baseline, series)?
+        } else {
+            simulate(&self.law, &series.shifted(refit_shift))?
+        };
         let mut located = locate(
             series,
             &self.surface.phases,

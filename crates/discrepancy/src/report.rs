@@ -114,7 +114,8 @@ pub struct Largest {
     pub around_s: f64,
 }
 
-/// Quartile bins of `key` over the in-contact samples.
+/// Quartile bins of `key` over the in-contact samples; a bin between equal quartiles (a quarter of the
+/// samples at rest, say) holds none and is left out.
 pub(crate) fn bins(key: &[f64], contact: &[usize], before: &[f64], after: &[f64]) -> Vec<Bin> {
     let mut sorted: Vec<f64> = contact.iter().map(|&i| key[i]).collect();
     if sorted.is_empty() {
@@ -140,6 +141,7 @@ pub(crate) fn bins(key: &[f64], contact: &[usize], before: &[f64], after: &[f64]
                 rms_after: rms(after),
             }
         })
+        .filter(|b| b.samples > 0)
         .collect()
 }
 

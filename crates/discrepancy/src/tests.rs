@@ -916,6 +916,10 @@ fn a_wrong_damping_form_is_re_chosen_not_patched() {
         assert!(ids(&r).is_empty(), "case {i}: {:?} named on top of a law re-chosen", ids(&r));
         assert_eq!(r.remaining, Remaining::None, "case {i}");
         assert!(!r.kept_baseline);
+        // The law was written with no lag: none is read against the kind chosen (against the wrong kind's
+        // damping, one was); every bin of the residual by speed and force holds samples.
+        assert!(r.locate.lag_s.abs() < 1.5 / fs, "case {i}: a lag of {} s", r.locate.lag_s);
+        assert!(r.locate.by_speed.iter().chain(&r.locate.by_force).all(|b| b.samples > 0), "case {i}");
         // Given the right kind, nothing is re-chosen.
         let right = ContactModel::new(kind, law.0, law.1).unwrap();
         let r = analyse(&s, &right, &Options::default()).unwrap();
