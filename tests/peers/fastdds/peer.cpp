@@ -47,6 +47,9 @@ Topic* topic(const std::string& name) {
     return participant->create_topic(name, type.get_type_name(), TOPIC_QOS_DEFAULT);
 }
 
+// ROS 2's sensor-data QoS profile: best effort, keep last 5 (a poll late by a few ms loses nothing).
+constexpr int SENSOR_DEPTH = 5;
+
 DataReaderQos reader_qos(bool reliable, int depth) {
     DataReaderQos q = DATAREADER_QOS_DEFAULT;
     q.reliability().kind = reliable ? RELIABLE_RELIABILITY_QOS : BEST_EFFORT_RELIABILITY_QOS;
@@ -139,9 +142,9 @@ int main(int argc, char** argv) {
     namespace gm = geometry_msgs::msg::dds_;
     namespace rcl = rcl_interfaces::srv::dds_;
     namespace act = softcontact_msgs::action::dds_;
-    auto* joints = subscriber->create_datareader(topic<sm::JointState_PubSubType>("rt/lwr/joint_states"), reader_qos(false, 1));
+    auto* joints = subscriber->create_datareader(topic<sm::JointState_PubSubType>("rt/lwr/joint_states"), reader_qos(false, SENSOR_DEPTH));
     auto* wrenches =
-        subscriber->create_datareader(topic<gm::WrenchStamped_PubSubType>("rt/ft_sensor/wrench"), reader_qos(false, 1));
+        subscriber->create_datareader(topic<gm::WrenchStamped_PubSubType>("rt/ft_sensor/wrench"), reader_qos(false, SENSOR_DEPTH));
     auto* tf = subscriber->create_datareader(topic<tf2_msgs::msg::dds_::TFMessage_PubSubType>("rt/tf"), reader_qos(true, 100));
 
     // The streams, for LISTEN_S seconds.
