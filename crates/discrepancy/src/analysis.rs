@@ -10,6 +10,7 @@ use std::cell::OnceCell;
 use softcontact_contact::ContactModel;
 
 use crate::fit::{self, Data, Fit, Structure, Term};
+use crate::law::whole_rms;
 use crate::{
     Ambiguity, Baseline, Bound, Cand, DiscrepancyError, Family, Gap, NamedEffect, NoiseFloor, Options, Phase, PhaseRms,
     Refit, Remaining, Report, Scales, Series, assess, clamp_mask, corr, gap, locate, noise_floor, parameters,
@@ -520,11 +521,8 @@ impl<'a> Analysis<'a> {
     /// count.
     pub(crate) fn keep_the_baseline_if_better(&mut self) -> Result<(), DiscrepancyError> {
         let series = self.series;
-        let whole_rms = |m: &ContactModel, shift: f64| -> Result<f64, DiscrepancyError> {
-            let pred = simulate(m, &series.shifted(shift))?;
-            Ok((pred.iter().zip(&series.f).map(|(p, f)| (f - p).powi(2)).sum::<f64>() / series.len() as f64).sqrt())
-        };
-        self.kept_baseline = whole_rms(&self.model, self.now.structure.shift)? > whole_rms(self.given, 0.0)?;
+        self.kept_baseline =
+            whole_rms(series, &self.model, self.now.structure.shift)? > whole_rms(series, self.given, 0.0)?;
         if self.kept_baseline {
             self.now.named.clear();
             self.now.stages.clear();

@@ -22,11 +22,11 @@ use softcontact_contact::{ContactModel, Kind};
 
 use crate::analysis::refit_law;
 use crate::fit::Data;
-use crate::{DiscrepancyError, Options, Report, Series, simulate};
+use crate::{DiscrepancyError, Options, Series, simulate, to_model};
 
 /// A law of another kind that fits the record better than the given one before any effect.
 pub(crate) struct Rival {
-    /// The given model with the kind, exponents, k and λ of the rival, refitted.
+    /// The given model in the rival's kind and exponents, its k and λ refitted (and no effects).
     pub law: ContactModel,
     pub held_out_rms: f64,
 }
@@ -37,25 +37,20 @@ pub(crate) fn rivals(
     given: &ContactModel,
     options: &Options,
 ) -> Result<(f64, Vec<Rival>), DiscrepancyError> {
-    let held_out = |law: &ContactModel| -> Result<(f64, ContactModel), DiscrepancyError> {
-        let data = Data::new(series, options.folds, law);
-        let (_, _, fit) = refit_law(&data, law)?;
-        let mut refitted = law.clone();
-        if fit.beta[0] > 0.0 && fit.beta[0].is_finite() {
-            refitted.stiffness = fit.beta[0];
-        }
-        refitted.damping = fit.beta[1].max(0.0);
-        Ok((fit.cv_mse, refitted))
-    };
     if !Kind::CANDIDATES.contains(&given.kind) {
         return Ok((f64::NAN, vec![]));
     }
-    let (given_mse, _) = held_out(given)?;
+    // The law refitted as the analysis refits it: its held-out MSE and the law with the fitted k and λ.
+    let refitted = |law: &ContactModel| -> Result<(f64, ContactModel), DiscrepancyError> {
+        let data = Data::new(series, options.folds, law);
+        let (structure, _, fit) = refit_law(&data, law)?;
+        Ok((fit.cv_mse, to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit, &[])))
+    };
+    let (given_mse, _) = refitted(given)?;
     let mut out = vec![];
     for kind in Kind::CANDIDATES.into_iter().filter(|&k| k != given.kind) {
         let Some(exponents) = kind.exponents() else { continue };
-        let law = ContactModel { kind, exponents, ..given.clone() };
-        let (mse, law) = held_out(&law)?;
+        let (mse, law) = refitted(&ContactModel { kind, exponents, ..given.clone() })?;
         if mse.is_finite() && mse < given_mse * (1.0 - options.min_gain) && law.validate().is_ok() {
             out.push(Rival { law, held_out_rms: mse.sqrt() });
         }
@@ -64,9 +59,11 @@ pub(crate) fn rivals(
     Ok((given_mse.sqrt(), out))
 }
 
-/// The RMS over every sample of the record, in contact or not, of a report's final model at its surface.
-pub(crate) fn whole_rms(series: &Series, report: &Report) -> Result<f64, DiscrepancyError> {
-    let predicted = simulate(&report.model, &series.shifted(report.contact_shift))?;
+/// The RMS over every sample of the record, in contact or not, of `model` with the surface moved by
+/// `shift`: how the final model, the model given and a rival kind's final model are compared (neither
+/// model's surface decides which samples count).
+pub(crate) fn whole_rms(series: &Series, model: &ContactModel, shift: f64) -> Result<f64, DiscrepancyError> {
+    let predicted = simulate(model, &series.shifted(shift))?;
     let sum: f64 = predicted.iter().zip(&series.f).map(|(p, f)| (f - p).powi(2)).sum();
     Ok((sum / series.len() as f64).sqrt())
 }
