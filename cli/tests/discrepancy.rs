@@ -545,9 +545,11 @@ fn the_closed_loop_replay_matches_the_recording_after_the_effects_are_added() {
 /// The measured AFM curves of data/afm (the table in docs/discrepancy-real.md), each against what a
 /// person saw in it before the workflow ran: the final model is never worse than the baseline, and where
 /// something outside the library is there the answer is never that nothing remains. The curves answered
-/// as expected stay so (at least the six of today's table), and on those where the expected effect is
-/// named the gap shrinks by at least 60 % of what the noise allows, but on the cell, whose free level is
-/// not in the record (45 % today; 40 % asserted).
+/// as expected stay so (at least the eight of today's table), and the expected effect stays named on all
+/// seven where it is one of the library's; the gap shrinks by at least 60 % of what the noise allows on
+/// four of them, and on the other three by today's share less a margin: the cell, whose free level is
+/// not in the record (45 %), and the two single indentations whose retract ends below the free level
+/// (flipsign 23 %, map 50 %).
 #[test]
 fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let dir = tempfile::tempdir().unwrap();
@@ -570,16 +572,18 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let as_expected = |c: &&serde_json::Value| {
         c["named_as_expected"] == true && c["outside_not_denied"] == true && c["not_worse"] == true
     };
-    assert!(curves.iter().filter(as_expected).count() >= 6, "{shown}");
+    assert!(curves.iter().filter(as_expected).count() >= 8, "{shown}");
     // The holds a person sees relax (two force clamps, one height clamp) are named although the adhesion
-    // on each retract dominates the residual (the phase-local rule), and so are the loops of a soft and a
-    // stiff single indentation; every named parameter carries its interval.
+    // on each retract dominates the residual (the phase-local rule), and so are the loops of four single
+    // indentations, soft and stiff; every named parameter carries its interval.
     for (file, shrink) in [
         ("brain_creep.csv", 0.6),
         ("polymergel_creep.csv", 0.6),
         ("cell_relaxation.csv", 0.4),
         ("reference_indentation.csv", 0.6),
         ("qi_stiff_indentation.csv", 0.6),
+        ("flipsign_indentation.csv", 0.18),
+        ("map_indentation.csv", 0.4),
     ] {
         let c = curves.iter().find(|c| c["file"] == file).unwrap();
         assert_eq!(c["named_as_expected"], true, "{c}");

@@ -5,11 +5,13 @@ Run once by hand (needs `pip install afmformats==0.18.7 matplotlib`); its output
 
     python3 data/afm/convert.py SRC_DIR data/afm
 
-SRC_DIR holds the files of afmformats' tests/data at commit 731b5ad8. Each curve becomes `<name>.csv`: t [s] from the start of the approach,
+SRC_DIR holds the files of afmformats' tests/data at commit 731b5ad8. Each curve becomes `<name>.csv`: t [s] from its first row kept,
 x [nm] the tip's position along the pressing direction (x = -(height + F/k): the measured height
 corrected for the cantilever's bend, so x grows as the tip presses into the sample) and f [nN] the
 cantilever's force (f > 0 pushes). Blocks of samples are averaged so no curve has more than
-MAX_ROWS rows; the block length is written in the file's header.
+MAX_ROWS rows; the block length is written in the file's header. A curve whose contact would keep fewer
+than MIN_CONTACT_ROWS samples that way is cut instead to MAX_ROWS samples about the contact at the
+instrument's rate (the header names the window).
 """
 import os
 import sys
@@ -19,6 +21,8 @@ import afmformats
 import numpy as np
 
 MAX_ROWS = 3000
+# Fewer contact samples than this after block averaging: the curve is cut to a window about the contact.
+MIN_CONTACT_ROWS = 200
 SOURCE = "https://github.com/AFM-analysis/afmformats"
 COMMIT = "731b5ad88bbb99b2455694d29016acd85a731388"
 
@@ -45,6 +49,16 @@ CURVES = {
 }
 
 
+def contact_span(force):
+    """First and last sample more than 10 noise σ (at least 2 % of the range) above the free level of
+    the curve's first fifth."""
+    head = force[: max(20, len(force) // 5)]
+    level = np.median(head)
+    noise = np.std(np.diff(head)) / np.sqrt(2)
+    above = np.nonzero(force - level > max(10 * noise, 0.02 * np.ptp(force)))[0]
+    return (above[0], above[-1]) if len(above) else (0, len(force) - 1)
+
+
 def blocks(values, length):
     n = len(values) // length * length
     return values[:n].reshape(-1, length).mean(axis=1)
@@ -59,6 +73,16 @@ def convert(src, name, file, index, what, out):
     height = np.asarray(curve["height (measured)"], float)
     x = -(height + force / k)
     length = max(1, -(-len(t) // MAX_ROWS))
+    first, last = contact_span(force)
+    kept = ""
+    if length > 1 and (last - first + 1) / length < MIN_CONTACT_ROWS:
+        # A short contact averaged in blocks keeps too few samples of its loop: a window about it at the
+        # instrument's own rate instead.
+        lo = max(0, min(first - (MAX_ROWS - (last - first + 1)) // 2, len(t) - MAX_ROWS))
+        hi = min(len(t), lo + MAX_ROWS)
+        t, x, force = (v[lo:hi] for v in (t, x, force))
+        kept = f"samples {lo}-{hi - 1} of {len(height)} (a window about the contact), none averaged"
+        length = 1
     t, x, force = (blocks(v, length) for v in (t, x, force))
     t = t - t[0]
     path = os.path.join(out, name + ".csv")
@@ -68,7 +92,7 @@ def convert(src, name, file, index, what, out):
                 + "), licence MIT, (c) 2019 Paul Müller\n")
         f.write(f"# instrument: {meta.get('instrument')}, recorded {meta.get('date')},"
                 f" cantilever {k:.6g} N/m, modality {curve.modality}\n")
-        f.write(f"# converted by data/afm/convert.py: x = -(height + F/k), blocks of {length} samples averaged\n")
+        f.write(f"# converted by data/afm/convert.py: x = -(height + F/k), {kept or f'blocks of {length} samples averaged'}\n")
         f.write("t [s],x [nm],f [nN]\n")
         for ti, xi, fi in zip(t, x, force):
             f.write(f"{ti:.6f},{xi * 1e9:.3f},{fi * 1e9:.5f}\n")
