@@ -222,9 +222,10 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     // A wrong kind is fixed, not patched: a rival kind replaces it where it fits better before and after.
     let (held_out_rms_from, rivals) = law::rivals(series, baseline, options)?;
     let final_rms = |r: &Report| law::whole_rms(series, &r.model, r.contact_shift);
+    let final_rms_from = if rivals.is_empty() { 0.0 } else { final_rms(&report)? };
     for rival in rivals {
         let other = on_law(&rival.law)?;
-        let (final_rms_from, final_rms_to) = (final_rms(&report)?, final_rms(&other)?);
+        let final_rms_to = final_rms(&other)?;
         if !other.kept_baseline && final_rms_to < final_rms_from * (1.0 - options.min_gain) {
             let choice = LawChoice {
                 from: baseline.kind,

@@ -39,6 +39,9 @@ static double now(void) {
   return t.tv_sec + t.tv_nsec * 1e-9;
 }
 
+/* ROS 2's sensor-data QoS profile: best effort, keep last 5 (a poll late by a few ms loses nothing). */
+#define SENSOR_DEPTH 5
+
 static dds_qos_t *reader_qos(bool reliable, int32_t depth) {
   dds_qos_t *q = dds_create_qos();
   dds_qset_reliability(q, reliable ? DDS_RELIABILITY_RELIABLE : DDS_RELIABILITY_BEST_EFFORT, DDS_SECS(1));
@@ -143,8 +146,8 @@ int main(int argc, char **argv) {
     dds_delete(pp);
     return 0;
   }
-  dds_entity_t joints = reader(pp, &sensor_msgs_msg_dds__JointState__desc, "rt/lwr/joint_states", false, 5);
-  dds_entity_t wrenches = reader(pp, &geometry_msgs_msg_dds__WrenchStamped__desc, "rt/ft_sensor/wrench", false, 5);
+  dds_entity_t joints = reader(pp, &sensor_msgs_msg_dds__JointState__desc, "rt/lwr/joint_states", false, SENSOR_DEPTH);
+  dds_entity_t wrenches = reader(pp, &geometry_msgs_msg_dds__WrenchStamped__desc, "rt/ft_sensor/wrench", false, SENSOR_DEPTH);
   dds_entity_t tf = reader(pp, &tf2_msgs_msg_dds__TFMessage__desc, "rt/tf", true, 100);
 
   long n_joints = 0, n_wrenches = 0, n_tf = 0, joints_named = 0, wrench_framed = 0;
