@@ -130,7 +130,7 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
         args.normal == [0.0, 0.0, -1.0],
         "--normal is for recordings: a table's depth column (x or z) is already along the contact normal"
     );
-    let onset = table::onset(&table.f);
+    let onset = table::onset(&table.f, &table.depth);
     let threshold = args.onset.unwrap_or(onset.threshold);
     let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
     let n = Vector3::z();
@@ -191,10 +191,20 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: 
             table.force(onset.noise),
         );
     } else {
-        println!(
-            "the table starts in contact (its first samples move by more than the threshold): the force is taken \
-             as recorded, its zero is the instrument's; onset threshold {threshold}"
-        );
+        let why = match onset.start {
+            table::Start::Paused => "its force is flat only while the depth holds still: a pause, not free space",
+            _ => "its first samples move by more than the threshold",
+        };
+        let zero = if onset.free_level == 0.0 {
+            "the force is taken as recorded, its zero is the instrument's".to_string()
+        } else {
+            format!(
+                "the force goes below the instrument's zero, which is then not its free level: zeroed at its least \
+                 value {} (a contact only pushes)",
+                table.force(onset.free_level)
+            )
+        };
+        println!("the table starts in contact ({why}): {zero}; onset threshold {threshold}");
     }
     for doubt in table.doubts(onset.free_level) {
         eprintln!("warning: {doubt}");
@@ -370,7 +380,7 @@ pub fn say_warnings(recording: &Recording, said: usize) -> usize {
 
 fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
     let table = table::read(&args.file)?;
-    let onset = table::onset(&table.f);
+    let onset = table::onset(&table.f, &table.depth);
     say_table(&args.file, &table, &onset, args.onset);
     let found = identify_table(&table, args)?;
     println!(

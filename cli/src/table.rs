@@ -453,10 +453,10 @@ pub fn prefix(magnitude: f64) -> (&'static str, f64) {
     PREFIXES.iter().copied().find(|(_, s)| magnitude >= *s).unwrap_or(PREFIXES[5])
 }
 
-/// Where the contact begins, from the force alone: what the table's own free part says.
+/// Where the contact begins: what the table's own free part says.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Onset {
-    /// The force read with nothing touching \[N\] (0 when the table starts in contact).
+    /// The force read with nothing touching \[N\]; where the table starts in contact, see [`Start`].
     pub free_level: f64,
     /// The free part's noise \[N\], from its first differences (a slow trend does not inflate it).
     pub noise: f64,
@@ -464,6 +464,19 @@ pub struct Onset {
     pub threshold: f64,
     /// Samples before the contact (the free part), 0 when the table starts in contact.
     pub free_samples: usize,
+    pub start: Start,
+}
+
+/// How the table begins, and so where its force's zero comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    /// A free part before the contact: the force is zeroed at its mean.
+    Free,
+    /// The head's force moves by more than the onset threshold: the table starts in contact.
+    InContact,
+    /// The force is flat before its onset, but the depth hardly moves there: a pause held at one depth,
+    /// which says nothing of whether anything touches (the force rises as soon as the depth moves).
+    Paused,
 }
 
 /// The share of the table read as its free start before the onset is known...
@@ -474,16 +487,27 @@ const HEAD_MAX: usize = 500;
 const ONSET_SIGMAS: f64 = 10.0;
 /// ...and at least this share of the table's force range.
 const ONSET_SHARE: f64 = 0.02;
+/// A flat force before the onset is free space only where the depth travels there by at least this
+/// share of its range in the table: an approach moves the probe toward the surface with nothing felt.
+const FREE_TRAVEL_SHARE: f64 = 0.1;
 
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
 }
 
-/// The free level, the noise and the onset threshold of a force column (see [`Onset`]). The head of the
-/// table (its first 2 %, at least 20 samples and at most 500) gives a first level and noise; where the head itself moves
-/// by more than the threshold the table starts in contact and the force is taken as recorded.
-pub fn onset(f: &[f64]) -> Onset {
+fn range(v: &[f64]) -> f64 {
+    v.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - v.iter().fold(f64::INFINITY, |a, &b| a.min(b))
+}
+
+/// The free level, the noise and the onset threshold of a force column and its depth (see [`Onset`]).
+/// The head of the table (its first 2 %, at least 20 samples and at most 500) gives a first level and
+/// noise. The table starts in contact where the head's force moves by more than the threshold, or where
+/// the depth travels less than [`FREE_TRAVEL_SHARE`] of its range before the onset. Starting in contact,
+/// the force keeps the instrument's zero, unless the table goes below it: a contact only pushes, so the
+/// least force of the table is then its zero (the highest free level consistent with a record that never
+/// pulls), where the table is not mostly below the zero (a force counted positive when pulling).
+pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
     let n = f.len();
     let head = ((n as f64 * HEAD_SHARE) as usize).clamp(20, HEAD_MAX).min(n);
     let noise_of = |s: &[f64]| {
@@ -497,17 +521,30 @@ pub fn onset(f: &[f64]) -> Onset {
     };
     let level0 = median(&mut f[..head].to_vec());
     let noise0 = noise_of(&f[..head]);
-    let range = f.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - f.iter().fold(f64::INFINITY, |a, &b| a.min(b));
-    let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range);
-    let head_moves = f[..head].iter().any(|v| (v - level0).abs() > threshold);
-    if head_moves {
-        return Onset { free_level: 0.0, noise: noise0, threshold, free_samples: 0 };
+    let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range(f));
+    let in_contact = |start: Start| {
+        let (least, most) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        // Mostly below the zero is a force counted positive when pulling ([`Table::doubts`] says so).
+        let free_level = if least < 0.0 && -least <= 2.0 * most { least } else { 0.0 };
+        Onset { free_level, noise: noise0, threshold, free_samples: 0, start }
+    };
+    if f[..head].iter().any(|v| (v - level0).abs() > threshold) {
+        return in_contact(Start::InContact);
     }
     let first = f.iter().position(|v| v - level0 > threshold).unwrap_or(n);
+    if range(&depth[..first.max(1).min(depth.len())]) < FREE_TRAVEL_SHARE * range(depth) {
+        return in_contact(Start::Paused);
+    }
     // The last tenth before the onset may already feel the surface (long-range forces).
     let free = &f[..(first - first / 10).max(head.min(first))];
     let free_level = free.iter().sum::<f64>() / free.len().max(1) as f64;
-    Onset { free_level, noise: noise_of(free).max(f64::MIN_POSITIVE), threshold, free_samples: free.len() }
+    Onset {
+        free_level,
+        noise: noise_of(free).max(f64::MIN_POSITIVE),
+        threshold,
+        free_samples: free.len(),
+        start: Start::Free,
+    }
 }
 
 #[cfg(test)]
@@ -620,7 +657,8 @@ mod tests {
             .collect();
         let at = |scale: f64| {
             let f: Vec<f64> = shape.iter().map(|v| v * scale).collect();
-            let o = onset(&f);
+            let depth: Vec<f64> = (0..f.len()).map(|i| i as f64 * 1e-6).collect();
+            let o = onset(&f, &depth);
             (o, f.iter().position(|v| v - o.free_level > o.threshold))
         };
         let (small, i_small) = at(1e-9);
@@ -646,7 +684,7 @@ mod tests {
         let t = read(&p).unwrap();
         assert_eq!(t.t[0], 0.0);
         assert!((t.t[199] - 1.99).abs() < 1e-9);
-        let doubts = t.doubts(onset(&t.f).free_level);
+        let doubts = t.doubts(onset(&t.f, &t.depth).free_level);
         assert!(doubts.iter().any(|d| d.contains("f > 0 must push")), "{doubts:?}");
         assert!(doubts.iter().any(|d| d.contains("zdot column disagrees")), "{doubts:?}");
         // As it should be: no doubt.
@@ -665,16 +703,50 @@ mod tests {
                 2.0 + 10.0 * z.max(0.0).powf(1.5) + 0.01 * noise
             })
             .collect();
-        let o = onset(&f);
+        let depth: Vec<f64> = (0..100_000).map(|i| (((i + 1000) % 10_000) as f64 / 5_000.0 - 1.0).abs()).collect();
+        let o = onset(&f, &depth);
         assert!(o.free_samples > 100, "{o:?}");
         assert!((o.free_level - 2.0).abs() < 0.01, "{o:?}");
+        assert_eq!(o.start, Start::Free);
     }
 
     #[test]
     fn a_table_that_starts_in_contact_has_no_free_level() {
         let f: Vec<f64> = (0..500).map(|i| 5.0 * (-(i as f64) / 100.0).exp() + 1.0).collect();
-        let o = onset(&f);
+        let o = onset(&f, &vec![1e-3; 500]);
         assert_eq!(o.free_level, 0.0);
         assert_eq!(o.free_samples, 0);
+        assert_eq!(o.start, Start::InContact);
+        // Counted positive when pulling: the zero stays the instrument's, for the doubt to see.
+        let pulling: Vec<f64> = f.iter().map(|v| -v).collect();
+        assert_eq!(onset(&pulling, &vec![1e-3; 500]).free_level, 0.0);
+    }
+
+    #[test]
+    fn a_pause_held_in_contact_is_not_free_space_and_the_least_force_is_the_zero() {
+        // Held still for 100 samples at an unknown preload read as -100 (the instrument's zero is not the
+        // free level), then pushed further, held, and withdrawn past where it started: the force falls to
+        // -235, below where the pause read it, and the record ends in contact.
+        let mut depth = vec![0.0; 100];
+        depth.extend((0..200).map(|i| i as f64 * 1e-8));
+        depth.extend(vec![2e-6; 500]);
+        depth.extend((0..250).map(|i| 2e-6 - i as f64 * 1e-8));
+        let f: Vec<f64> = (0..depth.len())
+            .map(|i| {
+                let relaxed = if i >= 300 { 60.0 * (1.0 - (-((i - 300) as f64) / 100.0).exp()) } else { 0.0 };
+                -100.0 + 1.5e8 * depth[i] - relaxed + 0.01 * (((i * 7919) % 101) as f64 / 100.0 - 0.5)
+            })
+            .collect();
+        let o = onset(&f, &depth);
+        assert_eq!(o.start, Start::Paused, "{o:?}");
+        assert_eq!(o.free_samples, 0);
+        let least = f.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        assert!(least < -200.0 && o.free_level == least, "{o:?}");
+        // The same force with the depth moving before the onset: an approach, zeroed at its mean.
+        let moving: Vec<f64> =
+            depth.iter().enumerate().map(|(i, d)| d - 2e-6 * (1.0 - i.min(100) as f64 / 100.0)).collect();
+        let free = onset(&f, &moving);
+        assert_eq!(free.start, Start::Free, "{free:?}");
+        assert!((free.free_level + 100.0).abs() < 0.01, "{free:?}");
     }
 }

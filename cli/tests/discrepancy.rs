@@ -547,9 +547,9 @@ fn the_closed_loop_replay_matches_the_recording_after_the_effects_are_added() {
 /// something outside the library is there the answer is never that nothing remains. The curves answered
 /// as expected stay so (at least the eight of today's table), and the expected effect stays named on all
 /// seven where it is one of the library's; the gap shrinks by at least 60 % of what the noise allows on
-/// four of them, and on the other three by today's share less a margin: the cell, whose free level is
-/// not in the record (45 %), and the two single indentations whose retract ends below the free level
-/// (flipsign 23 %, map 50 %).
+/// five of them (the cell's among them: it starts in contact, a pause the table reader does not take for
+/// free space), and on the other two by today's share less a margin: the single indentations whose
+/// retract ends below the free level (flipsign 23 %, map 50 %).
 #[test]
 fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let dir = tempfile::tempdir().unwrap();
@@ -579,7 +579,7 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     for (file, shrink) in [
         ("brain_creep.csv", 0.6),
         ("polymergel_creep.csv", 0.6),
-        ("cell_relaxation.csv", 0.4),
+        ("cell_relaxation.csv", 0.6),
         ("reference_indentation.csv", 0.6),
         ("qi_stiff_indentation.csv", 0.6),
         ("flipsign_indentation.csv", 0.18),
