@@ -130,6 +130,7 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
         args.normal == [0.0, 0.0, -1.0],
         "--normal is for recordings: a table's depth column (x or z) is already along the contact normal"
     );
+    ensure_contact(table)?;
     let onset = table::onset(&table.f, &table.depth);
     let threshold = args.onset.unwrap_or(onset.threshold);
     let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
@@ -378,8 +379,20 @@ pub fn say_warnings(recording: &Recording, said: usize) -> usize {
     warnings.len().max(said)
 }
 
+/// A table of deformations must reach z > 0 somewhere; one of positions has its surface found at the
+/// force onset, which [`identify_table`] reports when there is none.
+fn ensure_contact(table: &Table) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        table.depth_is == Depth::Position || table.depth.iter().any(|&z| z > 0.0),
+        "no sample is in contact: the deformation column z never exceeds 0 (z > 0 compresses, the surface at \
+         z = 0); a column of positions is named x, and its surface is found at the force onset"
+    );
+    Ok(())
+}
+
 fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
     let table = table::read(&args.file)?;
+    ensure_contact(&table)?;
     let onset = table::onset(&table.f, &table.depth);
     say_table(&args.file, &table, &onset, args.onset);
     let found = identify_table(&table, args)?;

@@ -87,6 +87,21 @@ enum Command {
     },
 }
 
+impl Command {
+    /// A command that reads files and prints a report, with no socket, node or child process.
+    fn reports_only(&self) -> bool {
+        matches!(
+            self,
+            Command::Identify(_)
+                | Command::Discrepancy(_)
+                | Command::Model(_)
+                | Command::LoadingPaths(_)
+                | Command::Climb(_)
+                | Command::Params { .. }
+        )
+    }
+}
+
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
@@ -120,7 +135,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 
 fn main() -> ExitCode {
     softcontact_nodes::runtime::ros::init_logging("softcontact");
-    match run(Cli::parse()) {
+    let cli = Cli::parse();
+    if cli.command.reports_only() {
+        // A report piped into `head` ends quietly when the reader closes the pipe, as other Unix tools do,
+        // instead of panicking on the failed write. Only offline commands: a node or a graph keeps
+        // SIGPIPE ignored, so that a peer closing a socket is an error it handles, not its end.
+        // SAFETY: setting a signal's disposition to its default before any thread is started.
+        unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+    }
+    match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");

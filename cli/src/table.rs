@@ -257,6 +257,12 @@ fn malformed(path: &Path, e: csv::Error) -> anyhow::Error {
     }
 }
 
+/// The largest magnitude each column (time, depth, force, rate) may hold, in SI, and how it is said: a
+/// thousand times beyond the product's range (10 cm, 10 kN) and a year of recording; a value past it is a
+/// corrupted cell or a wrong unit, and would make every fit non-finite.
+const READABLE: [(f64, &str); 4] =
+    [(3.2e7, "|t| ≤ 1 year"), (1e3, "|depth| ≤ 1 km"), (1e7, "|f| ≤ 10 MN"), (1e3, "|ż| ≤ 1 km/s")];
+
 /// Reads a table (see the module's doc).
 pub fn read(path: &Path) -> anyhow::Result<Table> {
     let sep = separator(path)?;
@@ -296,6 +302,13 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
             ensure!(
                 value.is_finite() && (value * scale).is_finite(),
                 "{}: line {line}, column {} (`{name}`): `{cell}` is not a finite number",
+                path.display(),
+                i + 1
+            );
+            let (bound, what) = READABLE[slot];
+            ensure!(
+                (value * scale).abs() <= bound,
+                "{}: line {line}, column {} (`{name}`): `{cell}` is beyond what an instrument reads ({what})",
                 path.display(),
                 i + 1
             );
@@ -441,6 +454,10 @@ pub fn si(value: f64, unit: &str) -> String {
     // Rounded to three decimals, a magnitude under 0.0005 pN is zero, with no sign.
     if value.abs() < 5e-16 {
         return format!("0 {unit}");
+    }
+    // Past the largest prefix by a thousand: in powers of ten, not in hundreds of digits.
+    if value.abs() >= 1e6 {
+        return format!("{value:.3e} {unit}");
     }
     // Rounded to three decimals, 999.9996 reads as 1.000 of the next prefix.
     let (prefix, scale) = prefix(value.abs() / (1.0 - 5e-4));
@@ -605,6 +622,8 @@ mod tests {
             ("t [s],x [m],f [N]\n0,0,0\n1,NaN,0\n", "line 3, column 2 (`x [m]`): `NaN` is not a finite number"),
             ("t [s],x [m],f [N]\n0,0,0\n0,1,inf\n", "line 3, column 1 (`t [s]`): time 0 is not after"),
             ("t [s],x [m],f [kN]\n0,0,1e306\n1,0,0\n", "line 2, column 3 (`f [kN]`): `1e306` is not a finite"),
+            ("t [s],x [m],f [N]\n0,0,0\n1,1e300,0\n", "line 3, column 2 (`x [m]`): `1e300` is beyond what an"),
+            ("t [s],z [nm],f [mN]\n0,0,2e13\n1,0,0\n", "line 2, column 3 (`f [mN]`): `2e13` is beyond"),
             ("t [s],x [furlong],f [N]\n0,0,0\n", "unit `furlong` is not one of m, mm"),
             ("t,x [m],f [N]\n0,0,0\n", "`t` needs its unit in brackets"),
             ("t [s],f [N]\n0,0\n1,1\n", "no `z [m]` (deformation) or `x [m]` (position) column"),
@@ -622,7 +641,7 @@ mod tests {
     #[test]
     fn a_long_table_is_averaged_in_blocks_of_equal_length() {
         let n = MAX_ROWS * 2 + 1;
-        let mut text = String::from("t [s],x [m],f [N]\n");
+        let mut text = String::from("t [s],x [µm],f [N]\n");
         for i in 0..n {
             text.push_str(&format!("{i},{i},1\n"));
         }
@@ -643,6 +662,9 @@ mod tests {
         assert_eq!(si(-0.0, "N"), "0 N");
         assert_eq!(si(-1e-17, "N"), "0 N");
         assert_eq!(si(3e-15, "N"), "0.003 pN");
+        assert_eq!(si(2e13, "N"), "2.000e13 N");
+        assert_eq!(si(-1e300, "m"), "-1.000e300 m");
+        assert_eq!(si(999_999.0, "N"), "999.999 kN");
     }
 
     #[test]

@@ -214,3 +214,44 @@ fn damaged_foreign_and_wrong_input_is_refused_clearly() {
     let (ok, msg) = run(&no_pose);
     assert!(!ok && msg.contains("the recording has no /lwr/ee_pose (it has: /ft_sensor/wrench)"), "{msg}");
 }
+
+/// A table of deformations that never reaches z > 0 has nothing to identify: identify and discrepancy
+/// both refuse it, saying why, instead of fitting a contact to the noise of free space.
+#[test]
+fn a_deformation_table_that_never_touches_is_refused_by_identify_and_discrepancy() {
+    let dir = tempfile::tempdir().unwrap();
+    let free = dir.path().join("free.csv");
+    // Free space only, the depth approaching the surface but stopping at it; the force a random walk.
+    let mut text_of = String::from("t [ms],z [µm],f [mN]\n");
+    let mut walk = 0.0_f64;
+    for i in 0..2000 {
+        walk += if (i * 7919) % 13 < 6 { 0.002 } else { -0.0015 };
+        text_of.push_str(&format!("{i},{},{walk}\n", -20.0 + 20.0 * i as f64 / 1999.0));
+    }
+    std::fs::write(&free, text_of).unwrap();
+    for command in ["identify", "discrepancy"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_softcontact")).arg(command).arg(&free).output().unwrap();
+        let shown = text(&out);
+        assert!(!out.status.success(), "{command} succeeded:\n{shown}");
+        assert!(shown.contains("no sample is in contact") && shown.contains("z never exceeds 0"), "{shown}");
+        assert!(!shown.contains("starts in contact") && !shown.contains("panicked"), "{shown}");
+    }
+}
+
+/// A report read only as far as its first line (`softcontact identify … | head -1`) ends when the reader
+/// closes the pipe, without a panic.
+#[test]
+fn a_report_piped_into_a_reader_that_stops_early_ends_without_a_panic() {
+    let curve = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm/qi_stiff_indentation.csv");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .args(["identify", curve])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read nothing and close the pipe: every line identify prints then meets a closed reader.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked") && !stderr.contains("Broken pipe"), "{stderr}");
+}
