@@ -547,9 +547,10 @@ fn the_closed_loop_replay_matches_the_recording_after_the_effects_are_added() {
 /// something outside the library is there the answer is never that nothing remains. The curves answered
 /// as expected stay so (at least the eight of today's table), and the expected effect stays named on all
 /// seven where it is one of the library's; the gap shrinks by at least 60 % of what the noise allows on
-/// five of them (the cell's among them: it starts in contact, a pause the table reader does not take for
-/// free space), and on the other two by today's share less a margin: the single indentations whose
-/// retract ends below the free level (flipsign 23 %, map 50 %).
+/// six of them (the cell's among them: it starts in contact, a pause the table reader does not take for
+/// free space; the map's, whose adhesion acts only on the retract, judged by interleaved folds), and on
+/// the seventh by today's share less a margin: the single indentation whose retract ends below the free
+/// level and whose tip pulls while still indented (flipsign 23 %).
 #[test]
 fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let dir = tempfile::tempdir().unwrap();
@@ -583,7 +584,7 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
         ("reference_indentation.csv", 0.6),
         ("qi_stiff_indentation.csv", 0.6),
         ("flipsign_indentation.csv", 0.18),
-        ("map_indentation.csv", 0.4),
+        ("map_indentation.csv", 0.6),
     ] {
         let c = curves.iter().find(|c| c["file"] == file).unwrap();
         assert_eq!(c["named_as_expected"], true, "{c}");

@@ -318,13 +318,14 @@ impl<'a> Analysis<'a> {
         options
     }
 
-    /// Collinear rivals of the best option, judged on the single-family fits: rivals that are both forms
-    /// of the surface's dissipation go to `forms` (the best is named, the other reported), any other to
-    /// `ambiguous` (nothing is named).
+    /// Collinear rivals of the best option, judged on the single-family fits and by the folds contiguous
+    /// in time (two effects alike over the record differ by how they extrapolate): rivals that are both
+    /// forms of the surface's dissipation go to `forms` (the best is named, the other reported), any other
+    /// to `ambiguous` (nothing is named).
     fn note_rivals(&mut self, best: &Cand, singles: &[Cand]) {
         let o = self.options;
         let cur = &self.now.fit;
-        let gain = |c: &Cand| cur.cv_mse - c.fit.cv_mse;
+        let gain = |c: &Cand| cur.stretch_mse - c.fit.stretch_mse;
         let contribution = |c: &Cand| -> Vec<f64> { c.fit.pred.iter().zip(&cur.pred).map(|(a, b)| a - b).collect() };
         let mut found = vec![];
         for &(f, _) in &best.fams {
@@ -332,7 +333,8 @@ impl<'a> Analysis<'a> {
             let cm = contribution(mine);
             for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
                 if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
-                    && rival.fit.cv_mse <= o.rival_ratio * mine.fit.cv_mse
+                    && rival.fit.stretch_mse <= o.rival_ratio * mine.fit.stretch_mse
+                    && gain(rival) > 0.0
                     && gain(rival) * o.rival_ratio >= gain(mine)
                 {
                     found.push((f, rival.fams[0].0));

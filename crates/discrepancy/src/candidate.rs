@@ -2,7 +2,7 @@
 //! grid, and the rules it must pass beside the white-noise gates.
 
 use super::*;
-use fit::golden;
+use crate::golden::golden;
 
 /// A fitted candidate option (one family, or a pair).
 #[derive(Clone)]

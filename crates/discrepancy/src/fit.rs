@@ -11,6 +11,7 @@ use std::sync::Arc;
 use softcontact_contact::{ContactModel, adhesion_share, maxwell_step, maxwell_step_with_decay, next_adhesion_peak};
 
 use crate::Series;
+use crate::folds::{cells, contiguous_folds, interleaved_folds};
 
 /// One column of the design, one value a sample; shared, so that a cached column is handed out without a copy (and a screen on another thread may hold one).
 pub(crate) type Col = Arc<[f64]>;
@@ -111,8 +112,16 @@ pub(crate) struct Data<'a> {
     /// Time since the sensor's last tare, counted the same way.
     pub since_tare: Vec<f64>,
     pub dt: Vec<f64>,
-    pub folds: Vec<Range<usize>>,
-    /// Σ f² over each fold.
+    /// The record cut into contiguous cells: the free space before the first contact, the contact (from
+    /// its first sample to its last) and the free space after it, each in 2·folds parts, the contact's
+    /// with an equal share of the in-contact samples.
+    pub cells: Vec<Range<usize>>,
+    /// The folds the rules judge by, as cells: fold f holds part f and part f + folds of each region, one
+    /// from the first half of the contact and one from the second ([`interleaved_folds`]).
+    pub folds: Vec<Vec<usize>>,
+    /// The folds rivals are judged by: contiguous in time ([`contiguous_folds`]).
+    pub stretch_folds: Vec<Vec<usize>>,
+    /// Σ f² over each cell.
     pub force_squares: Vec<f64>,
     /// Where the baseline law would pull (k zᵃ + λ zᵇ żᶜ < 0): the first structure's mask.
     pub clamped: Vec<bool>,
@@ -150,18 +159,9 @@ impl<'a> Data<'a> {
                 since
             })
             .collect();
-        // Blocks contiguous in time, each with an equal share of the in-contact samples: a record whose
-        // contact is a tenth of it (an indentation between long stretches of free space) would otherwise have
-        // all of its contact in one fold, and that fold predicted from no contact at all.
-        let contact: Vec<usize> = (0..n).filter(|&i| s.z[i] > 0.0).collect();
-        let bound = |i: usize| match i {
-            0 => 0,
-            i if i >= folds => n,
-            i if contact.len() >= folds => contact[i * contact.len() / folds],
-            i => i * n / folds,
-        };
-        let folds: Vec<Range<usize>> = (0..folds).map(|i| bound(i)..bound(i + 1)).collect();
-        let force_squares = folds.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
+        let cells = cells(&s.z, folds);
+        let force_squares = cells.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
+        let (stretch_folds, folds) = (contiguous_folds(folds), interleaved_folds(folds));
         let clamped =
             (0..n).map(|i| s.z[i] > 0.0 && baseline.force(s.z[i], s.zdot[i]).is_ok_and(|f| f <= 0.0)).collect();
         let [lateral_axis, second_axis] = crate::lateral::principal_axes(&s.tangential);
@@ -178,7 +178,9 @@ impl<'a> Data<'a> {
             time,
             since_tare,
             dt,
+            cells,
             folds,
+            stretch_folds,
             force_squares,
             clamped,
             lateral_axis,
@@ -200,7 +202,9 @@ impl<'a> Data<'a> {
             time: self.time.clone(),
             since_tare: self.since_tare.clone(),
             dt: self.dt.clone(),
+            cells: self.cells.clone(),
             folds: self.folds.clone(),
+            stretch_folds: self.stretch_folds.clone(),
             force_squares: self.force_squares.clone(),
             clamped: self.clamped.clone(),
             lateral_axis: self.lateral_axis,
@@ -518,8 +522,11 @@ pub(crate) struct Fit {
     /// Coefficients fitted with each fold held out.
     pub fold_beta: Vec<Vec<f64>>,
     pub sse: f64,
-    /// Mean held-out squared error over the blocked folds [N²].
+    /// Mean held-out squared error over the interleaved folds [N²] ([`interleaved_folds`]).
     pub cv_mse: f64,
+    /// Mean held-out squared error over the folds contiguous in time [N²] ([`contiguous_folds`]); NaN in
+    /// a fit that only ranks shapes.
+    pub stretch_mse: f64,
     pub aicc: f64,
     /// Fitted prediction at every sample [N].
     pub pred: Vec<f64>,
@@ -573,11 +580,11 @@ pub(crate) fn held_out(d: &Data, st: &Structure) -> Vec<f64> {
     out
 }
 
-/// The columns' dot products: Σ c² over all samples per column, and per fold Σ cⱼ·cₖ and Σ cⱼ·f (from the
+/// The columns' dot products: Σ c² over all samples per column, and per cell Σ cⱼ·cₖ and Σ cⱼ·f (from the
 /// cache where the columns' identities are given).
 struct Products {
     norms: Vec<f64>,
-    /// `pairs[j][k]` for k ≤ j, per fold.
+    /// `pairs[j][k]` for k ≤ j, per cell.
     pairs: Vec<Vec<Vec<f64>>>,
     with_force: Vec<Vec<f64>>,
 }
@@ -585,7 +592,7 @@ struct Products {
 fn products(d: &Data, cols: &[Col], ids: Option<&[ColumnId]>) -> Products {
     let y = &d.s.f;
     let per_fold =
-        |a: &[f64], b: &[f64]| -> Vec<f64> { d.folds.iter().map(|r| dot(&a[r.clone()], &b[r.clone()])).collect() };
+        |a: &[f64], b: &[f64]| -> Vec<f64> { d.cells.iter().map(|r| dot(&a[r.clone()], &b[r.clone()])).collect() };
     let Some(ids) = ids else {
         let p = cols.len();
         return Products {
@@ -644,35 +651,32 @@ fn fit_columns_to(
             if r > 0.0 && r.is_finite() { r } else { 1.0 }
         })
         .collect();
-    // Per-fold Gram matrices from column dot products (contiguous slices: the compiler vectorises them).
-    let mut gf = Vec::with_capacity(d.folds.len());
-    let mut hf = Vec::with_capacity(d.folds.len());
-    let mut yyf = Vec::with_capacity(d.folds.len());
-    for f in 0..d.folds.len() {
+    // Per-fold Gram matrices, sums of the cells' column dot products.
+    let gram = |fold: &[usize]| {
         let mut g = DMatrix::<f64>::zeros(p, p);
         let mut h = DVector::<f64>::zeros(p);
         for j in 0..p {
-            h[j] = products.with_force[j][f] / scale[j];
+            h[j] = fold.iter().map(|&c| products.with_force[j][c]).sum::<f64>() / scale[j];
             for k in 0..=j {
-                let v = products.pairs[j][k][f] / (scale[j] * scale[k]);
+                let v = fold.iter().map(|&c| products.pairs[j][k][c]).sum::<f64>() / (scale[j] * scale[k]);
                 g[(j, k)] = v;
                 g[(k, j)] = v;
             }
         }
-        gf.push(g);
-        hf.push(h);
-        yyf.push(d.force_squares[f]);
-    }
-    let g: DMatrix<f64> = gf.iter().fold(DMatrix::zeros(p, p), |a, b| a + b);
-    let h: DVector<f64> = hf.iter().fold(DVector::zeros(p), |a, b| a + b);
+        (g, h, fold.iter().map(|&c| d.force_squares[c]).sum::<f64>())
+    };
+    let per_fold: Vec<_> = d.folds.iter().map(|f| gram(f)).collect();
+    let g: DMatrix<f64> = per_fold.iter().fold(DMatrix::zeros(p, p), |a, b| a + &b.0);
+    let h: DVector<f64> = per_fold.iter().fold(DVector::zeros(p), |a, b| a + &b.1);
     let (beta_s, inv) = solve(&g, &h);
     let nf = n as f64;
+    // The fold's held-out squared error and the coefficients fitted without it.
+    let held_out_fold = |(gf, hf, yy): &(DMatrix<f64>, DVector<f64>, f64)| {
+        let (bf, _) = solve(&(&g - gf), &(&h - hf));
+        ((yy - 2.0 * bf.dot(hf) + (gf * &bf).dot(&bf)).max(0.0), bf)
+    };
     if extent == Extent::HeldOutOnly {
-        let mut held = 0.0;
-        for f in 0..d.folds.len() {
-            let (bf, _) = solve(&(&g - &gf[f]), &(&h - &hf[f]));
-            held += (yyf[f] - 2.0 * bf.dot(&hf[f]) + (&gf[f] * &bf).dot(&bf)).max(0.0);
-        }
+        let held: f64 = per_fold.iter().map(|f| held_out_fold(f).0).sum();
         let beta = (0..p).map(|j| beta_s[j] / scale[j]).collect();
         return Fit {
             beta,
@@ -680,6 +684,7 @@ fn fit_columns_to(
             fold_beta: vec![],
             sse: f64::NAN,
             cv_mse: held / nf,
+            stretch_mse: f64::NAN,
             aicc: f64::NAN,
             pred: vec![],
         };
@@ -701,23 +706,22 @@ fn fit_columns_to(
     let se = (0..p).map(|j| (s2 * inflation * inv[(j, j)]).max(0.0).sqrt() / scale[j]).collect();
     let mut fold_beta = Vec::new();
     let mut held = 0.0;
-    for f in 0..d.folds.len() {
-        let gt = &g - &gf[f];
-        let ht = &h - &hf[f];
-        let (bf, _) = solve(&gt, &ht);
-        let out = yyf[f] - 2.0 * bf.dot(&hf[f]) + (&gf[f] * &bf).dot(&bf);
-        held += out.max(0.0);
+    for (f, fold) in per_fold.iter().enumerate() {
+        let (out, bf) = held_out_fold(fold);
+        held += out;
         if let Some(res) = per_sample.as_deref_mut() {
-            for i in d.folds[f].clone() {
+            for i in d.folds[f].iter().flat_map(|&c| d.cells[c].clone()) {
                 let p: f64 = (0..p).map(|j| bf[j] / scale[j] * cols[j][i]).sum();
                 res[i] = (y[i] - p).powi(2);
             }
         }
         fold_beta.push((0..p).map(|j| bf[j] / scale[j]).collect());
     }
+    let stretch: f64 = d.stretch_folds.iter().map(|f| held_out_fold(&gram(f)).0).sum();
     let pf = p as f64;
     let aicc = nf * (sse.max(1e-300) / nf).ln() + 2.0 * pf + 2.0 * pf * (pf + 1.0) / (nf - pf - 1.0).max(1.0);
-    Fit { beta: (0..p).map(|j| beta_s[j] / scale[j]).collect(), se, fold_beta, sse, cv_mse: held / nf, aicc, pred }
+    let beta = (0..p).map(|j| beta_s[j] / scale[j]).collect();
+    Fit { beta, se, fold_beta, sse, cv_mse: held / nf, stretch_mse: stretch / nf, aicc, pred }
 }
 
 pub(crate) fn fit(d: &Data, st: &Structure) -> Fit {
@@ -772,27 +776,4 @@ fn fit_to(d: &Data, st: &Structure, extent: Extent) -> Fit {
         fitted = fit_structure_columns(&mask);
     }
     fitted
-}
-
-/// Golden-section minimum of `f` on [lo, hi].
-pub(crate) fn golden(mut f: impl FnMut(f64) -> f64, mut lo: f64, mut hi: f64, iters: usize) -> f64 {
-    let phi = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
-    let (mut f1, mut f2) = (f(x1), f(x2));
-    for _ in 0..iters {
-        if f1 <= f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - phi * (hi - lo);
-            f1 = f(x1);
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + phi * (hi - lo);
-            f2 = f(x2);
-        }
-    }
-    if f1 <= f2 { x1 } else { x2 }
 }

@@ -6,7 +6,7 @@
 //! grid's fast edge, a hysteresis) or leave it `unexplained`; neither is the finding, which is the kind.
 //!
 //! So before the rounds, every other kind of [`Kind::CANDIDATES`] is refitted on the record exactly as
-//! the given law is ([`refit_law`]: k, λ and the surface position, blocked folds held out). A kind whose
+//! the given law is ([`refit_law`]: k, λ and the surface position, interleaved folds held out). A kind whose
 //! held-out MSE is below the given law's by [`Options::min_gain`] is a rival, and the whole workflow runs
 //! on it as well ([`crate::analyse`]); it replaces the given kind only where its final model also fits the
 //! whole record better by that margin and is not itself beaten by the baseline as given. Requiring both

@@ -20,7 +20,8 @@
 //!    amplitudes; each candidate is fitted **jointly** with k and λ (and the effects already accepted) on
 //!    columns scaled to unit RMS. A candidate (or a pair of candidates, so that two hidden effects do not
 //!    mask each other) is accepted only if, against the current model:
-//!    - its held-out MSE over [`Options::folds`] folds contiguous in time improves by at least
+//!    - its held-out MSE over [`Options::folds`] interleaved folds (each holding a part of both halves
+//!      of the contact and of the free space around it: `folds::interleaved_folds`) improves by at least
 //!      [`Options::min_gain`] (relative), and its AICc by at least [`Options::min_delta_aicc`];
 //!    - it explains at least [`Options::min_share`] of the current excess held-out MSE over σ² (a
 //!      candidate explaining a sliver of a large structured residual is a proxy, not a discovery);
@@ -31,8 +32,9 @@
 //!    - its parameters are physical (k_m > 0, 0 < h < 1, k > 0);
 //!    - no rival of another id has fitted contributions correlated beyond [`Options::collinear_corr`]
 //!      with a held-out MSE within [`Options::rival_ratio`]× and a gain at least 1/[`Options::rival_ratio`]
-//!      of the best one's: then the pair is reported `ambiguous` with the excitation that would separate it,
-//!      and nothing is named from it.
+//!      of the best one's, both over folds contiguous in time (`folds::contiguous_folds`: alike over the
+//!      record, two effects differ by how they extrapolate): then the pair is reported `ambiguous` with the
+//!      excitation that would separate it, and nothing is named from it.
 //! 6. **Iterate**: add the accepted effect (the best single one; a pair only when no single passes), refit
 //!    everything with the surface position, drop an earlier effect the new one made redundant, repeat (at
 //!    most [`Options::max_rounds`]); then polish every shape (τ, v₀) in the final structure.
@@ -45,7 +47,7 @@
 //!    on it too, and it replaces the given kind if its final model fits the record better by that margin
 //!    ([`Report::law_rechosen`]).
 //!
-//! The lessons behind these choices (columns made dimensionless, joint fits, blocked folds, AICc, margins,
+//! The lessons behind these choices (columns made dimensionless, joint fits, two fold layouts, AICc, margins,
 //! collinearity, refusing out-of-library effects) are summarised in the crate's README.md (crates/discrepancy).
 //!
 //! # Files, in the order the workflow uses them
@@ -66,6 +68,8 @@ mod augmented;
 mod candidate;
 mod family;
 mod fit;
+mod folds;
+mod golden;
 mod lateral;
 mod law;
 mod loading_paths;
@@ -145,7 +149,7 @@ pub(crate) fn steps(model: &ContactModel, series: &Series) -> Result<Vec<(f64, f
 /// Thresholds of [`analyse`]; the defaults are the documented method.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Options {
-    /// Folds contiguous in time for held-out scores.
+    /// Folds for held-out scores (in the two layouts of the crate documentation's step 5).
     pub folds: usize,
     /// Rounds of name-and-add.
     pub max_rounds: usize,

@@ -1,7 +1,7 @@
 //! The shapes of the named effects refined together (τ, v₀, a′, delay, range).
 
 use super::*;
-use fit::golden;
+use crate::golden::golden;
 
 /// Polish: each shape (τ of a relaxation branch, v₀ of the hysteresis) was chosen in its own round, with
 /// the effects of that round, and the shapes trade against each other and against the damping (a fast
