@@ -18,15 +18,14 @@ pub(crate) fn cells(z: &[f64], folds: usize) -> Vec<Range<usize>> {
         let (a, len) = (r.start, r.len());
         (0..parts).map(|i| a + i * len / parts..a + (i + 1) * len / parts).collect()
     };
-    let (first, end) = match contact.len() >= parts {
-        true => (contact[0], contact[contact.len() - 1] + 1),
-        false => (0, n),
-    };
-    let edge = |i: usize| match (i, contact.len() >= parts) {
-        (0, _) => first,
-        (i, _) if i == parts => end,
-        (i, true) => contact[i * contact.len() / parts],
-        (i, false) => i * n / parts,
+    if contact.len() < parts {
+        return [split(0..0), split(0..n), split(n..n)].concat();
+    }
+    let (first, end) = (contact[0], contact[contact.len() - 1] + 1);
+    let edge = |i: usize| match i {
+        0 => first,
+        i if i == parts => end,
+        i => contact[i * contact.len() / parts],
     };
     let mut out = split(0..first);
     out.extend((0..parts).map(|i| edge(i)..edge(i + 1)));
