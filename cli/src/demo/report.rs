@@ -163,6 +163,7 @@ pub fn describe(model: &ContactModel) -> String {
             Effect::Adhesion { force, range } => {
                 format!("adhesion (pull-off {force:.2} N, letting go {:.1} mm beyond the surface)", range * 1e3)
             }
+            Effect::MediumDrag { damping, .. } => format!("medium drag ({damping:.2} N·s/m)"),
             ref other => other.id().to_string(),
         });
     }

@@ -105,6 +105,13 @@ pub enum Effect {
     /// elastic force k zᵃ instead of the deformation, ṡ = g · d(k zᵃ)/dt − s/τ. The fresh response is
     /// (1 + g) times the law's, relaxing to it with τ; for a linear law it is a Maxwell branch of g·k.
     QuasiLinearRelaxation { fraction: f64, time_constant: f64 },
+    /// The medium the hand moves through (a liquid bath, a gel around the probe, an AFM cantilever in
+    /// buffer) resists its motion along the normal, in contact and out of it: the reading gains
+    /// `damping` · (ż − `tare_speed`) \[N\], ż [m/s] the rate of the deformation (> 0 towards the surface),
+    /// `damping` [N·s/m] the medium's viscous drag, and `tare_speed` [m/s] the hand's speed while the
+    /// sensor's zero was read (0 for a sensor tared at rest; an instrument that zeroes its force on the
+    /// moving approach has zeroed the drag of that speed too).
+    MediumDrag { damping: f64, tare_speed: f64 },
 }
 
 /// The longest [`Effect::TimeDelay`] a model may carry \[s\].
@@ -143,6 +150,7 @@ impl Effect {
             Effect::ToolGravity { .. } => "tool_gravity",
             Effect::Adhesion { .. } => "adhesion",
             Effect::QuasiLinearRelaxation { .. } => "quasi_linear_relaxation",
+            Effect::MediumDrag { .. } => "medium_drag",
         }
     }
 
@@ -152,7 +160,8 @@ impl Effect {
             Effect::ViscoelasticRelaxation { .. }
             | Effect::Hysteresis { .. }
             | Effect::Adhesion { .. }
-            | Effect::QuasiLinearRelaxation { .. } => 2,
+            | Effect::QuasiLinearRelaxation { .. }
+            | Effect::MediumDrag { .. } => 2,
             Effect::SensorCrosstalk { .. } => 3,
             _ => 1,
         };
@@ -184,6 +193,7 @@ impl Effect {
             "quasi_linear_relaxation" => {
                 arity(2).map(|_| Effect::QuasiLinearRelaxation { fraction: p[0], time_constant: p[1] })
             }
+            "medium_drag" => arity(2).map(|_| Effect::MediumDrag { damping: p[0], tare_speed: p[1] }),
             _ => {
                 Err(ContactError::InvalidModel(format!("unknown effect `{}`", id.chars().take(40).collect::<String>())))
             }
@@ -203,6 +213,7 @@ impl Effect {
             Effect::ToolGravity { mass } => [mass, 0.0, 0.0],
             Effect::Adhesion { force, range } => [force, range, 0.0],
             Effect::QuasiLinearRelaxation { fraction, time_constant } => [fraction, time_constant, 0.0],
+            Effect::MediumDrag { damping, tare_speed } => [damping, tare_speed, 0.0],
         }
     }
 
@@ -231,6 +242,9 @@ impl Effect {
             Effect::Adhesion { force, range } if force < 0.0 || range <= 0.0 => bad("force must be ≥ 0 and range > 0"),
             Effect::QuasiLinearRelaxation { fraction, time_constant } if fraction < 0.0 || time_constant <= 0.0 => {
                 bad("fraction must be ≥ 0 and time_constant > 0")
+            }
+            Effect::MediumDrag { damping, tare_speed } if damping < 0.0 || tare_speed.abs() > MAX_TARE_SPEED => {
+                bad(&format!("damping must be ≥ 0 and |tare_speed| at most {MAX_TARE_SPEED} m/s"))
             }
             _ => Ok(()),
         }
@@ -328,31 +342,7 @@ pub fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
     if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 
-/// The most effects a plausible model names ([`ContactModel::plausible`]).
-pub const MAX_EFFECTS: usize = 8;
-/// The stiffest a plausible soft contact is [N/m]: the law's slope at [`PLAUSIBLE_DEPTH`] and every
-/// relaxation branch together (the demo's sponge: 1.4e4; a rigid table: beyond 1e7). The simulated arm
-/// at its 1 ms step is stable on it.
-pub const MAX_CONTACT_STIFFNESS: f64 = 1e6;
-/// The depth at which a plausible law's stiffness is taken \[m\].
-pub const PLAUSIBLE_DEPTH: f64 = 0.1;
-/// The time constants of a plausible model's relaxation branches \[s\].
-pub const TIME_CONSTANT_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
-/// The largest hysteresis of a plausible model (a share of the elastic force).
-pub const MAX_HYSTERESIS: f64 = 0.5;
-/// The slowest speed over which a plausible model's hysteresis turns [m/s]: slower is a switch on the
-/// sign of the sensor's noise.
-pub const MIN_HYSTERESIS_SCALE: f64 = 1e-4;
-/// The fastest surface offset drift of a plausible model [m/s]: a surface at rest.
-pub const MAX_SURFACE_DRIFT: f64 = 1e-3;
-/// The fastest sensor drift of a plausible model [N/s] (a warming F/T sensor drifts mN/s).
-pub const MAX_SENSOR_DRIFT: f64 = 0.1;
-/// The largest sensor bias of a plausible model \[N\].
-pub const MAX_SENSOR_BIAS: f64 = 20.0;
-/// The strongest pull-off of a plausible model's adhesion \[N\] (a suction cup on glass: tens of N).
-pub const MAX_ADHESION: f64 = 50.0;
-/// The farthest beyond the surface a plausible model's adhesion holds on \[m\].
-pub const MAX_ADHESION_RANGE: f64 = 0.02;
+pub use crate::limits::*;
 
 /// The share of an [`Effect::Adhesion`]'s pull-off force at deformation z \[m\] after the contact's deepest
 /// deformation `peak`: min(1, (peak − z)/(peak + range)), 0 while pressing deeper.
@@ -392,6 +382,8 @@ pub struct EffectState {
     /// The deepest effective deformation of the present contact while an [`Effect::Adhesion`] holds on
     /// (None before the first contact and after it let go).
     pub adhesion_peak: Option<f64>,
+    /// The deformation's rate of the last step [m/s]: what an [`Effect::MediumDrag`] reads.
+    pub rate: f64,
 }
 
 /// One step of a Maxwell branch, ṡ = k_m ż − s/τ, over dt: the branch force s after a step in which the
@@ -481,7 +473,7 @@ impl ContactModel {
         let a = self.exponents.a;
         let mut stiffness = self.stiffness * a * pow(PLAUSIBLE_DEPTH, a - 1.0);
         let (mut hysteresis, mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
-        let mut adhesion = 0.0_f64;
+        let (mut adhesion, mut drag) = (0.0_f64, 0.0_f64);
         for e in &self.effects {
             match *e {
                 Effect::ViscoelasticRelaxation { time_constant, .. }
@@ -518,11 +510,15 @@ impl ContactModel {
                     ));
                 }
                 Effect::Adhesion { force, .. } => adhesion += force,
+                Effect::MediumDrag { damping, .. } => drag += damping,
                 _ => {}
             }
         }
         if adhesion > MAX_ADHESION {
             return bad(format!("an adhesion pulling {adhesion} N in all, more than {MAX_ADHESION} N"));
+        }
+        if drag > MAX_MEDIUM_DRAG {
+            return bad(format!("a medium dragging {drag} N·s/m in all, more than {MAX_MEDIUM_DRAG} N·s/m"));
         }
         if stiffness.is_nan() || stiffness > MAX_CONTACT_STIFFNESS {
             return bad(format!(
@@ -622,6 +618,7 @@ impl ContactModel {
         let (z, zdot, dt) = (finite("z", z)?, finite("ż", zdot)?, finite("dt", dt)?);
         state.time += dt;
         state.since_tare += dt;
+        state.rate = zdot;
         let (z_eff, scale) = self.effective(state.time, z, zdot);
         let mut surface = 0.0;
         if z_eff > 0.0 {
@@ -735,22 +732,24 @@ impl ContactModel {
         Ok((force.max(0.0) - pull, slope - pull_slope))
     }
 
-    /// What the named sensor effects add to a reading now \[N\]: the bias, and the drift since the last
-    /// tare. A reading minus it is the surface force (the effects that need the tangential force, the
-    /// orientation or the past are not in it).
+    /// What the named sensor effects add to a reading now \[N\]: the bias, the drift since the last
+    /// tare and the medium's drag at the last step's rate. A reading minus it is the surface force (the
+    /// effects that need the tangential force, the orientation or the past are not in it).
     pub fn sensor_offset(&self, state: &EffectState) -> f64 {
         self.effects
             .iter()
             .map(|e| match *e {
                 Effect::SensorBias { offset } => offset,
                 Effect::SensorDrift { rate } => rate * state.since_tare,
+                Effect::MediumDrag { damping, tare_speed } => damping * (state.rate - tare_speed),
                 _ => 0.0,
             })
             .sum()
     }
 
     /// What the sensor reads along the normal of the surface force of this step (after
-    /// [`ContactModel::step_surface`]): plus bias, drift, crosstalk and unknown tool weight, the whole
+    /// [`ContactModel::step_surface`]): plus bias, drift, crosstalk, unknown tool weight and the medium's
+    /// drag at the step's rate, the whole
     /// reading delayed by a time delay (linear interpolation between steps; before the first step the
     /// first reading).
     pub fn sense(&self, state: &mut EffectState, surface: f64, inputs: &SensorInputs) -> Result<f64, ContactError> {
@@ -769,6 +768,7 @@ impl ContactModel {
                     reading += (0..3).map(|i| coupling[i] * inputs.tangential_force[i]).sum::<f64>()
                 }
                 Effect::ToolGravity { mass } => reading += mass * gravity,
+                Effect::MediumDrag { damping, tare_speed } => reading += damping * (state.rate - tare_speed),
                 Effect::TimeDelay { delay: d } => delay = Some(d),
                 _ => {}
             }

@@ -424,6 +424,37 @@ fn adhesion_at_rest_is_the_step_and_its_slope_the_difference_quotient() {
     }
 }
 
+/// The sensor reads the medium's drag of the step's rate, less the drag of the speed its zero was read
+/// at, in contact and out of it; the surface force is untouched and a reading less `sensor_offset` is it.
+#[test]
+fn a_medium_drag_is_read_at_the_steps_rate_less_its_tare_speed_in_and_out_of_contact() {
+    let (damping, tare_speed) = (8.0, 0.01);
+    let mut model = ContactModel::new(Kind::KelvinVoigt, 1e4, 0.0).unwrap();
+    let plain = model.clone();
+    model.effects = vec![Effect::MediumDrag { damping, tare_speed }];
+    let (mut state, mut plain_state) = (model.effect_state(), plain.effect_state());
+    for (z, zdot) in [(-0.004, 0.03), (-0.001, 0.01), (0.002, 0.02), (0.003, 0.0), (0.001, -0.05), (-0.002, -0.05)] {
+        let (surface, measured) = model.step(&mut state, z, zdot, 1e-3).unwrap();
+        let (plain_surface, _) = plain.step(&mut plain_state, z, zdot, 1e-3).unwrap();
+        assert_eq!(surface, plain_surface, "the drag acts on the hand, not in the surface's force");
+        let drag = damping * (zdot - tare_speed);
+        assert!((measured - (surface + drag)).abs() <= 1e-12, "at ({z}, {zdot}): {measured} vs {}", surface + drag);
+        assert!((measured - model.sensor_offset(&state) - surface).abs() <= 1e-12);
+    }
+    model.plausible().unwrap();
+    for (damping, tare_speed, words) in
+        [(150.0, 0.0, "more than 100 N·s/m"), (-1.0, 0.0, "damping must be ≥ 0"), (1.0, 2.0, "at most 1 m/s")]
+    {
+        model.effects = vec![Effect::MediumDrag { damping, tare_speed }];
+        let err = model.plausible().unwrap_err().to_string();
+        assert!(err.contains(words), "{damping} N·s/m at {tare_speed} m/s: {err}");
+    }
+    model.effects = vec![Effect::MediumDrag { damping: 60.0, tare_speed: 0.0 }; 2];
+    assert!(model.plausible().unwrap_err().to_string().contains("in all"));
+    let file = "kind: kelvin_voigt\nstiffness: 1.0e4\ndamping: 0.0\neffects:\n  - {id: medium_drag, damping: 8.0, tare_speed: 0.01}\n";
+    assert_eq!(ContactModel::from_yaml(file).unwrap().effects, [Effect::MediumDrag { damping: 8.0, tare_speed: 0.01 }]);
+}
+
 #[test]
 fn adhesion_beyond_what_a_surface_can_pull_is_implausible() {
     let mut model = ContactModel::new(Kind::KelvinVoigt, 1e4, 0.0).unwrap();

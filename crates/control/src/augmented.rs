@@ -282,6 +282,19 @@ mod tests {
     }
 
     #[test]
+    fn a_mediums_drag_comes_out_of_a_reading_at_the_observed_rate_and_not_at_rest() {
+        let mut m = standard_solid(2000.0, 0.0, 1.0);
+        m.effects = vec![Effect::MediumDrag { damping: 4.0, tare_speed: 0.0 }];
+        let mut inverse = AugmentedInverse::new(m);
+        inverse.observe(0.005, 0.05, 1e-3).unwrap();
+        assert!((inverse.surface_reading(10.2) - 10.0).abs() < 1e-9);
+        inverse.observe(0.005, 0.0, 1e-3).unwrap();
+        assert!((inverse.surface_reading(10.0) - 10.0).abs() < 1e-9);
+        // The hold at rest is the law's alone: a drag pushes only while the hand moves.
+        assert!((inverse.hold(10.0, 0.005, 1e-3).unwrap() - 0.005).abs() < 1e-9);
+    }
+
+    #[test]
     fn hostile_inputs_are_errors_not_deformations() {
         let inverse = AugmentedInverse::new(standard_solid(2000.0, 600.0, 0.15));
         for f in [f64::NAN, f64::INFINITY, -1.0] {

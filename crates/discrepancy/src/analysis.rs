@@ -2,7 +2,8 @@
 //! [`Analysis::refit_baseline`] (k, λ and the surface refitted, the phases and noise floor at that surface)
 //! → [`Analysis::name_and_add`] (the rounds: screen every family, judge, name the best, add it, refit) →
 //! [`Analysis::polish_once_more`] → [`Analysis::undo_rounds_that_simulate_worse`] →
-//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::drop_shapes_at_an_edge`] →
+//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::try_the_medium_drag`] →
+//! [`Analysis::drop_shapes_at_an_edge`] →
 //! [`Analysis::keep_the_baseline_if_better`] → [`Analysis::report`].
 
 use std::cell::OnceCell;
@@ -90,9 +91,9 @@ impl<'a> Analysis<'a> {
     ) -> Result<Self, DiscrepancyError> {
         let force_scale = series.f.iter().map(|f| f.abs()).fold(0.0, f64::max);
         let scales = Scales::of(series, velocity_threshold);
-        let data = Data::new(series, options.folds, law);
+        let data = Data::new(series, options.folds, options.tare_window, law);
         let (structure, shift_se, fit) = refit_law(&data, law)?;
-        let model = to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit, &[]);
+        let model = to_model(law, &data, &structure, &fit, &[]);
         let surface = at_surface(series, options, velocity_threshold, force_scale, structure.shift);
         let gap = gap(series, &surface.phases, &simulate(&model, &series.shifted(structure.shift))?);
         let refit = Refit {
@@ -134,7 +135,7 @@ impl<'a> Analysis<'a> {
     }
 
     fn model_of(&self, structure: &Structure, fit: &Fit, named: &[(Family, f64)]) -> ContactModel {
-        to_model(&self.law, [self.data.lateral_axis, self.data.second_axis], structure, fit, named)
+        to_model(&self.law, &self.data, structure, fit, named)
     }
 
     /// The simulated gap of `model` with the surface moved by `shift`, over the current phases.
@@ -233,7 +234,7 @@ impl<'a> Analysis<'a> {
         let times = |f: Family| self.now.named.iter().filter(|x| x.0 == f).count();
         let families: Vec<Family> = Family::ALL
             .into_iter()
-            .filter(|&f| f != Family::QuasiLinear)
+            .filter(|&f| f != Family::QuasiLinear && f != Family::MediumDrag)
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&self.data))
             .collect();
@@ -494,6 +495,38 @@ impl<'a> Analysis<'a> {
         Ok(())
     }
 
+    /// The medium's drag, tried once the surface's own effects are named: its only evidence of its own is
+    /// free space crossed at two speeds; in contact it is one more damping, and a loop of constant width
+    /// between loading and unloading, which the surface's dissipation makes too. Judged by every rule a
+    /// round's candidate meets, and taken where the simulated record (every sample) fits better by the
+    /// gain a new effect needs and the contact no worse.
+    pub(crate) fn try_the_medium_drag(&mut self) -> Result<(), DiscrepancyError> {
+        if !self.ambiguous.is_empty() || !Family::MediumDrag.observable(&self.data) {
+            return Ok(());
+        }
+        let drag = assess(&self.data, &self.now.structure, &[(Family::MediumDrag, 0.0)], &self.scales);
+        if !self.passes(&drag, &self.free_stretches(), &OnceCell::new()) {
+            return Ok(());
+        }
+        let (structure, shift_se, _) = refine_surface(&self.data, &drag.st);
+        let fit = fit::fit(&self.data, &structure);
+        let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain([(Family::MediumDrag, 0.0)]).collect();
+        let model = self.model_of(&structure, &fit, &named);
+        model.validate()?;
+        let before = whole_rms(self.series, &self.model, self.now.structure.shift)?;
+        let gap = self.gap_of(&model, structure.shift)?;
+        if whole_rms(self.series, &model, structure.shift)? > before * (1.0 - self.options.min_gain)
+            || gap.rms > self.now.gap.rms * (1.0 + 1e-3)
+        {
+            return Ok(());
+        }
+        self.now.stages.push((self.now.gap.rms, gap.rms));
+        (self.now.structure, self.now.fit, self.now.named, self.model, self.now.gap, self.now.shift_se) =
+            (structure, fit, named, model, gap, shift_se);
+        self.move_surface();
+        Ok(())
+    }
+
     /// A shape still at an end of its range after every polish is a bound, not a finding: the effect is
     /// dropped (the model refitted without it) and reported among `bounds`.
     pub(crate) fn drop_shapes_at_an_edge(&mut self) -> Result<(), DiscrepancyError> {
@@ -660,7 +693,7 @@ pub(crate) fn refit_law(data: &Data, law: &ContactModel) -> Result<(Structure, f
         clamped: data.clamped.clone(),
     };
     let (mut structure, _, _) = refine_surface(data, &start);
-    let first = to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit::fit(data, &structure), &[]);
+    let first = to_model(law, data, &structure, &fit::fit(data, &structure), &[]);
     structure.clamped = clamp_mask(&first, &data.s.shifted(structure.shift))?;
     let (structure, shift_se, _) = refine_surface(data, &structure);
     let fit = fit::fit(data, &structure);

@@ -3,11 +3,11 @@
 
 use super::*;
 
-/// The augmented model of a structure and its fit; `order` lists the accepted families in order; `axes`
-/// the record's lateral axes ([`Data::lateral_axis`], [`Data::second_axis`]).
+/// The augmented model of a structure and its fit on `d` (its lateral axes, the speed its zero was read
+/// at); `order` lists the accepted families in order.
 pub(crate) fn to_model(
     base: &ContactModel,
-    axes: [Option<[f64; 3]>; 2],
+    d: &Data,
     st: &Structure,
     fit: &Fit,
     order: &[(Family, f64)],
@@ -38,7 +38,7 @@ pub(crate) fn to_model(
                 Family::Crosstalk => {
                     // A small rotation of the sensor: the coupling along each axis the record loads.
                     let along = |term: Term| st.terms.iter().position(|t| *t == term).map_or(0.0, |j| fit.beta[j + 2]);
-                    let (u, v) = (axes[0].unwrap_or_default(), axes[1].unwrap_or_default());
+                    let (u, v) = (d.lateral_axis.unwrap_or_default(), d.second_axis.unwrap_or_default());
                     let (b1, b2) = (along(Term::Crosstalk), along(Term::CrosstalkSecond));
                     Some(Effect::SensorCrosstalk { coupling: std::array::from_fn(|i| u[i] * b1 + v[i] * b2) })
                 }
@@ -47,6 +47,7 @@ pub(crate) fn to_model(
                 Family::QuasiLinear => {
                     Some(Effect::QuasiLinearRelaxation { fraction: (b(f) / k).max(0.0), time_constant: sh })
                 }
+                Family::MediumDrag => Some(Effect::MediumDrag { damping: b(f).max(0.0), tare_speed: d.tare_speed }),
                 Family::StiffnessExponent => None,
             }
         })
@@ -200,6 +201,9 @@ pub(crate) fn uncertainty(
             u.insert("fraction".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)] / k);
             u.insert("time_constant_s".into(), z * shape_se(&Term::QuasiRelax));
         }
+        Family::MediumDrag => {
+            u.insert("damping_n_s_per_m".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+        }
         Family::Adhesion => {
             u.insert("force_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
             // Where it lets go is known to within the deformation's step across the letting go, however
@@ -266,6 +270,10 @@ pub(crate) fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTree
             (Effect::Adhesion { force, range }, Family::Adhesion) => {
                 p.insert("force_n".into(), force);
                 p.insert("range_m".into(), range);
+            }
+            // Its tare speed is read from the record, not fitted: the model file carries it.
+            (Effect::MediumDrag { damping, .. }, Family::MediumDrag) => {
+                p.insert("damping_n_s_per_m".into(), damping);
             }
             _ => {}
         }

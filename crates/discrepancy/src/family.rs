@@ -17,10 +17,11 @@ pub(crate) enum Family {
     ToolGravity,
     Adhesion,
     QuasiLinear,
+    MediumDrag,
 }
 
 impl Family {
-    pub(crate) const ALL: [Family; 11] = [
+    pub(crate) const ALL: [Family; 12] = [
         Family::SensorBias,
         Family::SensorDrift,
         Family::Relaxation,
@@ -32,6 +33,7 @@ impl Family {
         Family::ToolGravity,
         Family::Adhesion,
         Family::QuasiLinear,
+        Family::MediumDrag,
     ];
 
     pub(crate) fn id(self) -> &'static str {
@@ -47,6 +49,7 @@ impl Family {
             Family::ToolGravity => "tool_gravity",
             Family::Adhesion => "adhesion",
             Family::QuasiLinear => "quasi_linear_relaxation",
+            Family::MediumDrag => "medium_drag",
         }
     }
 
@@ -86,6 +89,8 @@ impl Family {
                 let in_contact = d.s.z.iter().filter(|&&z| z > 0.0).count();
                 contacts.count() >= 2 || 2 * in_contact >= d.s.z.len()
             }
+            // The hand moving through the medium out of contact: in contact a drag is one more damping.
+            Family::MediumDrag => d.drag_observable,
             _ => true,
         }
     }
@@ -103,6 +108,7 @@ impl Family {
             Family::Hysteresis => Some(Term::Hyst(shape)),
             Family::Adhesion => Some(Term::Adhesion(shape)),
             Family::QuasiLinear => Some(Term::QuasiRelax(shape)),
+            Family::MediumDrag => Some(Term::Drag),
             Family::OffsetDrift => Some(Term::OffsetLin),
             Family::StiffnessExponent => None,
         }
@@ -206,6 +212,9 @@ pub(crate) fn would_separate(a: Family, b: Family) -> String {
             "lateral motion at a held deformation: only crosstalk follows the tangential load"
         }
         (ToolGravity, _) | (_, ToolGravity) => "tilting the hand in free space: only the tool's weight follows the tilt",
+        (MediumDrag, _) | (_, MediumDrag) => {
+            "free space crossed at two speeds, both ways: only the medium's drag follows the hand's speed out of contact"
+        }
         _ => "a hold of several seconds, pushes at two speeds and to two depths, and free space before and after",
     }
     .to_string()

@@ -46,12 +46,18 @@ pub(crate) enum Term {
     /// Minus the share of an adhesion's pull-off force with range δ [m] ([`softcontact_contact::Effect::Adhesion`]);
     /// coefficient the pull-off force [N].
     Adhesion(f64),
+    /// The hand's rate along the normal less its rate while the sensor's zero was read [m/s] ([`Data::drag_rate`]),
+    /// in contact and out of it; coefficient the medium's drag [N·s/m].
+    Drag,
 }
 
 impl Term {
     /// A term of the sensor alone: it acts out of contact too.
     fn of_sensor(self) -> bool {
-        matches!(self, Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::CrosstalkSecond | Term::Gravity)
+        matches!(
+            self,
+            Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::CrosstalkSecond | Term::Gravity | Term::Drag
+        )
     }
 
     /// A term the law's clamp at zero leaves alone: the sensor's, and an adhesion, which pulls on what the
@@ -134,6 +140,11 @@ pub(crate) struct Data<'a> {
     /// much as in free space (the rule of [`crate::lateral::loads`], as for the first).
     pub second_axis: Option<[f64; 3]>,
     pub second: Vec<f64>,
+    /// The speed [m/s] where the sensor's zero was read ([`crate::drag::tare_speed`]), ż less it (a drag's
+    /// column), and whether free space shows a drag ([`crate::drag::drag_observable`]).
+    pub tare_speed: f64,
+    pub drag_rate: Vec<f64>,
+    pub drag_observable: bool,
     /// Columns already computed (see [`ColumnCache`]).
     pub cache: std::cell::RefCell<ColumnCache>,
     /// Their products (see [`ProductCache`]).
@@ -141,7 +152,8 @@ pub(crate) struct Data<'a> {
 }
 
 impl<'a> Data<'a> {
-    pub fn new(s: &'a Series, folds: usize, baseline: &ContactModel) -> Self {
+    /// `tare_window` [s]: how long a tare reads the sensor before its time ([`crate::Options::tare_window`]).
+    pub fn new(s: &'a Series, folds: usize, tare_window: f64, baseline: &ContactModel) -> Self {
         let n = s.len();
         let dt = crate::step_sizes(s);
         let mut time = Vec::with_capacity(n);
@@ -173,6 +185,8 @@ impl<'a> Data<'a> {
         let second = along(second_axis);
         let (second_axis, second) =
             if crate::lateral::loads(&s.z, &second) { (second_axis, second) } else { (None, Vec::new()) };
+        let tare_speed = crate::drag::tare_speed(s, tare_window);
+        let drag_rate = s.zdot.iter().map(|v| v - tare_speed).collect();
         Data {
             s,
             time,
@@ -187,6 +201,9 @@ impl<'a> Data<'a> {
             lateral,
             second_axis,
             second,
+            tare_speed,
+            drag_rate,
+            drag_observable: crate::drag::drag_observable(s),
             cache: Default::default(),
             products: Default::default(),
         }
@@ -211,6 +228,9 @@ impl<'a> Data<'a> {
             lateral: self.lateral.clone(),
             second_axis: self.second_axis,
             second: self.second.clone(),
+            tare_speed: self.tare_speed,
+            drag_rate: self.drag_rate.clone(),
+            drag_observable: self.drag_observable,
             cache: Default::default(),
             products: Default::default(),
         }
@@ -418,6 +438,7 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
     match t {
         Term::Bias => vec![1.0; n],
         Term::SensorDrift => d.since_tare.clone(),
+        Term::Drag => d.drag_rate.clone(),
         Term::Relax(tau) | Term::QuasiRelax(tau) => {
             // The branch of unit stiffness, updated as ContactModel::step_surface updates it; a
             // quasi-linear one driven by zᵃ.

@@ -42,9 +42,9 @@ pub(crate) fn rivals(
     }
     // The law refitted as the analysis refits it: its held-out MSE and the law with the fitted k and λ.
     let refitted = |law: &ContactModel| -> Result<(f64, ContactModel), DiscrepancyError> {
-        let data = Data::new(series, options.folds, law);
+        let data = Data::new(series, options.folds, options.tare_window, law);
         let (structure, _, fit) = refit_law(&data, law)?;
-        Ok((fit.cv_mse, to_model(law, [data.lateral_axis, data.second_axis], &structure, &fit, &[])))
+        Ok((fit.cv_mse, to_model(law, &data, &structure, &fit, &[])))
     };
     let (given_mse, _) = refitted(given)?;
     let mut out = vec![];

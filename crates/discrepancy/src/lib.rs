@@ -16,7 +16,8 @@
 //!    [`Remaining::None`] with no effect named. Refusing is a first-class answer.
 //! 5. **Name**: each candidate is a physical augmentation with SI parameters (ids `sensor_bias`,
 //!    `sensor_drift`, `viscoelastic_relaxation`, `hysteresis`, `stiffness_exponent`,
-//!    `contact_offset_drift`). For a shape parameter on a grid (τ, v₀, a′) the model is linear in its
+//!    `contact_offset_drift`, and the others of the crate's README; `quasi_linear_relaxation` and
+//!    `medium_drag` are tried once the rounds are done). For a shape parameter on a grid (τ, v₀, a′) the model is linear in its
 //!    amplitudes; each candidate is fitted **jointly** with k and λ (and the effects already accepted) on
 //!    columns scaled to unit RMS. A candidate (or a pair of candidates, so that two hidden effects do not
 //!    mask each other) is accepted only if, against the current model:
@@ -66,6 +67,7 @@ mod analysis;
 mod arm;
 mod augmented;
 mod candidate;
+mod drag;
 mod family;
 mod fit;
 mod folds;
@@ -218,6 +220,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         analysis.polish_once_more()?;
         analysis.undo_rounds_that_simulate_worse();
         analysis.try_the_quasi_linear_form()?;
+        analysis.try_the_medium_drag()?;
         analysis.drop_shapes_at_an_edge()?;
         analysis.keep_the_baseline_if_better()?;
         analysis.report()

@@ -763,6 +763,26 @@ fn an_adhesion_written_by_hand_is_named_with_its_pull_off_force_and_range() {
     }
 }
 
+/// A medium's drag written here, not by the library's effect code: the reading gains c·ż in contact and out
+/// of it, and the force is zeroed at its mean over the free approach, as an instrument zeroes a table (the
+/// approach's own drag is in that zero). Named after the surface's effects, with its damping; a record
+/// without it names none (the nulls of `null_cases_name_nothing` screen it too).
+#[test]
+fn a_medium_drag_written_by_hand_is_named_with_its_damping() {
+    let damping = 20.0;
+    for (j, m) in [kv(), af()].iter().enumerate() {
+        let mut s = record(m, Exc::new(200.0), 0.02, 70 + j as u64, &|_, _, zdot| damping * zdot);
+        let first_contact = s.z.iter().position(|&z| z > 0.0).unwrap();
+        let zero = s.zdot[..first_contact].iter().map(|v| damping * v).sum::<f64>() / first_contact as f64;
+        s.f.iter_mut().for_each(|f| *f -= zero);
+        let r = analyse(&s, m, &Options::default()).unwrap();
+        show("medium drag by hand", &r);
+        assert_eq!(ids(&r), ["medium_drag"], "{:?}", m.kind);
+        within("damping", param(&r, "medium_drag", "damping_n_s_per_m"), damping, 0.1);
+        assert!(shrink_ratio(&r) >= 0.8, "shrink {} of the ideal", shrink_ratio(&r));
+    }
+}
+
 /// Fung's quasi-linear relaxation written here: a branch s driven by the law's elastic force, integrated
 /// exactly for a force changing linearly over each step, ṡ = g·d(k zᵃ)/dt − s/τ.
 #[test]
@@ -837,9 +857,9 @@ fn the_loop_of_a_single_indentation_is_named_as_dissipation_not_a_moving_surface
         .collect();
     let s = Series::new(t, z, zd, f).unwrap();
     let folds = Options::default().folds;
-    assert!(!crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&s, folds, &m)));
+    assert!(!crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&s, folds, 0.1, &m)));
     let pushes = record(&m, Exc::new(200.0), 0.02, 72, &|_, _, _| 0.0);
-    assert!(crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&pushes, folds, &m)));
+    assert!(crate::Family::OffsetDrift.observable(&crate::fit::Data::new(&pushes, folds, 0.1, &m)));
     let r = analyse(&s, &m, &Options::default()).unwrap();
     show("one indentation with a loop", &r);
     let dissipation = ["hysteresis", "quasi_linear_relaxation", "viscoelastic_relaxation"];

@@ -177,6 +177,12 @@ fn augmented_models_beyond_what_a_tared_sensor_or_a_resting_surface_has_are_refu
         with(Effect::QuasiLinearRelaxation { fraction: 1e300, time_constant: 0.5 }),
         with(Effect::QuasiLinearRelaxation { fraction: 0.2, time_constant: 1e-300 }),
         with(Effect::QuasiLinearRelaxation { fraction: -0.2, time_constant: 0.5 }),
+        with(Effect::MediumDrag { damping: f64::NAN, tare_speed: 0.0 }),
+        with(Effect::MediumDrag { damping: 1.0, tare_speed: f64::INFINITY }),
+        with(Effect::MediumDrag { damping: 1e300, tare_speed: 0.0 }),
+        with(Effect::MediumDrag { damping: -1.0, tare_speed: 0.0 }),
+        with(Effect::MediumDrag { damping: 1.0, tare_speed: 2.0 }),
+        with(Effect::MediumDrag { damping: 150.0, tare_speed: 0.0 }),
     ] {
         assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
         assert_eq!(c.contact_model(), &softcontact_sim::sponge());
