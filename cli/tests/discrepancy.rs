@@ -593,32 +593,13 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     // The cantilever's drag in the liquid, named on two indentations whose approach and retract cross free
     // space at different speeds: within a factor of 1.5 of what the free levels alone say.
     for file in ["flipsign_indentation.csv", "reference_indentation.csv"] {
-        let json = dir.path().join(format!("{file}.json"));
-        let path = format!("{data}/{file}");
-        let run = discrepancy(&[
-            path.as_ref(),
-            "--out".as_ref(),
-            dir.path().as_os_str(),
-            "--json".as_ref(),
-            json.as_os_str(),
-        ]);
-        assert!(run.status.success(), "{}", text(&run));
-        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        let v = report_of(dir.path(), &format!("{data}/{file}"));
         let drag = v["effects"].as_array().unwrap().iter().find(|e| e["id"] == "medium_drag");
         let damping = drag.map_or(0.0, |e| e["parameters"]["damping_n_s_per_m"].as_f64().unwrap());
         let levels = drag_from_free_levels(&format!("{data}/{file}"));
         assert!(damping > levels / 1.5 && damping < levels * 1.5, "{file}: {damping} N·s/m, the free levels {levels}");
     }
-    let json = dir.path().join("polymergel.json");
-    let run = discrepancy(&[
-        std::ffi::OsStr::new(&format!("{data}/polymergel_creep.csv")),
-        "--out".as_ref(),
-        dir.path().as_os_str(),
-        "--json".as_ref(),
-        json.as_os_str(),
-    ]);
-    assert!(run.status.success(), "{}", text(&run));
-    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let v = report_of(dir.path(), &format!("{data}/polymergel_creep.csv"));
     for e in v["effects"].as_array().unwrap() {
         for (name, _) in e["parameters"].as_object().unwrap() {
             assert!(e["uncertainty"][name].as_f64().is_some_and(|u| u >= 0.0), "{e}");
@@ -629,6 +610,14 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let refused = curves.iter().find(|c| c["file"] == "qi_adhesion.csv").unwrap();
     let why = refused["answer"]["Err"].as_str().unwrap();
     assert!(why.contains("onset threshold") && why.contains("--onset"), "{why}");
+}
+
+/// `softcontact discrepancy PATH`'s JSON report, its files written to `dir`.
+fn report_of(dir: &Path, path: &str) -> serde_json::Value {
+    let json = dir.join("report.json");
+    let run = discrepancy(&[path.as_ref(), "--out".as_ref(), dir.as_os_str(), "--json".as_ref(), json.as_os_str()]);
+    assert!(run.status.success(), "{}", text(&run));
+    serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap()
 }
 
 /// The drag [N·s/m] an AFM table's free levels show, worked out without the workflow: the mean force and
