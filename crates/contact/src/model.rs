@@ -243,8 +243,9 @@ impl Effect {
             Effect::QuasiLinearRelaxation { fraction, time_constant } if fraction < 0.0 || time_constant <= 0.0 => {
                 bad("fraction must be ≥ 0 and time_constant > 0")
             }
-            Effect::MediumDrag { damping, tare_speed } if damping < 0.0 || tare_speed.abs() > MAX_TARE_SPEED => {
-                bad(&format!("damping must be ≥ 0 and |tare_speed| at most {MAX_TARE_SPEED} m/s"))
+            Effect::MediumDrag { damping, .. } if damping < 0.0 => bad(&format!("damping must be ≥ 0, not {damping}")),
+            Effect::MediumDrag { tare_speed, .. } if tare_speed.abs() > MAX_TARE_SPEED => {
+                bad(&format!("|tare_speed| must be at most {MAX_TARE_SPEED} m/s, not {tare_speed}"))
             }
             _ => Ok(()),
         }

@@ -442,9 +442,11 @@ fn a_medium_drag_is_read_at_the_steps_rate_less_its_tare_speed_in_and_out_of_con
         assert!((measured - model.sensor_offset(&state) - surface).abs() <= 1e-12);
     }
     model.plausible().unwrap();
-    for (damping, tare_speed, words) in
-        [(150.0, 0.0, "more than 100 N·s/m"), (-1.0, 0.0, "damping must be ≥ 0"), (1.0, 2.0, "at most 1 m/s")]
-    {
+    for (damping, tare_speed, words) in [
+        (150.0, 0.0, "more than 100 N·s/m"),
+        (-1.0, 0.0, "damping must be ≥ 0, not -1"),
+        (1.0, 2.0, "at most 1 m/s, not 2"),
+    ] {
         model.effects = vec![Effect::MediumDrag { damping, tare_speed }];
         let err = model.plausible().unwrap_err().to_string();
         assert!(err.contains(words), "{damping} N·s/m at {tare_speed} m/s: {err}");

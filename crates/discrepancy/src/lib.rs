@@ -213,6 +213,15 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     if series.len() < MIN_SAMPLES.max(10 * options.folds) || in_contact < MIN_CONTACT_SAMPLES {
         return Err(DiscrepancyError::TooShort { got: series.len(), in_contact });
     }
+    // A model whose forces on this record overflow (a parameter out of all proportion) leaves no residual
+    // to explain.
+    let predicted = simulate(baseline, series)?;
+    if !predicted.iter().zip(&series.f).map(|(p, f)| (f - p).powi(2)).sum::<f64>().is_finite() {
+        return Err(ContactError::InvalidModel(
+            "its forces on this record overflow: a parameter is out of all proportion".into(),
+        )
+        .into());
+    }
     let velocity = velocity_threshold(series);
     let on_law = |law: &ContactModel| -> Result<Report, DiscrepancyError> {
         let mut analysis = Analysis::refit_baseline(series, baseline, law, options, velocity)?;

@@ -783,6 +783,17 @@ fn a_medium_drag_written_by_hand_is_named_with_its_damping() {
     }
 }
 
+/// A baseline whose forces on the record overflow (a drag or a bias of 1e300, finite each) is refused with
+/// a clear error, not analysed to an infinite residual.
+#[test]
+fn a_baseline_out_of_all_proportion_is_refused() {
+    let s = record(&kv(), Exc::new(100.0), 0.02, 5, &|_, _, _| 0.0);
+    for effect in [Effect::MediumDrag { damping: 1e300, tare_speed: 0.0 }, Effect::SensorBias { offset: 1e300 }] {
+        let err = analyse(&s, &with(&kv(), &[effect]), &Options::default()).unwrap_err().to_string();
+        assert!(err.contains("overflow") && err.contains("out of all proportion"), "{effect:?}: {err}");
+    }
+}
+
 /// Fung's quasi-linear relaxation written here: a branch s driven by the law's elastic force, integrated
 /// exactly for a force changing linearly over each step, ṡ = g·d(k zᵃ)/dt − s/τ.
 #[test]
