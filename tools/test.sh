@@ -9,5 +9,6 @@ cd "$(dirname "$0")/.."
 source tools/python-env.sh
 source tools/dds-peers.sh
 # With DDS-Security compiled in (it stays off unless ROS_SECURITY_* asks for it): the secure graph's tests
-# run too, and every other test shows that nothing changes without it.
-cargo test --workspace --release --features softcontact/security "$@"
+# run too, and every other test shows that nothing changes without it. The `testing` profile is the
+# release profile without its link-time optimisation (Cargo.toml).
+cargo test --workspace --profile testing --features softcontact/security "$@"

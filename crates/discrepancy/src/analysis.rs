@@ -553,11 +553,9 @@ impl<'a> Analysis<'a> {
     /// Never worse than the model the user gave (or identify found): where the refitted and augmented
     /// model fits the record worse than that baseline as it was given, the baseline stands and nothing is
     /// named. Judged on every sample, in contact or not, so that neither model's surface decides which
-    /// count.
-    pub(crate) fn keep_the_baseline_if_better(&mut self) -> Result<(), DiscrepancyError> {
-        let series = self.series;
-        self.kept_baseline =
-            whole_rms(series, &self.model, self.now.structure.shift)? > whole_rms(series, self.given, 0.0)?;
+    /// count; `given_rms` is the given model's RMS so ([`whole_rms`] at its own surface).
+    pub(crate) fn keep_the_baseline_if_better(&mut self, given_rms: f64) -> Result<(), DiscrepancyError> {
+        self.kept_baseline = whole_rms(self.series, &self.model, self.now.structure.shift)? > given_rms;
         if self.kept_baseline {
             self.now.named.clear();
             self.now.stages.clear();

@@ -28,6 +28,5 @@ pub(crate) fn drag_observable(s: &Series) -> bool {
         return false;
     }
     let spread = percentile(&mut free, 0.95) - percentile(&mut free, 0.05);
-    let mut speeds: Vec<f64> = s.zdot.iter().map(|v| v.abs()).collect();
-    spread > 0.0 && spread >= 0.5 * percentile(&mut speeds, 0.95)
+    spread > 0.0 && spread >= 0.5 * crate::phase::p95_speed(s)
 }

@@ -215,8 +215,8 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
     }
     // A model whose forces on this record overflow (a parameter out of all proportion) leaves no residual
     // to explain.
-    let predicted = simulate(baseline, series)?;
-    if !predicted.iter().zip(&series.f).map(|(p, f)| (f - p).powi(2)).sum::<f64>().is_finite() {
+    let given_rms = law::whole_rms(series, baseline, 0.0)?;
+    if !given_rms.is_finite() {
         return Err(ContactError::InvalidModel(
             "its forces on this record overflow: a parameter is out of all proportion".into(),
         )
@@ -231,7 +231,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         analysis.try_the_quasi_linear_form()?;
         analysis.try_the_medium_drag()?;
         analysis.drop_shapes_at_an_edge()?;
-        analysis.keep_the_baseline_if_better()?;
+        analysis.keep_the_baseline_if_better(given_rms)?;
         analysis.report()
     };
     let report = on_law(baseline)?;
