@@ -303,10 +303,20 @@ fn check_recording(recording: &Path, logs: &Path) {
     for topic in ["/ft_sensor/wrench", "/lwr/ee_pose", "/lwr/ee_twist", "/lwr/joint_states", "/tf_static"] {
         assert!(rec.topic(topic).is_some_and(|t| t.message_count > 0), "{topic} recorded");
     }
-    let wrenches = rec.topic("/ft_sensor/wrench").unwrap().message_count as f64;
+    // The wrench's own rate, between its first and last message: the recording's span also holds the
+    // seconds before the wrench's subscription matched (/tf_static, latched, comes at once).
+    let (mut first, mut last, mut wrenches) = (u64::MAX, 0, 0u64);
+    for m in rec.messages().map(Result::unwrap).filter(|m| m.topic() == "/ft_sensor/wrench") {
+        (first, last, wrenches) = (first.min(m.log_time), last.max(m.log_time), wrenches + 1);
+    }
+    let rate = (wrenches - 1) as f64 / ((last - first) as f64 * 1e-9);
     let (t0, t1) = rec.time_range().unwrap();
-    let rate = wrenches / ((t1 - t0) as f64 * 1e-9);
-    eprintln!("recording: {} messages, /ft_sensor/wrench at {rate:.0} Hz", rec.message_count());
+    eprintln!(
+        "recording: {} messages over {:.1} s, /ft_sensor/wrench at {rate:.0} Hz over its {:.1} s",
+        rec.message_count(),
+        (t1 - t0) as f64 * 1e-9,
+        (last - first) as f64 * 1e-9
+    );
     // Catches a publisher or recorder that lost its rate, not a few late samples on a loaded machine.
     assert!(rate > 800.0, "the wrench recorded at {rate} Hz (published at 1 kHz)");
 
