@@ -187,10 +187,12 @@ fn print_refit_and_effects(report: &Report, name: &str) {
                 .parameters
                 .iter()
                 .map(|(k, v)| match e.uncertainty.get(k) {
-                    _ if e.not_identifiable.contains(k) => format!(
-                        "{k} not identifiable ({v:.1e} ± {:.1e})",
-                        e.uncertainty.get(k).copied().unwrap_or(f64::NAN)
-                    ),
+                    // No value where the record does not pin one down: the interval says why (the JSON keeps
+                    // both, with the parameter listed under `not_identifiable`).
+                    _ if e.not_identifiable.contains(k) => match e.uncertainty.get(k) {
+                        Some(u) if u.is_finite() => format!("{k} not identifiable (± {u:.1e})"),
+                        _ => format!("{k} not identifiable"),
+                    },
                     Some(u) => format!("{k} {v:.4e} ± {u:.1e}"),
                     None => format!("{k} {v:.4e}"),
                 })
