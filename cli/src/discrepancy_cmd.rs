@@ -186,15 +186,13 @@ fn print_refit_and_effects(report: &Report, name: &str) {
             let parameters: Vec<String> = e
                 .parameters
                 .iter()
-                .map(|(k, v)| match e.uncertainty.get(k) {
-                    // No value where the record does not pin one down: the interval says why (the JSON keeps
-                    // both, with the parameter listed under `not_identifiable`).
-                    _ if e.not_identifiable.contains(k) => match e.uncertainty.get(k) {
-                        Some(u) if u.is_finite() => format!("{k} not identifiable (± {u:.1e})"),
-                        _ => format!("{k} not identifiable"),
-                    },
-                    Some(u) => format!("{k} {v:.4e} ± {u:.1e}"),
-                    None => format!("{k} {v:.4e}"),
+                // No value where the record does not pin one down: the interval says why (the JSON keeps
+                // both, with the parameter listed under `not_identifiable`).
+                .map(|(k, v)| match (e.not_identifiable.contains(k), e.uncertainty.get(k)) {
+                    (true, Some(u)) if u.is_finite() => format!("{k} not identifiable (± {u:.1e})"),
+                    (true, _) => format!("{k} not identifiable"),
+                    (false, Some(u)) => format!("{k} {v:.4e} ± {u:.1e}"),
+                    (false, None) => format!("{k} {v:.4e}"),
                 })
                 .collect();
             println!("{:<26}{:<48}{:>12}{:>12}", e.id, parameters.join(", "), n(e.rms_before), n(e.rms_after));

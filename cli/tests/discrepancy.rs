@@ -722,3 +722,28 @@ fn a_ten_million_row_table_runs_through_discrepancy_in_bounded_memory() {
     // A measurement, not a zero: the table alone is 255 MB, read in two streaming passes.
     assert!(peak > 4 << 20 && peak <= 512 << 20, "peak resident memory {} MiB", peak >> 20);
 }
+
+/// A parameter the record does not pin down is printed without a value in the text report, its interval
+/// beside it; the JSON keeps value and interval, listing it under `not_identifiable`.
+#[test]
+fn the_text_report_gives_no_value_for_a_parameter_that_is_not_identifiable() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("report.json");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm/flipsign_indentation.csv");
+    let run =
+        discrepancy(&[path.as_ref(), "--out".as_ref(), dir.path().as_os_str(), "--json".as_ref(), json.as_os_str()]);
+    let shown = text(&run);
+    assert!(run.status.success(), "{shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let mut checked = 0;
+    for e in v["effects"].as_array().unwrap() {
+        for k in e["not_identifiable"].as_array().unwrap().iter().map(|k| k.as_str().unwrap()) {
+            assert!(e["parameters"][k].is_number() && e["uncertainty"][k].is_number(), "{e}");
+            assert!(shown.contains(&format!("{k} not identifiable (± ")), "{k}\n{shown}");
+            let value = format!("{k} {:.4e}", e["parameters"][k].as_f64().unwrap());
+            assert!(!shown.contains(&value), "{value}\n{shown}");
+            checked += 1;
+        }
+    }
+    assert!(checked > 0, "flipsign's relaxation time is not pinned down by its 0.5 ms record\n{shown}");
+}
