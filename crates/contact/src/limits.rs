@@ -30,5 +30,8 @@ pub const MAX_ADHESION_RANGE: f64 = 0.02;
 /// water reads about a newton; this is ten times more. The controller subtracts the drag of the measured
 /// rate from every reading, so a larger one would feed the rate's noise into the force it controls.
 pub const MAX_MEDIUM_DRAG: f64 = 100.0;
+/// The farthest from the surface a plausible model's squeeze film reaches \[m\] (half its damping at that
+/// gap): a film as thick as a tool is wide.
+pub const MAX_SQUEEZE_REACH: f64 = 0.02;
 /// The fastest hand speed a [`crate::Effect::MediumDrag`]'s zero may have been read at [m/s].
 pub const MAX_TARE_SPEED: f64 = 1.0;

@@ -112,6 +112,15 @@ pub enum Effect {
     /// sensor's zero was read (0 for a sensor tared at rest; an instrument that zeroes its force on the
     /// moving approach has zeroed the drag of that speed too).
     MediumDrag { damping: f64, tare_speed: f64 },
+    /// The medium squeezed out between the hand and the surface as they close in (a tool pressing on
+    /// tissue in saline, an AFM cantilever in buffer near its sample) resists the motion the more the
+    /// thinner the film: the reading gains `damping` · `reach` / (gap + `reach`) · ż \[N\], gap = max(−z, 0)
+    /// [m] the distance to the surface, so the whole `damping` [N·s/m] in contact, half of it at `reach`
+    /// [m] from the surface, nothing far away. The drag of a sphere or a lever above a plane in a viscous
+    /// liquid, b(h) = 6πη·a²/(h + h_eff) (Alcaraz et al., "Correction of microrheological measurements of
+    /// soft samples with atomic force microscopy for the hydrodynamic drag on the cantilever"); beside a
+    /// [`Effect::MediumDrag`], the same medium's drag far from the surface.
+    SqueezeFilm { damping: f64, reach: f64 },
 }
 
 /// The longest [`Effect::TimeDelay`] a model may carry \[s\].
@@ -151,6 +160,7 @@ impl Effect {
             Effect::Adhesion { .. } => "adhesion",
             Effect::QuasiLinearRelaxation { .. } => "quasi_linear_relaxation",
             Effect::MediumDrag { .. } => "medium_drag",
+            Effect::SqueezeFilm { .. } => "squeeze_film",
         }
     }
 
@@ -161,7 +171,8 @@ impl Effect {
             | Effect::Hysteresis { .. }
             | Effect::Adhesion { .. }
             | Effect::QuasiLinearRelaxation { .. }
-            | Effect::MediumDrag { .. } => 2,
+            | Effect::MediumDrag { .. }
+            | Effect::SqueezeFilm { .. } => 2,
             Effect::SensorCrosstalk { .. } => 3,
             _ => 1,
         };
@@ -194,6 +205,7 @@ impl Effect {
                 arity(2).map(|_| Effect::QuasiLinearRelaxation { fraction: p[0], time_constant: p[1] })
             }
             "medium_drag" => arity(2).map(|_| Effect::MediumDrag { damping: p[0], tare_speed: p[1] }),
+            "squeeze_film" => arity(2).map(|_| Effect::SqueezeFilm { damping: p[0], reach: p[1] }),
             _ => {
                 Err(ContactError::InvalidModel(format!("unknown effect `{}`", id.chars().take(40).collect::<String>())))
             }
@@ -214,6 +226,7 @@ impl Effect {
             Effect::Adhesion { force, range } => [force, range, 0.0],
             Effect::QuasiLinearRelaxation { fraction, time_constant } => [fraction, time_constant, 0.0],
             Effect::MediumDrag { damping, tare_speed } => [damping, tare_speed, 0.0],
+            Effect::SqueezeFilm { damping, reach } => [damping, reach, 0.0],
         }
     }
 
@@ -246,6 +259,9 @@ impl Effect {
             Effect::MediumDrag { damping, .. } if damping < 0.0 => bad(&format!("damping must be ≥ 0, not {damping}")),
             Effect::MediumDrag { tare_speed, .. } if tare_speed.abs() > MAX_TARE_SPEED => {
                 bad(&format!("|tare_speed| must be at most {MAX_TARE_SPEED} m/s, not {tare_speed}"))
+            }
+            Effect::SqueezeFilm { damping, reach } if damping < 0.0 || reach <= 0.0 => {
+                bad(&format!("damping must be ≥ 0 and reach > 0, not {damping} and {reach}"))
             }
             _ => Ok(()),
         }
@@ -343,27 +359,8 @@ pub fn finite(name: &'static str, v: f64) -> Result<f64, ContactError> {
     if v.is_finite() { Ok(v) } else { Err(ContactError::NonFinite { name, value: v }) }
 }
 
+pub use crate::effect_laws::*;
 pub use crate::limits::*;
-
-/// The share of an [`Effect::Adhesion`]'s pull-off force at deformation z \[m\] after the contact's deepest
-/// deformation `peak`: min(1, (peak − z)/(peak + range)), 0 while pressing deeper.
-#[inline]
-pub fn adhesion_share(peak: f64, z: f64, range: f64) -> f64 {
-    ((peak - z) / (peak + range)).clamp(0.0, 1.0)
-}
-
-/// The contact's deepest deformation after a step to z: deeper in contact, kept until z is `reach` \[m\]
-/// beyond the surface (the farthest an adhesion holds on), then forgotten.
-#[inline]
-pub fn next_adhesion_peak(peak: Option<f64>, z: f64, reach: f64) -> Option<f64> {
-    if z > 0.0 {
-        Some(peak.map_or(z, |p| p.max(z)))
-    } else if z < -reach {
-        None
-    } else {
-        peak
-    }
-}
 
 /// State of the effects that have memory (see [`ContactModel::step`]).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -387,23 +384,12 @@ pub struct EffectState {
     pub rate: f64,
 }
 
-/// One step of a Maxwell branch, ṡ = k_m ż − s/τ, over dt: the branch force s after a step in which the
-/// spring's force would change by `spring_change` = k_m·Δz, exact when the deformation changes linearly
-/// over the step. The measured change of the deformation, not its rate held over the step, drives it: the
-/// update is then second-order in the step (recordings at 100 Hz drive a 0.15 s branch), and the noise of
-/// a measured deformation telescopes instead of accumulating. dt = 0 is a step of the deformation alone.
+/// The share of a [`Effect::SqueezeFilm`]'s damping that acts after the state's last step: reach / (gap +
+/// reach), the gap the distance of the last effective deformation beyond the surface (1 in contact).
 #[inline]
-pub fn maxwell_step(s: f64, spring_change: f64, dt: f64, time_constant: f64) -> f64 {
-    if dt <= 0.0 {
-        return s + spring_change;
-    }
-    maxwell_step_with_decay(s, spring_change, dt, time_constant, (-dt / time_constant).exp())
-}
-
-/// [`maxwell_step`] with exp(−dt/τ) given (computed once for a series of equal steps); dt > 0.
-#[inline]
-pub fn maxwell_step_with_decay(s: f64, spring_change: f64, dt: f64, time_constant: f64, decay: f64) -> f64 {
-    s * decay + spring_change * time_constant * (1.0 - decay) / dt
+pub fn squeeze_share(reach: f64, state: &EffectState) -> f64 {
+    let gap = (-state.last_deformation.unwrap_or(0.0)).max(0.0);
+    reach / (gap + reach)
 }
 
 /// The most readings a delay line keeps (one second at 10 kHz); with finer steps the delay is cut short.
@@ -511,7 +497,13 @@ impl ContactModel {
                     ));
                 }
                 Effect::Adhesion { force, .. } => adhesion += force,
-                Effect::MediumDrag { damping, .. } => drag += damping,
+                Effect::SqueezeFilm { reach, .. } if reach > MAX_SQUEEZE_REACH => {
+                    return bad(format!(
+                        "a squeeze film reaching {reach} m from the surface, farther than {MAX_SQUEEZE_REACH} m"
+                    ));
+                }
+                // In contact a squeeze film drags with the whole of its damping.
+                Effect::MediumDrag { damping, .. } | Effect::SqueezeFilm { damping, .. } => drag += damping,
                 _ => {}
             }
         }
@@ -743,6 +735,7 @@ impl ContactModel {
                 Effect::SensorBias { offset } => offset,
                 Effect::SensorDrift { rate } => rate * state.since_tare,
                 Effect::MediumDrag { damping, tare_speed } => damping * (state.rate - tare_speed),
+                Effect::SqueezeFilm { damping, reach } => damping * squeeze_share(reach, state) * state.rate,
                 _ => 0.0,
             })
             .sum()
@@ -770,6 +763,7 @@ impl ContactModel {
                 }
                 Effect::ToolGravity { mass } => reading += mass * gravity,
                 Effect::MediumDrag { damping, tare_speed } => reading += damping * (state.rate - tare_speed),
+                Effect::SqueezeFilm { damping, reach } => reading += damping * squeeze_share(reach, state) * state.rate,
                 Effect::TimeDelay { delay: d } => delay = Some(d),
                 _ => {}
             }

@@ -457,6 +457,48 @@ fn a_medium_drag_is_read_at_the_steps_rate_less_its_tare_speed_in_and_out_of_con
     assert_eq!(ContactModel::from_yaml(file).unwrap().effects, [Effect::MediumDrag { damping: 8.0, tare_speed: 0.01 }]);
 }
 
+/// A squeeze film's drag is read at the step's rate with the share reach / (gap + reach) of its damping:
+/// the whole in contact, half at one reach from the surface, a tenth at nine; the surface force is
+/// untouched, a reading less `sensor_offset` is it, and its damping in contact counts toward the medium's
+/// bound.
+#[test]
+fn a_squeeze_film_drags_with_all_of_its_damping_in_contact_and_half_of_it_one_reach_away() {
+    let (damping, reach) = (30.0, 2e-3);
+    let mut model = ContactModel::new(Kind::HuntCrossley, 1e5, 1e3).unwrap();
+    let plain = model.clone();
+    model.effects = vec![Effect::SqueezeFilm { damping, reach }];
+    let (mut state, mut plain_state) = (model.effect_state(), plain.effect_state());
+    for (z, zdot, share) in
+        [(-18e-3, 0.03, 0.1), (-2e-3, 0.01, 0.5), (0.0, 0.02, 1.0), (3e-3, -0.02, 1.0), (-2e-3, -0.05, 0.5)]
+    {
+        let (surface, measured) = model.step(&mut state, z, zdot, 1e-3).unwrap();
+        let (plain_surface, _) = plain.step(&mut plain_state, z, zdot, 1e-3).unwrap();
+        assert_eq!(surface, plain_surface, "the film's drag acts on the hand, not in the surface's force");
+        let drag = share * damping * zdot;
+        assert!((measured - (surface + drag)).abs() <= 1e-12, "at ({z}, {zdot}): {measured} vs {}", surface + drag);
+        assert!((measured - model.sensor_offset(&state) - surface).abs() <= 1e-12);
+    }
+    model.plausible().unwrap();
+    for (damping, reach, words) in [
+        (150.0, 1e-3, "more than 100 N·s/m"),
+        (-1.0, 1e-3, "damping must be ≥ 0 and reach > 0"),
+        (1.0, 0.0, "damping must be ≥ 0 and reach > 0"),
+        (1.0, 0.5, "farther than 0.02 m"),
+        (f64::NAN, 1e-3, "finite"),
+    ] {
+        model.effects = vec![Effect::SqueezeFilm { damping, reach }];
+        let err = model.plausible().unwrap_err().to_string();
+        assert!(err.contains(words), "{damping} N·s/m reaching {reach} m: {err}");
+    }
+    model.effects =
+        vec![Effect::SqueezeFilm { damping: 60.0, reach: 1e-3 }, Effect::MediumDrag { damping: 60.0, tare_speed: 0.0 }];
+    assert!(model.plausible().unwrap_err().to_string().contains("in all"));
+    let file = "kind: kelvin_voigt\nstiffness: 1.0e4\neffects:\n  - {id: squeeze_film, damping: 30.0, reach: 0.002}\n";
+    let read = ContactModel::from_yaml(file).unwrap().effects;
+    assert_eq!(read, [Effect::SqueezeFilm { damping: 30.0, reach: 2e-3 }]);
+    assert_eq!(Effect::from_parameters("squeeze_film", &read[0].parameter_list()).unwrap(), read[0]);
+}
+
 #[test]
 fn adhesion_beyond_what_a_surface_can_pull_is_implausible() {
     let mut model = ContactModel::new(Kind::KelvinVoigt, 1e4, 0.0).unwrap();

@@ -2,7 +2,7 @@
 //! [`Analysis::refit_baseline`] (k, λ and the surface refitted, the phases and noise floor at that surface)
 //! → [`Analysis::name_and_add`] (the rounds: screen every family, judge, name the best, add it, refit) →
 //! [`Analysis::polish_once_more`] → [`Analysis::undo_rounds_that_simulate_worse`] →
-//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::try_the_medium_drag`] →
+//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::try_the_medium`] →
 //! [`Analysis::drop_shapes_at_an_edge`] →
 //! [`Analysis::keep_the_baseline_if_better`] → [`Analysis::report`].
 
@@ -234,7 +234,7 @@ impl<'a> Analysis<'a> {
         let times = |f: Family| self.now.named.iter().filter(|x| x.0 == f).count();
         let families: Vec<Family> = Family::ALL
             .into_iter()
-            .filter(|&f| f != Family::QuasiLinear && f != Family::MediumDrag)
+            .filter(|&f| !matches!(f, Family::QuasiLinear | Family::MediumDrag | Family::SqueezeFilm))
             .filter(|&f| times(f) < if f == Family::Relaxation { MAX_RELAXATION_BRANCHES } else { 1 })
             .filter(|&f| f.observable(&self.data))
             .collect();
@@ -495,36 +495,71 @@ impl<'a> Analysis<'a> {
         Ok(())
     }
 
-    /// The medium's drag, tried once the surface's own effects are named: its only evidence of its own is
-    /// free space crossed at two speeds; in contact it is one more damping, and a loop of constant width
-    /// between loading and unloading, which the surface's dissipation makes too. Judged by every rule a
-    /// round's candidate meets, and taken where the simulated record (every sample) fits better by the
-    /// gain a new effect needs and the contact no worse.
-    pub(crate) fn try_the_medium_drag(&mut self) -> Result<(), DiscrepancyError> {
+    /// The medium, tried once the surface's own effects are named: its only evidence of its own is free
+    /// space crossed at two speeds; in contact it is one more damping, and a loop of constant width between
+    /// loading and unloading, which the surface's dissipation makes too. Three forms: the medium's drag
+    /// alone, a squeeze film alone (its reach the best of its grid by held-out error, not at the grid's
+    /// ends), and both (taken only where they beat the better single by the gain a new effect needs). Each
+    /// is judged by every rule a round's candidate meets and admitted where the simulated record (every
+    /// sample) fits better by the gain a new effect needs and the contact no worse; of those admitted, the
+    /// one with the least in-contact gap (the gap every stage reports) is taken.
+    pub(crate) fn try_the_medium(&mut self) -> Result<(), DiscrepancyError> {
         if !self.ambiguous.is_empty() || !Family::MediumDrag.observable(&self.data) {
             return Ok(());
         }
-        let drag = assess(&self.data, &self.now.structure, &[(Family::MediumDrag, 0.0)], &self.scales);
-        if !self.passes(&drag, &self.free_stretches(), &OnceCell::new()) {
-            return Ok(());
+        let drag = (Family::MediumDrag, 0.0);
+        let mut options = vec![vec![drag]];
+        for beside in [&[][..], &[drag][..]] {
+            if let Some(reach) = self.best_squeeze_reach(beside) {
+                options.push(beside.iter().copied().chain([(Family::SqueezeFilm, reach)]).collect());
+            }
         }
-        let (structure, shift_se, _) = refine_surface(&self.data, &drag.st);
-        let fit = fit::fit(&self.data, &structure);
-        let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain([(Family::MediumDrag, 0.0)]).collect();
-        let model = self.model_of(&structure, &fit, &named);
-        model.validate()?;
         let before = whole_rms(self.series, &self.model, self.now.structure.shift)?;
-        let gap = self.gap_of(&model, structure.shift)?;
-        if whole_rms(self.series, &model, structure.shift)? > before * (1.0 - self.options.min_gain)
-            || gap.rms > self.now.gap.rms * (1.0 + 1e-3)
-        {
-            return Ok(());
+        let stretches = self.free_stretches();
+        let mut best: Option<(f64, Progress, ContactModel)> = None;
+        for fams in options {
+            let cand = assess(&self.data, &self.now.structure, &fams, &self.scales);
+            if !self.passes(&cand, &stretches, &OnceCell::new()) {
+                continue;
+            }
+            let (structure, shift_se, _) = refine_surface(&self.data, &cand.st);
+            let fit = fit::fit(&self.data, &structure);
+            let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain(fams.iter().copied()).collect();
+            let model = self.model_of(&structure, &fit, &named);
+            model.validate()?;
+            let rms = whole_rms(self.series, &model, structure.shift)?;
+            let gap = self.gap_of(&model, structure.shift)?;
+            let gain = if fams.len() > 1 { self.options.min_gain } else { 0.0 };
+            if rms > before * (1.0 - self.options.min_gain)
+                || gap.rms > self.now.gap.rms * (1.0 + 1e-3)
+                || best.as_ref().is_some_and(|(best_gap, ..)| gap.rms > best_gap * (1.0 - gain))
+            {
+                continue;
+            }
+            let mut stages = self.now.stages.clone();
+            stages.extend(fams.iter().map(|_| (self.now.gap.rms, gap.rms)));
+            let progress = Progress { structure, fit, named, stages, gap, shift_se, rate_se: self.now.rate_se };
+            best = Some((progress.gap.rms, progress, model));
         }
-        self.now.stages.push((self.now.gap.rms, gap.rms));
-        (self.now.structure, self.now.fit, self.now.named, self.model, self.now.gap, self.now.shift_se) =
-            (structure, fit, named, model, gap, shift_se);
-        self.move_surface();
+        if let Some((_, progress, model)) = best {
+            (self.now, self.model) = (progress, model);
+            self.move_surface();
+        }
         Ok(())
+    }
+
+    /// The reach of a squeeze film, beside `beside`, that predicts held-out data best; None where that is
+    /// at an end of the grid (a bound, not a finding).
+    fn best_squeeze_reach(&self, beside: &[(Family, f64)]) -> Option<f64> {
+        let held_out_error = |reach: f64| {
+            let fams: Vec<(Family, f64)> = beside.iter().copied().chain([(Family::SqueezeFilm, reach)]).collect();
+            let st = fams.iter().fold(self.now.structure.clone(), |s, &(f, sh)| f.apply(&s, sh));
+            fit::fit(&self.data, &st).cv_mse
+        };
+        let grid = Family::SqueezeFilm.grid(&self.scales, &self.now.structure);
+        let (reach, _) =
+            grid.into_iter().map(|reach| (reach, held_out_error(reach))).min_by(|a, b| a.1.total_cmp(&b.1))?;
+        self.scales.at_edge(Family::SqueezeFilm, reach).is_none().then_some(reach)
     }
 
     /// A shape still at an end of its range after every polish is a bound, not a finding: the effect is

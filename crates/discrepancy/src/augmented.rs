@@ -48,6 +48,7 @@ pub(crate) fn to_model(
                     Some(Effect::QuasiLinearRelaxation { fraction: (b(f) / k).max(0.0), time_constant: sh })
                 }
                 Family::MediumDrag => Some(Effect::MediumDrag { damping: b(f).max(0.0), tare_speed: d.tare_speed }),
+                Family::SqueezeFilm => Some(Effect::SqueezeFilm { damping: b(f).max(0.0), reach: sh }),
                 Family::StiffnessExponent => None,
             }
         })
@@ -204,6 +205,10 @@ pub(crate) fn uncertainty(
         Family::MediumDrag => {
             u.insert("damping_n_s_per_m".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
         }
+        Family::SqueezeFilm => {
+            u.insert("damping_n_s_per_m".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
+            u.insert("reach_m".into(), z * shape_se(&Term::Squeeze));
+        }
         Family::Adhesion => {
             u.insert("force_n".into(), z * fit.se[term_index(st, fam, sh).unwrap_or(2)]);
             // Where it lets go is known to within the deformation's step across the letting go, however
@@ -274,6 +279,10 @@ pub(crate) fn parameters(model: &ContactModel, fam: Family, shape: f64) -> BTree
             // Its tare speed is read from the record, not fitted: the model file carries it.
             (Effect::MediumDrag { damping, .. }, Family::MediumDrag) => {
                 p.insert("damping_n_s_per_m".into(), damping);
+            }
+            (Effect::SqueezeFilm { damping, reach }, Family::SqueezeFilm) => {
+                p.insert("damping_n_s_per_m".into(), damping);
+                p.insert("reach_m".into(), reach);
             }
             _ => {}
         }

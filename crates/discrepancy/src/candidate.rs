@@ -53,7 +53,9 @@ pub(crate) fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: 
                 // Its letting go seen: the hand goes past the range after a contact at least once.
                 Family::Adhesion => physical &= b > 0.0 && let_go_steps(d, &st, j).next().is_some(),
                 // A medium resists the motion; a plausible one (`MAX_MEDIUM_DRAG`).
-                Family::MediumDrag => physical &= b > 0.0 && b <= softcontact_contact::MAX_MEDIUM_DRAG,
+                Family::MediumDrag | Family::SqueezeFilm => {
+                    physical &= b > 0.0 && b <= softcontact_contact::MAX_MEDIUM_DRAG
+                }
                 _ => {}
             }
         } else if f == Family::TimeDelay {

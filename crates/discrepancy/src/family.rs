@@ -18,10 +18,11 @@ pub(crate) enum Family {
     Adhesion,
     QuasiLinear,
     MediumDrag,
+    SqueezeFilm,
 }
 
 impl Family {
-    pub(crate) const ALL: [Family; 12] = [
+    pub(crate) const ALL: [Family; 13] = [
         Family::SensorBias,
         Family::SensorDrift,
         Family::Relaxation,
@@ -34,6 +35,7 @@ impl Family {
         Family::Adhesion,
         Family::QuasiLinear,
         Family::MediumDrag,
+        Family::SqueezeFilm,
     ];
 
     pub(crate) fn id(self) -> &'static str {
@@ -50,6 +52,7 @@ impl Family {
             Family::Adhesion => "adhesion",
             Family::QuasiLinear => "quasi_linear_relaxation",
             Family::MediumDrag => "medium_drag",
+            Family::SqueezeFilm => "squeeze_film",
         }
     }
 
@@ -90,7 +93,8 @@ impl Family {
                 contacts.count() >= 2 || 2 * in_contact >= d.s.z.len()
             }
             // The hand moving through the medium out of contact: in contact a drag is one more damping.
-            Family::MediumDrag => d.drag_observable,
+            // A squeeze film the same way, near the surface.
+            Family::MediumDrag | Family::SqueezeFilm => d.drag_observable,
             _ => true,
         }
     }
@@ -109,6 +113,7 @@ impl Family {
             Family::Adhesion => Some(Term::Adhesion(shape)),
             Family::QuasiLinear => Some(Term::QuasiRelax(shape)),
             Family::MediumDrag => Some(Term::Drag),
+            Family::SqueezeFilm => Some(Term::Squeeze(shape)),
             Family::OffsetDrift => Some(Term::OffsetLin),
             Family::StiffnessExponent => None,
         }
@@ -164,6 +169,7 @@ impl Family {
             Family::TimeDelay => log(scales.delays.0, scales.delays.1, 8),
             Family::Adhesion => log(scales.adhesion_ranges.0, scales.adhesion_ranges.1, 9),
             Family::QuasiLinear => scales.time_constant_grid(),
+            Family::SqueezeFilm => log(scales.squeeze_reaches.0, scales.squeeze_reaches.1, 9),
             _ => vec![0.0],
         }
     }
@@ -177,6 +183,7 @@ impl Family {
                 | Family::TimeDelay
                 | Family::Adhesion
                 | Family::QuasiLinear
+                | Family::SqueezeFilm
         )
     }
 }
@@ -212,7 +219,10 @@ pub(crate) fn would_separate(a: Family, b: Family) -> String {
             "lateral motion at a held deformation: only crosstalk follows the tangential load"
         }
         (ToolGravity, _) | (_, ToolGravity) => "tilting the hand in free space: only the tool's weight follows the tilt",
-        (MediumDrag, _) | (_, MediumDrag) => {
+        (MediumDrag, SqueezeFilm) => {
+            "free space crossed at one speed from far away up to the surface: a squeeze film's drag grows as the gap closes, the medium's stays"
+        }
+        (MediumDrag, _) | (_, MediumDrag) | (SqueezeFilm, _) | (_, SqueezeFilm) => {
             "free space crossed at two speeds, both ways: only the medium's drag follows the hand's speed out of contact"
         }
         _ => "a hold of several seconds, pushes at two speeds and to two depths, and free space before and after",

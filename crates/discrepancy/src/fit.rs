@@ -12,60 +12,10 @@ use softcontact_contact::{ContactModel, adhesion_share, maxwell_step, maxwell_st
 
 use crate::Series;
 use crate::folds::{cells, contiguous_folds, interleaved_folds};
+pub(crate) use crate::term::Term;
 
 /// One column of the design, one value a sample; shared, so that a cached column is handed out without a copy (and a screen on another thread may hold one).
 pub(crate) type Col = Arc<[f64]>;
-
-/// An augmentation term with its shape parameter fixed; each adds one column (one linear amplitude).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Term {
-    /// 1 over all samples; coefficient offset [N].
-    Bias,
-    /// Time since the last tare over all samples; coefficient rate [N/s].
-    SensorDrift,
-    /// Maxwell branch of unit stiffness and time constant τ [s]; coefficient k_m [N/m].
-    Relax(f64),
-    /// Quasi-linear branch: driven by zᵃ instead of z, time constant τ [s]; coefficient g·k.
-    QuasiRelax(f64),
-    /// zᵃ·tanh(ż/v₀) with v₀ [m/s]; coefficient k·h [N/mᵃ].
-    Hyst(f64),
-    /// −a·zᵃ⁻¹ (linearised shift of the surface position); coefficient k·δz₀. Always in the structure: the
-    /// contact position is refitted with every candidate, so that no effect absorbs an error of the onset.
-    Shift,
-    /// −t·a·zᵃ⁻¹ (linearised surface-zero drift); coefficient k·r.
-    OffsetLin,
-    /// zᵃ·ln z (linearised change of the stiffness exponent); coefficient k·δa.
-    ExpDeriv,
-    /// The tangential force along the recording's lateral axis [N]; coefficient the crosstalk coupling.
-    Crosstalk,
-    /// The tangential force along the second lateral axis, across the first in the surface's plane, where
-    /// the record loads that way too ([`Data::second_axis`]); coefficient the coupling along it.
-    CrosstalkSecond,
-    /// The change of gravity along the normal since the last tare [m/s²]; coefficient the unknown mass [kg].
-    Gravity,
-    /// Minus the share of an adhesion's pull-off force with range δ [m] ([`softcontact_contact::Effect::Adhesion`]);
-    /// coefficient the pull-off force [N].
-    Adhesion(f64),
-    /// The hand's rate along the normal less its rate while the sensor's zero was read [m/s] ([`Data::drag_rate`]),
-    /// in contact and out of it; coefficient the medium's drag [N·s/m].
-    Drag,
-}
-
-impl Term {
-    /// A term of the sensor alone: it acts out of contact too.
-    fn of_sensor(self) -> bool {
-        matches!(
-            self,
-            Term::Bias | Term::SensorDrift | Term::Crosstalk | Term::CrosstalkSecond | Term::Gravity | Term::Drag
-        )
-    }
-
-    /// A term the law's clamp at zero leaves alone: the sensor's, and an adhesion, which pulls on what the
-    /// clamped law gives and beyond the surface.
-    fn unclamped(self) -> bool {
-        self.of_sensor() || matches!(self, Term::Adhesion(_))
-    }
-}
 
 /// Base law exponents a (fitted), b, c (of the baseline kind), the surface position's shift [m] and its drift
 /// rate [m/s] (refined by Gauss-Newton on the exact law), plus the terms.
@@ -355,8 +305,10 @@ fn design_of(st: &Structure, clamped: &[bool]) -> Vec<(Column, [f64; 5], ColumnI
             // What the column depends on: the surface (not the sensor's columns), and the exponent its
             // power of z has (the branches have none).
             let key = match id {
+                Column::Term(Term::Relax(_) | Term::Adhesion(_) | Term::Squeeze(_)) => {
+                    [0.0, 0.0, 0.0, st.shift, st.offset_rate]
+                }
                 Column::Term(t) if t.of_sensor() => [0.0; 5],
-                Column::Term(Term::Relax(_) | Term::Adhesion(_)) => [0.0, 0.0, 0.0, st.shift, st.offset_rate],
                 Column::Term(Term::QuasiRelax(_)) => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
                 Column::Rate => [0.0, st.b, st.c, st.shift, st.offset_rate],
                 _ => [st.a, 0.0, 0.0, st.shift, st.offset_rate],
@@ -439,6 +391,7 @@ fn column(d: &Data, st: &Structure, zeff: &[f64], id: Column) -> Vec<f64> {
         Term::Bias => vec![1.0; n],
         Term::SensorDrift => d.since_tare.clone(),
         Term::Drag => d.drag_rate.clone(),
+        Term::Squeeze(reach) => (0..n).map(|i| s.zdot[i] * reach / ((-zeff[i]).max(0.0) + reach)).collect(),
         Term::Relax(tau) | Term::QuasiRelax(tau) => {
             // The branch of unit stiffness, updated as ContactModel::step_surface updates it; a
             // quasi-linear one driven by zᵃ.

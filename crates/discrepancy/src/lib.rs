@@ -53,14 +53,14 @@
 //!
 //! # Files, in the order the workflow uses them
 //! `series.rs` (the samples, checked) → `phase.rs` (phases, noise floor) → `scales.rs` (the record's
-//! scales: shape grids, floors, bounds) → `fit.rs` (the linear columns and the joint fit, held-out by
+//! scales: shape grids, floors, bounds) → `term.rs` (the augmentation terms) → `fit.rs` (the linear columns and the joint fit, held-out by
 //! folds) → `family.rs` (the library as screened: id, term, grid) → `candidate.rs` (one candidate fitted
 //! and judged, the rules it must pass) → `refine.rs` (the named shapes refined together) →
 //! `augmented.rs` (the augmented model, its simulated gap, the surface, parameters and intervals) →
 //! `report.rs` (what is reported, where the gap is) → `analysis.rs` (the steps [`analyse`] runs, one
 //! method each: refit the baseline, the rounds of naming and adding, the checks after them) → `law.rs`
 //! (the other kinds, refitted, as rivals of the given one). Beside them:
-//! `wrench.rs` (every wrench channel), `arm.rs` (the arm's own effects), `loading_paths.rs` (tangential
+//! `drag.rs` (what a medium's drag is read against), `wrench.rs` (every wrench channel), `arm.rs` (the arm's own effects), `loading_paths.rs` (tangential
 //! path effects).
 
 mod analysis;
@@ -80,6 +80,7 @@ mod refine;
 mod report;
 mod scales;
 mod series;
+mod term;
 #[cfg(test)]
 mod tests;
 mod wrench;
@@ -229,7 +230,7 @@ pub fn analyse(series: &Series, baseline: &ContactModel, options: &Options) -> R
         analysis.polish_once_more()?;
         analysis.undo_rounds_that_simulate_worse();
         analysis.try_the_quasi_linear_form()?;
-        analysis.try_the_medium_drag()?;
+        analysis.try_the_medium()?;
         analysis.drop_shapes_at_an_edge()?;
         analysis.keep_the_baseline_if_better(given_rms)?;
         analysis.report()

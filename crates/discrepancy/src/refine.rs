@@ -103,6 +103,7 @@ fn within_bounds(s: &Structure, scales: &Scales) -> bool {
         Term::Hyst(v0) => v0 > 0.0 && v0 <= scales.saturating_speed,
         Term::Adhesion(range) => (scales.adhesion_ranges.0..=scales.adhesion_ranges.1).contains(&range),
         Term::QuasiRelax(tau) => (scales.time_constants.0..=scales.time_constants.1).contains(&tau),
+        Term::Squeeze(reach) => (scales.squeeze_reaches.0..=scales.squeeze_reaches.1).contains(&reach),
         _ => true,
     }) && taus.iter().enumerate().all(|(i, a)| taus[i + 1..].iter().all(|b| (a / b).ln().abs() >= 3f64.ln()))
 }
@@ -190,6 +191,7 @@ pub(crate) fn shape_of(t: Term) -> Option<(Family, f64)> {
         Term::Hyst(x) => Some((Family::Hysteresis, x)),
         Term::Adhesion(x) => Some((Family::Adhesion, x)),
         Term::QuasiRelax(x) => Some((Family::QuasiLinear, x)),
+        Term::Squeeze(x) => Some((Family::SqueezeFilm, x)),
         _ => None,
     }
 }

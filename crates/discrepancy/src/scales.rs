@@ -44,6 +44,9 @@ pub struct Scales {
     pub delays: (f64, f64),
     /// The adhesion ranges screened \[m\]: from a fiftieth of the deepest deformation to twice it.
     pub adhesion_ranges: (f64, f64),
+    /// The reaches of a squeeze film screened \[m\]: from a fiftieth of the deepest deformation to half the
+    /// farthest distance from the surface the record goes (at most [`softcontact_contact::MAX_SQUEEZE_REACH`]).
+    pub squeeze_reaches: (f64, f64),
 }
 
 impl Scales {
@@ -53,15 +56,17 @@ impl Scales {
         let sample_period = dt.get(dt.len() / 2).copied().unwrap_or(0.0).max(f64::MIN_POSITIVE);
         let duration = series.t.last().copied().unwrap_or(0.0) - series.t.first().copied().unwrap_or(0.0);
         let lo = RELAXATION_MIN_SAMPLES * sample_period;
+        let deepest = series.z.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
         Scales {
             sample_period,
             p95_speed: p95_speed(series).max(f64::MIN_POSITIVE),
             saturating_speed: saturating_speed(series, v_th),
             time_constants: (lo, (RELAXATION_MAX_SHARE * duration).max(4.0 * TIME_CONSTANT_GRID_FROM * sample_period)),
             delays: (DELAY_SAMPLES.0 * sample_period, (DELAY_SAMPLES.1 * sample_period).min(MAX_DELAY)),
-            adhesion_ranges: {
-                let deepest = series.z.iter().cloned().fold(0.0, f64::max).max(f64::MIN_POSITIVE);
-                (0.02 * deepest, 2.0 * deepest)
+            adhesion_ranges: (0.02 * deepest, 2.0 * deepest),
+            squeeze_reaches: {
+                let farthest = series.z.iter().map(|z| -z).fold(0.0, f64::max);
+                (0.02 * deepest, (0.5 * farthest).min(softcontact_contact::MAX_SQUEEZE_REACH).max(0.1 * deepest))
             },
         }
     }
@@ -85,6 +90,7 @@ impl Scales {
             Family::Hysteresis => (0.01 * self.p95_speed, self.saturating_speed),
             Family::TimeDelay => self.delays,
             Family::Adhesion => self.adhesion_ranges,
+            Family::SqueezeFilm => self.squeeze_reaches,
             Family::StiffnessExponent => {
                 let inside = shape > EXPONENT_RANGE.0 + 0.02 && shape < EXPONENT_RANGE.1 - 0.02;
                 return (!inside).then_some(EXPONENT_RANGE);

@@ -783,6 +783,31 @@ fn a_medium_drag_written_by_hand_is_named_with_its_damping() {
     }
 }
 
+/// A squeeze film written here in a form of its own, not the library's: the reading gains c·(1 + h/δ)^−1.2·ż
+/// out of contact, h the distance to the surface, and c·ż in contact (a film thinning by its own power,
+/// where the library's thins as δ/(h + δ)), the force zeroed over the free approach as an instrument zeroes
+/// it. Named as a squeeze film with its damping in contact; a record with the medium's drag alone names
+/// no film (`a_medium_drag_written_by_hand_is_named_with_its_damping`).
+#[test]
+fn a_squeeze_film_written_by_hand_in_another_form_is_named_with_its_damping() {
+    let (damping, reach) = (40.0, 0.5e-3);
+    let film = |_: f64, z: f64, zdot: f64| damping * (1.0 + (-z).max(0.0) / reach).powf(-1.2) * zdot;
+    for (j, m) in [kv(), af()].iter().enumerate() {
+        let mut s = record(m, Exc::new(200.0), 0.02, 110 + j as u64, &film);
+        let first_contact = s.z.iter().position(|&z| z > 0.0).unwrap();
+        let zero = (0..first_contact).map(|i| film(s.t[i], s.z[i], s.zdot[i])).sum::<f64>() / first_contact as f64;
+        s.f.iter_mut().for_each(|f| *f -= zero);
+        let r = analyse(&s, m, &Options::default()).unwrap();
+        show("squeeze film by hand", &r);
+        assert!(ids(&r).contains(&"squeeze_film"), "{:?}: {:?}", m.kind, ids(&r));
+        assert!(ids(&r).iter().all(|id| ["squeeze_film", "medium_drag"].contains(id)), "{:?}", ids(&r));
+        within("damping in contact", param(&r, "squeeze_film", "damping_n_s_per_m"), damping, 0.2);
+        let fitted_reach = param(&r, "squeeze_film", "reach_m");
+        assert!(fitted_reach > reach / 2.0 && fitted_reach < reach * 2.0, "reach {fitted_reach} m");
+        assert!(shrink_ratio(&r) >= 0.8, "shrink {} of the ideal", shrink_ratio(&r));
+    }
+}
+
 /// A baseline whose forces on the record overflow (a drag or a bias of 1e300, finite each) is refused with
 /// a clear error, not analysed to an infinite residual.
 #[test]

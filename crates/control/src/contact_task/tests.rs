@@ -183,6 +183,13 @@ fn augmented_models_beyond_what_a_tared_sensor_or_a_resting_surface_has_are_refu
         with(Effect::MediumDrag { damping: -1.0, tare_speed: 0.0 }),
         with(Effect::MediumDrag { damping: 1.0, tare_speed: 2.0 }),
         with(Effect::MediumDrag { damping: 150.0, tare_speed: 0.0 }),
+        with(Effect::SqueezeFilm { damping: f64::NAN, reach: 1e-3 }),
+        with(Effect::SqueezeFilm { damping: 1.0, reach: f64::INFINITY }),
+        with(Effect::SqueezeFilm { damping: 1e300, reach: 1e-3 }),
+        with(Effect::SqueezeFilm { damping: -1.0, reach: 1e-3 }),
+        with(Effect::SqueezeFilm { damping: 1.0, reach: 0.0 }),
+        with(Effect::SqueezeFilm { damping: 1.0, reach: 1.0 }),
+        with(Effect::SqueezeFilm { damping: 150.0, reach: 1e-3 }),
     ] {
         assert!(c.adopt_estimate(bad.clone(), &surface, None).is_err(), "{bad:?}");
         assert_eq!(c.contact_model(), &softcontact_sim::sponge());
