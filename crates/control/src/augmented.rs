@@ -295,6 +295,22 @@ mod tests {
     }
 
     #[test]
+    fn a_squeeze_films_drag_comes_out_of_a_reading_with_its_share_at_the_observed_gap() {
+        let mut m = standard_solid(2000.0, 0.0, 1.0);
+        m.effects = vec![Effect::SqueezeFilm { damping: 4.0, reach: 0.002 }];
+        let mut inverse = AugmentedInverse::new(m);
+        // One reach from the surface, closing in at 0.05 m/s: half of 4 N·s/m, 0.1 N, and no surface force.
+        inverse.observe(-0.002, 0.05, 1e-3).unwrap();
+        assert!(inverse.surface_reading(0.1).abs() < 1e-9);
+        // In contact, the whole of it.
+        inverse.observe(0.005, 0.05, 1e-3).unwrap();
+        assert!((inverse.surface_reading(10.2) - 10.0).abs() < 1e-9);
+        inverse.observe(0.005, 0.0, 1e-3).unwrap();
+        assert!((inverse.surface_reading(10.0) - 10.0).abs() < 1e-9);
+        assert!((inverse.hold(10.0, 0.005, 1e-3).unwrap() - 0.005).abs() < 1e-9);
+    }
+
+    #[test]
     fn hostile_inputs_are_errors_not_deformations() {
         let inverse = AugmentedInverse::new(standard_solid(2000.0, 600.0, 0.15));
         for f in [f64::NAN, f64::INFINITY, -1.0] {
