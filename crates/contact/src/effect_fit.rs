@@ -11,7 +11,9 @@
 //! has a gap (the contact was left: its samples are in contact only), sᵢ₀ the branch force the window
 //! starts with (a quasi-linear branch's rᵢ is driven by zᵃ instead, its amplitude g·k), u the share of an adhesion's pull-off force F_a (its range fixed; the window's deepest
 //! deformation its peak), and b the sensor's offset now (its bias and the drift since the tare, as one constant
-//! over the window). Least squares by QR; an amplitude fitted unphysical (λ, kᵢ < 0, h outside [0, 1)) is
+//! over the window). The named drags of the medium ([`Effect::MediumDrag`], [`Effect::SqueezeFilm`]) are
+//! held as named and taken from each reading first: in contact a drag is one more damping, which only free
+//! space (not in the window) tells from λ, and fitted beside λ it would be counted twice. Least squares by QR; an amplitude fitted unphysical (λ, kᵢ < 0, h outside [0, 1)) is
 //! fixed at zero and the rest fitted again. The surface is placed by a golden-section search of the
 //! residual over the offset range, as [`crate::estimate_contact_offset`] does for the base law.
 
@@ -136,6 +138,18 @@ fn design(samples: &[TimedSample], cols: &[Column], structure: &ContactModel, of
     a
 }
 
+/// What the structure's named drags add to the reading of sample `s` with the surface `offset` deeper than
+/// its zero, as [`ContactModel::sense`] adds them.
+fn named_drag(structure: &ContactModel, s: &Sample, offset: f64) -> f64 {
+    let gap = (offset - s.z).max(0.0);
+    let drag = |e: &Effect| match *e {
+        Effect::MediumDrag { damping, tare_speed } => damping * (s.zdot - tare_speed),
+        Effect::SqueezeFilm { damping, reach } => damping * reach / (gap + reach) * s.zdot,
+        _ => 0.0,
+    };
+    structure.effects.iter().map(drag).sum()
+}
+
 /// Least squares over the columns not fixed at zero; returns the amplitudes (zero where fixed) and the
 /// residual sum of squares.
 fn solve(a: &Mat<f64>, f: &Mat<f64>, free: &[bool]) -> Option<(Vec<f64>, f64)> {
@@ -170,7 +184,8 @@ fn fit_at(
     offset: f64,
 ) -> Option<(Vec<f64>, Vec<bool>, f64)> {
     let a = design(samples, cols, structure, offset);
-    let f = Mat::from_fn(samples.len(), 1, |i, _| samples[i].sample.f);
+    let f =
+        Mat::from_fn(samples.len(), 1, |i, _| samples[i].sample.f - named_drag(structure, &samples[i].sample, offset));
     let mut free = vec![true; cols.len()];
     loop {
         let (x, rss) = solve(&a, &f, &free)?;
@@ -367,6 +382,25 @@ mod tests {
                 }
                 other => panic!("effects out of order: {other:?}"),
             }
+        }
+    }
+
+    /// A named drag of the medium or of a squeeze film is held and taken from the readings: λ comes back
+    /// as the surface's own, not with the drag in it, and the drag stays as named.
+    #[test]
+    fn a_named_drag_is_held_and_not_counted_into_the_damping_again() {
+        for drag in [
+            Effect::MediumDrag { damping: 800.0, tare_speed: 0.0 },
+            Effect::SqueezeFilm { damping: 800.0, reach: 0.004 },
+        ] {
+            let mut truth = ContactModel::new(Kind::KelvinVoigt, 25_000.0, 300.0).unwrap();
+            truth.effects = vec![drag];
+            let samples = record(&truth, 0.0, 13.0);
+            let structure = ContactModel { stiffness: 30_000.0, damping: 0.0, ..truth.clone() };
+            let fitted = fit_with_effects_at(&samples, &structure, 0.0).unwrap();
+            assert!((fitted.damping / 300.0 - 1.0).abs() < 1e-3, "{drag:?}: λ {}", fitted.damping);
+            assert!((fitted.stiffness / 25_000.0 - 1.0).abs() < 1e-3, "{drag:?}: k {}", fitted.stiffness);
+            assert_eq!(fitted.effects, [drag]);
         }
     }
 
