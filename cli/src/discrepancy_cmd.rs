@@ -30,6 +30,11 @@ pub struct DiscrepancyArgs {
     /// The baseline contact model (model YAML); default: the best model identified from the recording.
     #[arg(long)]
     pub model: Option<PathBuf>,
+    /// A table's undeformed surface, where its depth column reads the model's zero of deformation: a
+    /// length in metres or with its unit (`812.5nm`); default: found from the force onset. The augmented
+    /// model file of a table names the surface it was fitted at.
+    #[arg(long, value_parser = table::parse_length, allow_hyphen_values = true)]
+    pub surface: Option<f64>,
     /// Folder for the augmented model (`<name>.augmented.yaml`).
     #[arg(long, default_value = "out/discrepancy")]
     pub out: PathBuf,
@@ -289,13 +294,17 @@ fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: b
     if say {
         identify_cmd::say_table(&id_args.file, &table, &found.onset, id_args.onset);
     }
-    let z: Vec<f64> = table.depth.iter().map(|d| d - found.surface).collect();
+    let surface = args.surface.unwrap_or(found.surface);
+    if say && args.surface.is_some() {
+        println!("the surface at {} of the depth column (--surface)", si(surface, "m"));
+    }
+    let z: Vec<f64> = table.depth.iter().map(|d| d - surface).collect();
     let f: Vec<f64> = table.f.iter().map(|f| f - found.onset.free_level).collect();
     let series = Series::new(table.t.clone(), z, table.depth_rate(), f)?;
     let baseline = baseline.unwrap_or_else(|| found.id.model.model.clone());
     let report = analyse(&series, &baseline, &Options::default())?;
     let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("table").to_string();
-    Ok(Analysis { name, baseline, surface: found.surface * Vector3::z(), series, report, from_table: true })
+    Ok(Analysis { name, baseline, surface: surface * Vector3::z(), series, report, from_table: true })
 }
 
 /// Reads the recording (or table), identifies it (or takes `--model`) and runs the workflow.
@@ -308,6 +317,13 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
         }
         None => None,
     };
+    if let Some(given) = baseline.as_ref().filter(|m| progress && !m.effects.is_empty()) {
+        let ids: Vec<&str> = given.effects.iter().map(|e| e.id()).collect();
+        println!(
+            "the given model's effects ({}) are in its baseline residual; the refit starts from its law alone and names effects anew",
+            ids.join(", ")
+        );
+    }
     if table::is_table(&args.recording.file) {
         return table_analysis(args, baseline, progress);
     }
@@ -373,6 +389,12 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
             !args.arm && !args.loading_paths && !args.closed_loop,
             "--arm, --loading-paths and --closed-loop read a ROS 2 recording, not a table"
         );
+    } else {
+        anyhow::ensure!(
+            args.surface.is_none(),
+            "--surface places a table's surface; a recording's surface is identify's, and the graph's overlay \
+             (`discrepancy --out`) carries where the workflow placed it (initial_surface)"
+        );
     }
     let analysis = analyse_file(args, true)?;
     if args.closed_loop {
@@ -384,8 +406,8 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     print_report(&report, name);
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let model_file = args.out.join(format!("{name}.augmented.yaml"));
-    std::fs::write(&model_file, report.model.to_yaml()).with_context(|| format!("writing {}", model_file.display()))?;
+    let table_surface = from_table.then(|| analysis_surface.z + report.contact_shift);
+    let model_file = write_model_file(args, name, &report.model, table_surface)?;
     println!("augmented model: {}", model_file.display());
     let overlay = if from_table {
         None
@@ -421,6 +443,29 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         identify_cmd::write_json(path, &value)?;
     }
     Ok(())
+}
+
+/// `DIR/NAME.augmented.yaml`: the augmented model; a table's begins with a comment naming the surface
+/// its fit placed (in the depth column's terms), with which `--model` starts from that fit again.
+fn write_model_file(
+    args: &DiscrepancyArgs,
+    name: &str,
+    model: &ContactModel,
+    table_surface: Option<f64>,
+) -> anyhow::Result<PathBuf> {
+    let model_file = args.out.join(format!("{name}.augmented.yaml"));
+    let mut text = model.to_yaml();
+    if let Some(surface) = table_surface {
+        let file = args.recording.file.display();
+        text = format!(
+            "# Fitted with the surface at {surface:e} m of the depth column of {file}: to start from this fit again,\n\
+             # softcontact discrepancy {file} --model {} --surface {surface:e}\n{text}",
+            model_file.display()
+        );
+        println!("its surface: {} of the depth column (--surface {surface:e})", si(surface, "m"));
+    }
+    std::fs::write(&model_file, text).with_context(|| format!("writing {}", model_file.display()))?;
+    Ok(model_file)
 }
 
 /// `DIR/NAME.params.yaml`: the augmented model as a parameter overlay of the graph. The controller

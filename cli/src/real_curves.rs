@@ -82,6 +82,7 @@ pub fn run(dir: &Path) -> anyhow::Result<Vec<Outcome>> {
                 sample_period: None,
             },
             model: None,
+            surface: None,
             out: out.clone(),
             loading_paths: false,
             arm: false,

@@ -59,6 +59,24 @@ pub fn is_table(path: &Path) -> bool {
             .is_some_and(|e| ["csv", "tsv", "txt", "dat"].contains(&e.to_ascii_lowercase().as_str()))
 }
 
+/// A length as a user writes it, a number in metres or with a unit of [`LENGTH_UNITS`] (`812.5nm`,
+/// `0.3 mm`); finite only.
+pub fn parse_length(text: &str) -> Result<f64, String> {
+    let text = text.trim();
+    // The unit is the longest of LENGTH_UNITS the text ends with; a number's own exponent (`e-7`) is not one.
+    let unit = LENGTH_UNITS.iter().filter(|(u, _)| text.ends_with(u)).max_by_key(|(u, _)| u.len());
+    let (number, scale) = match unit {
+        Some((u, scale)) => (text[..text.len() - u.len()].trim(), *scale),
+        None => (text, 1.0),
+    };
+    let value: f64 = number.parse().map_err(|_| {
+        let known: Vec<&str> = LENGTH_UNITS.iter().map(|u| u.0).collect();
+        format!("`{text}` is not a length: a number in metres, or with a unit ({})", known.join(", "))
+    })?;
+    let metres = value * scale;
+    if metres.is_finite() { Ok(metres) } else { Err(format!("`{text}` is not a finite length")) }
+}
+
 const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
 const LENGTH_UNITS: [(&str, f64); 6] =
     [("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("um", 1e-6), ("nm", 1e-9), ("cm", 1e-2)];
@@ -573,6 +591,19 @@ mod tests {
         let path = dir.path().join("t.csv");
         std::fs::write(&path, text).unwrap();
         (dir, path)
+    }
+
+    #[test]
+    fn a_length_is_read_in_metres_or_with_its_unit_and_anything_else_is_refused() {
+        assert_eq!(parse_length("1.5e-7"), Ok(1.5e-7));
+        assert_eq!(parse_length("-4.1e-5"), Ok(-4.1e-5));
+        assert!((parse_length("2e2 nm").unwrap() - 2e-7).abs() < 1e-20);
+        assert!((parse_length("812.5nm").unwrap() - 812.5e-9).abs() < 1e-20);
+        assert!((parse_length(" 0.3 mm").unwrap() - 3e-4).abs() < 1e-18);
+        assert!((parse_length("-2µm").unwrap() + 2e-6).abs() < 1e-18);
+        for bad in ["", "nm", "1 furlong", "NaN", "inf", "1e400", "1e300 cm", "1..2nm"] {
+            assert!(parse_length(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

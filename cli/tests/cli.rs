@@ -48,6 +48,11 @@ fn recording_commands_refuse_bad_arguments_before_touching_the_network() {
         let o = softcontact(args);
         assert!(!o.status.success() && text(&o).contains(want), "{args:?}: {}", text(&o));
     }
+    // A missing file is said once, not again as the cause of itself.
+    for args in [&["replay", "/nonexistent/run.mcap"][..], &["discrepancy", "/nonexistent/table.csv"]] {
+        let o = softcontact(args);
+        assert_eq!(text(&o).matches("No such file").count(), 1, "{args:?}: {}", text(&o));
+    }
 }
 
 #[test]

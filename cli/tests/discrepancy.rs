@@ -747,3 +747,67 @@ fn the_text_report_gives_no_value_for_a_parameter_that_is_not_identifiable() {
     }
     assert!(checked > 0, "flipsign's relaxation time is not pinned down by its 0.5 ms record\n{shown}");
 }
+
+/// A table of a medium more viscous than a plausible one (a Kelvin–Voigt surface of 5000 N/m under a
+/// squeeze film of 80 N·s/m reaching 5 mm and a drag of 40, 120 in all): the augmented model written
+/// keeps the medium within the bound (`MAX_MEDIUM_DRAG`, 100 N·s/m), so that the nodes take it.
+#[test]
+fn a_table_of_a_medium_beyond_the_bound_gives_a_model_within_it() {
+    use rand::{SeedableRng, rngs::SmallRng};
+    use rand_distr::{Distribution, Normal};
+    let dir = tempfile::tempdir().unwrap();
+    let mut x = vec![-0.03; 1000];
+    for v in [0.01, 0.03, 0.02, 0.05] {
+        let n = (0.04 / v / 1e-3) as usize;
+        x.extend((0..n).map(|i| -0.03 + 0.04 * i as f64 / n as f64));
+        x.extend([0.01; 500]);
+        x.extend((0..n).map(|i| 0.01 - 0.04 * i as f64 / n as f64));
+        x.extend([-0.03; 500]);
+    }
+    let (mut rng, noise) = (SmallRng::seed_from_u64(1), Normal::new(0.0, 0.01).unwrap());
+    let mut table = String::from("t [s],x [m],f [N]\n");
+    for i in 0..x.len() {
+        let (a, b) = (i.saturating_sub(1), (i + 1).min(x.len() - 1));
+        let rate = (x[b] - x[a]) / ((b - a) as f64 * 1e-3);
+        let film = 80.0 * 5e-3 / ((-x[i]).max(0.0) + 5e-3);
+        let f = 5000.0 * x[i].max(0.0) + (film + 40.0) * rate + noise.sample(&mut rng);
+        table += &format!("{:.6},{:.9},{f:.6}\n", i as f64 * 1e-3, x[i]);
+    }
+    let path = dir.path().join("viscous.csv");
+    std::fs::write(&path, table).unwrap();
+    let v = report_of(dir.path(), path.to_str().unwrap());
+    let drags: f64 = v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|e| e["id"] == "medium_drag" || e["id"] == "squeeze_film")
+        .map(|e| e["parameters"]["damping_n_s_per_m"].as_f64().unwrap())
+        .sum();
+    assert!(drags > 0.0 && drags <= 100.0, "{drags} N·s/m named: {}", v["effects"]);
+}
+
+/// The augmented model of a table names the surface it was fitted at; given back with `--model` and that
+/// `--surface`, it starts where its fit ended: its residual as the baseline is the first run's final one.
+/// A surface that is no length is refused, naming the units.
+#[test]
+fn a_tables_augmented_model_given_back_at_its_surface_starts_from_its_own_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm/map_indentation.csv");
+    let first = report_of(dir.path(), data);
+    let model = dir.path().join("map_indentation.augmented.yaml");
+    let file = std::fs::read_to_string(&model).unwrap();
+    let surface = file.lines().find_map(|l| l.split("--surface ").nth(1)).expect("the surface in the file").trim();
+    assert!(ContactModel::from_yaml(&file).is_ok(), "the file with its comment is a model");
+    let again = dir.path().join("again");
+    let json = again.join("report.json");
+    let args = [data.as_ref(), "--model".as_ref(), model.as_os_str(), "--surface".as_ref(), surface.as_ref()];
+    let run =
+        discrepancy(&[&args[..], &["--out".as_ref(), again.as_os_str(), "--json".as_ref(), json.as_os_str()]].concat());
+    assert!(run.status.success(), "{}", text(&run));
+    assert!(text(&run).contains("the given model's effects (adhesion"), "{}", text(&run));
+    let second: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let (before, after) = (second["baseline"]["rms"].as_f64().unwrap(), first["final_rms"].as_f64().unwrap());
+    assert!((before / after - 1.0).abs() < 0.01, "given back at its surface {before}, its fit ended at {after}");
+    let bad = discrepancy(&[data.as_ref(), "--surface".as_ref(), "3 furlongs".as_ref()]);
+    assert!(!bad.status.success() && text(&bad).contains("nm"), "{}", text(&bad));
+}

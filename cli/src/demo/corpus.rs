@@ -406,6 +406,7 @@ fn args(file: &Path, out: &Path, sample_period: f64) -> DiscrepancyArgs {
             sample_period: Some(sample_period),
         },
         model: None,
+        surface: None,
         out: out.to_path_buf(),
         loading_paths: false,
         arm: false,

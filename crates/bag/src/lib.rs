@@ -28,8 +28,9 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BagError {
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    /// (The error is in the message, not a source as well: `{:#}` would print it twice.)
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{0}: not a regular file (a recording is an .mcap file or a rosbag2 folder)")]
     NotAFile(PathBuf),
     #[error("{0}: the file is empty")]

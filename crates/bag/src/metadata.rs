@@ -117,7 +117,7 @@ impl MetadataFile {
         let text = match std::fs::read_to_string(&path) {
             Ok(text) => text,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(source) => return Err(BagError::Io { path, source }),
+            Err(source) => return Err(BagError::Io { path, error: source }),
         };
         let file: MetadataFile = serde_yaml_ng::from_str(&text)
             .map_err(|e| BagError::Metadata { path: path.clone(), message: format!("not rosbag2 metadata: {e}") })?;
@@ -144,7 +144,7 @@ impl MetadataFile {
         let path: PathBuf = folder.join("metadata.yaml");
         let text = serde_yaml_ng::to_string(&MetadataFile { rosbag2_bagfile_information: info })
             .map_err(|e| BagError::Invalid(format!("metadata.yaml: {e}")))?;
-        std::fs::write(&path, text).map_err(|source| BagError::Io { path, source })
+        std::fs::write(&path, text).map_err(|source| BagError::Io { path, error: source })
     }
 }
 

@@ -137,7 +137,7 @@ impl BagMessage<'_> {
 }
 
 fn io_error(path: &Path) -> impl Fn(std::io::Error) -> BagError + '_ {
-    move |source| BagError::Io { path: path.into(), source }
+    move |source| BagError::Io { path: path.into(), error: source }
 }
 
 /// Fills `buf` as far as the input goes; the bytes read.
@@ -319,7 +319,7 @@ impl<'r> FileReader<'r> {
             }
             if let Err(Stop::Io(source)) = self.step() {
                 self.finish();
-                return Some(Err(BagError::Io { path: self.file.path.clone(), source }));
+                return Some(Err(BagError::Io { path: self.file.path.clone(), error: source }));
             }
         }
     }

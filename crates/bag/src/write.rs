@@ -47,7 +47,7 @@ impl BagWriter {
         let (file, folder) = if path.extension().is_some_and(|e| e == "mcap") {
             (path.to_path_buf(), None)
         } else {
-            std::fs::create_dir(path).map_err(|source| BagError::Io { path: path.into(), source })?;
+            std::fs::create_dir(path).map_err(|source| BagError::Io { path: path.into(), error: source })?;
             let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("recording");
             (path.join(format!("{name}_0.mcap")), Some(path.to_path_buf()))
         };
@@ -55,7 +55,7 @@ impl BagWriter {
             .write(true)
             .create_new(true)
             .open(&file)
-            .map_err(|source| BagError::Io { path: file.clone(), source })?;
+            .map_err(|source| BagError::Io { path: file.clone(), error: source })?;
         let mcap = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("softcontact-bag ", env!("CARGO_PKG_VERSION")))
@@ -148,7 +148,8 @@ impl BagWriter {
     pub fn finish(mut self) -> Result<WriteStats> {
         self.mcap.finish()?;
         let messages = self.channels.iter().map(|c| c.count).sum();
-        let bytes = std::fs::metadata(&self.file).map_err(|source| BagError::Io { path: self.file.clone(), source })?;
+        let bytes =
+            std::fs::metadata(&self.file).map_err(|source| BagError::Io { path: self.file.clone(), error: source })?;
         if let Some(folder) = &self.folder {
             let (start, end) = self.time_bounds.unwrap_or((0, 0));
             let name = self.file.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();

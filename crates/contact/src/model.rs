@@ -508,10 +508,10 @@ impl ContactModel {
             }
         }
         if adhesion > MAX_ADHESION {
-            return bad(format!("an adhesion pulling {adhesion} N in all, more than {MAX_ADHESION} N"));
+            return bad(format!("an adhesion pulling {adhesion:.4e} N in all, more than {MAX_ADHESION} N"));
         }
         if drag > MAX_MEDIUM_DRAG {
-            return bad(format!("a medium dragging {drag} N·s/m in all, more than {MAX_MEDIUM_DRAG} N·s/m"));
+            return bad(format!("a medium dragging {drag:.4e} N·s/m in all, more than {MAX_MEDIUM_DRAG} N·s/m"));
         }
         if stiffness.is_nan() || stiffness > MAX_CONTACT_STIFFNESS {
             return bad(format!(

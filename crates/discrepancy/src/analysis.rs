@@ -517,6 +517,8 @@ impl<'a> Analysis<'a> {
         let before = whole_rms(self.series, &self.model, self.now.structure.shift)?;
         let stretches = self.free_stretches();
         let mut best: Option<(f64, Progress, ContactModel)> = None;
+        // The drag's own gap, where it alone is admitted: a pair's first stage.
+        let mut drag_alone = None;
         for fams in options {
             let cand = assess(&self.data, &self.now.structure, &fams, &self.scales);
             if !self.passes(&cand, &stretches, &OnceCell::new()) {
@@ -527,6 +529,10 @@ impl<'a> Analysis<'a> {
             let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain(fams.iter().copied()).collect();
             let model = self.model_of(&structure, &fit, &named);
             model.validate()?;
+            // A medium no more viscous in all than a plausible one (each member is on its own).
+            if drags_in_contact(&model) > softcontact_contact::MAX_MEDIUM_DRAG {
+                continue;
+            }
             let rms = whole_rms(self.series, &model, structure.shift)?;
             let gap = self.gap_of(&model, structure.shift)?;
             let gain = if fams.len() > 1 { self.options.min_gain } else { 0.0 };
@@ -537,7 +543,13 @@ impl<'a> Analysis<'a> {
                 continue;
             }
             let mut stages = self.now.stages.clone();
-            stages.extend(fams.iter().map(|_| (self.now.gap.rms, gap.rms)));
+            let first = drag_alone.filter(|_| fams.len() > 1).unwrap_or(gap.rms);
+            stages.push((self.now.gap.rms, first));
+            if fams.len() > 1 {
+                stages.push((first, gap.rms));
+            } else if fams == [drag] {
+                drag_alone = Some(gap.rms);
+            }
             let progress = Progress { structure, fit, named, stages, gap, shift_se, rate_se: self.now.rate_se };
             best = Some((progress.gap.rms, progress, model));
         }
@@ -768,4 +780,15 @@ fn not_identifiable(
         }
     }
     out
+}
+
+/// The damping [N·s/m] a model's medium drags with in contact: its drag and its squeeze films together, as
+/// [`ContactModel::plausible`] bounds them.
+fn drags_in_contact(model: &ContactModel) -> f64 {
+    let drag = |e: &softcontact_contact::Effect| match *e {
+        softcontact_contact::Effect::MediumDrag { damping, .. }
+        | softcontact_contact::Effect::SqueezeFilm { damping, .. } => damping,
+        _ => 0.0,
+    };
+    model.effects.iter().map(drag).sum()
 }

@@ -122,8 +122,15 @@ pub enum DiscrepancyError {
         "too few samples: {got} ({in_contact} in contact); need {MIN_SAMPLES} and {MIN_CONTACT_SAMPLES} in contact"
     )]
     TooShort { got: usize, in_contact: usize },
+    /// (Not a source as well: the message holds it, and `{:#}` would print it twice.)
     #[error("baseline model: {0}")]
-    Model(#[from] ContactError),
+    Model(ContactError),
+}
+
+impl From<ContactError> for DiscrepancyError {
+    fn from(e: ContactError) -> Self {
+        DiscrepancyError::Model(e)
+    }
 }
 
 /// The measured force `model` predicts at every sample, stepped with [`ContactModel::step`] from a fresh

@@ -814,8 +814,16 @@ fn a_squeeze_film_written_by_hand_in_another_form_is_named_with_its_damping() {
 fn a_baseline_out_of_all_proportion_is_refused() {
     let s = record(&kv(), Exc::new(100.0), 0.02, 5, &|_, _, _| 0.0);
     for effect in [Effect::MediumDrag { damping: 1e300, tare_speed: 0.0 }, Effect::SensorBias { offset: 1e300 }] {
-        let err = analyse(&s, &with(&kv(), &[effect]), &Options::default()).unwrap_err().to_string();
-        assert!(err.contains("overflow") && err.contains("out of all proportion"), "{effect:?}: {err}");
+        let err = analyse(&s, &with(&kv(), &[effect]), &Options::default()).unwrap_err();
+        // As a command prints it: the message, then each cause.
+        let mut whole = err.to_string();
+        let mut cause = std::error::Error::source(&err);
+        while let Some(c) = cause {
+            whole += &format!(": {c}");
+            cause = c.source();
+        }
+        assert!(whole.contains("overflow") && whole.contains("out of all proportion"), "{effect:?}: {whole}");
+        assert_eq!(whole.matches("overflow").count(), 1, "said once, not again as its cause: {whole}");
     }
 }
 
