@@ -302,7 +302,10 @@ fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: b
     let f: Vec<f64> = table.f.iter().map(|f| f - found.onset.free_level).collect();
     let series = Series::new(table.t.clone(), z, table.depth_rate(), f)?;
     let baseline = baseline.unwrap_or_else(|| found.id.model.model.clone());
-    let report = analyse(&series, &baseline, &Options::default())?;
+    let report = analyse(&series, &baseline, &Options::default()).with_context(|| match args.surface {
+        Some(at) => format!("with the surface at {} of the depth column (--surface)", si(at, "m")),
+        None => id_args.file.display().to_string(),
+    })?;
     let name = id_args.file.file_stem().and_then(|s| s.to_str()).unwrap_or("table").to_string();
     Ok(Analysis { name, baseline, surface: surface * Vector3::z(), series, report, from_table: true })
 }

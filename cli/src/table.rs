@@ -4,9 +4,9 @@
 //! | column | meaning | units |
 //! |---|---|---|
 //! | `t` | time | s, ms, µs |
-//! | `z` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm |
-//! | `x` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm |
-//! | `f` | normal force, f > 0 pushes | kN, N, mN, µN, nN |
+//! | `z` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm, pm |
+//! | `x` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm, pm |
+//! | `f` | normal force, f > 0 pushes | kN, N, mN, µN, nN, pN |
 //! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
 //!
 //! e.g. `t [s],x [nm],f [nN]`; names in any case, units as written. Other columns are ignored (and
@@ -78,9 +78,10 @@ pub fn parse_length(text: &str) -> Result<f64, String> {
 }
 
 const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
-const LENGTH_UNITS: [(&str, f64); 6] =
-    [("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("um", 1e-6), ("nm", 1e-9), ("cm", 1e-2)];
-const FORCE_UNITS: [(&str, f64); 6] = [("kN", 1e3), ("N", 1.0), ("mN", 1e-3), ("µN", 1e-6), ("uN", 1e-6), ("nN", 1e-9)];
+const LENGTH_UNITS: [(&str, f64); 7] =
+    [("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("um", 1e-6), ("nm", 1e-9), ("pm", 1e-12), ("cm", 1e-2)];
+const FORCE_UNITS: [(&str, f64); 7] =
+    [("kN", 1e3), ("N", 1.0), ("mN", 1e-3), ("µN", 1e-6), ("uN", 1e-6), ("nN", 1e-9), ("pN", 1e-12)];
 const SPEED_UNITS: [(&str, f64); 5] = [("m/s", 1.0), ("mm/s", 1e-3), ("µm/s", 1e-6), ("um/s", 1e-6), ("nm/s", 1e-9)];
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -600,6 +601,7 @@ mod tests {
         assert!((parse_length("2e2 nm").unwrap() - 2e-7).abs() < 1e-20);
         assert!((parse_length("812.5nm").unwrap() - 812.5e-9).abs() < 1e-20);
         assert!((parse_length(" 0.3 mm").unwrap() - 3e-4).abs() < 1e-18);
+        assert!((parse_length("79.4pm").unwrap() - 79.4e-12).abs() < 1e-24);
         assert!((parse_length("-2µm").unwrap() + 2e-6).abs() < 1e-18);
         for bad in ["", "nm", "1 furlong", "NaN", "inf", "1e400", "1e300 cm", "1..2nm"] {
             assert!(parse_length(bad).is_err(), "{bad}");

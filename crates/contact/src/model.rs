@@ -115,8 +115,8 @@ pub enum Effect {
     /// The medium squeezed out between the hand and the surface as they close in (a tool pressing on
     /// tissue in saline, an AFM cantilever in buffer near its sample) resists the motion the more the
     /// thinner the film: the reading gains `damping` · `reach` / (gap + `reach`) · ż \[N\], gap = max(−z, 0)
-    /// [m] the distance to the surface, so the whole `damping` [N·s/m] in contact, half of it at `reach`
-    /// [m] from the surface, nothing far away. The drag of a sphere or a lever above a plane in a viscous
+    /// \[m\] the distance to the surface, so the whole `damping` [N·s/m] in contact, half of it at `reach`
+    /// \[m\] from the surface, nothing far away. The drag of a sphere or a lever above a plane in a viscous
     /// liquid, b(h) = 6πη·a²/(h + h_eff) (Alcaraz et al., "Correction of microrheological measurements of
     /// soft samples with atomic force microscopy for the hydrodynamic drag on the cantilever"); beside a
     /// [`Effect::MediumDrag`], the same medium's drag far from the surface.

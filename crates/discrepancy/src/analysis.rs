@@ -2,7 +2,7 @@
 //! [`Analysis::refit_baseline`] (k, λ and the surface refitted, the phases and noise floor at that surface)
 //! → [`Analysis::name_and_add`] (the rounds: screen every family, judge, name the best, add it, refit) →
 //! [`Analysis::polish_once_more`] → [`Analysis::undo_rounds_that_simulate_worse`] →
-//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::try_the_medium`] →
+//! [`Analysis::try_the_quasi_linear_form`] → [`Analysis::try_the_medium`] (`analysis/medium.rs`) →
 //! [`Analysis::drop_shapes_at_an_edge`] →
 //! [`Analysis::keep_the_baseline_if_better`] → [`Analysis::report`].
 
@@ -19,6 +19,8 @@ use crate::{
     uncertainty, would_separate,
 };
 use crate::{MAX_RELAXATION_BRANCHES, MIN_CONTACT_SAMPLES, MIN_NOISE_SAMPLES, wrench};
+
+mod medium;
 
 /// What a round changes, kept whole so that a round can be undone.
 #[derive(Clone)]
@@ -495,85 +497,6 @@ impl<'a> Analysis<'a> {
         Ok(())
     }
 
-    /// The medium, tried once the surface's own effects are named: its only evidence of its own is free
-    /// space crossed at two speeds; in contact it is one more damping, and a loop of constant width between
-    /// loading and unloading, which the surface's dissipation makes too. Three forms: the medium's drag
-    /// alone, a squeeze film alone (its reach the best of its grid by held-out error, not at the grid's
-    /// ends), and both (taken only where they beat the better single by the gain a new effect needs). Each
-    /// is judged by every rule a round's candidate meets and admitted where the simulated record (every
-    /// sample) fits better by the gain a new effect needs and the contact no worse; of those admitted, the
-    /// one with the least in-contact gap (the gap every stage reports) is taken.
-    pub(crate) fn try_the_medium(&mut self) -> Result<(), DiscrepancyError> {
-        if !self.ambiguous.is_empty() || !Family::MediumDrag.observable(&self.data) {
-            return Ok(());
-        }
-        let drag = (Family::MediumDrag, 0.0);
-        let mut options = vec![vec![drag]];
-        for beside in [&[][..], &[drag][..]] {
-            if let Some(reach) = self.best_squeeze_reach(beside) {
-                options.push(beside.iter().copied().chain([(Family::SqueezeFilm, reach)]).collect());
-            }
-        }
-        let before = whole_rms(self.series, &self.model, self.now.structure.shift)?;
-        let stretches = self.free_stretches();
-        let mut best: Option<(f64, Progress, ContactModel)> = None;
-        // The drag's own gap, where it alone is admitted: a pair's first stage.
-        let mut drag_alone = None;
-        for fams in options {
-            let cand = assess(&self.data, &self.now.structure, &fams, &self.scales);
-            if !self.passes(&cand, &stretches, &OnceCell::new()) {
-                continue;
-            }
-            let (structure, shift_se, _) = refine_surface(&self.data, &cand.st);
-            let fit = fit::fit(&self.data, &structure);
-            let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain(fams.iter().copied()).collect();
-            let model = self.model_of(&structure, &fit, &named);
-            model.validate()?;
-            // A medium no more viscous in all than a plausible one (each member is on its own).
-            if drags_in_contact(&model) > softcontact_contact::MAX_MEDIUM_DRAG {
-                continue;
-            }
-            let rms = whole_rms(self.series, &model, structure.shift)?;
-            let gap = self.gap_of(&model, structure.shift)?;
-            let gain = if fams.len() > 1 { self.options.min_gain } else { 0.0 };
-            if rms > before * (1.0 - self.options.min_gain)
-                || gap.rms > self.now.gap.rms * (1.0 + 1e-3)
-                || best.as_ref().is_some_and(|(best_gap, ..)| gap.rms > best_gap * (1.0 - gain))
-            {
-                continue;
-            }
-            let mut stages = self.now.stages.clone();
-            let first = drag_alone.filter(|_| fams.len() > 1).unwrap_or(gap.rms);
-            stages.push((self.now.gap.rms, first));
-            if fams.len() > 1 {
-                stages.push((first, gap.rms));
-            } else if fams == [drag] {
-                drag_alone = Some(gap.rms);
-            }
-            let progress = Progress { structure, fit, named, stages, gap, shift_se, rate_se: self.now.rate_se };
-            best = Some((progress.gap.rms, progress, model));
-        }
-        if let Some((_, progress, model)) = best {
-            (self.now, self.model) = (progress, model);
-            self.move_surface();
-        }
-        Ok(())
-    }
-
-    /// The reach of a squeeze film, beside `beside`, that predicts held-out data best; None where that is
-    /// at an end of the grid (a bound, not a finding).
-    fn best_squeeze_reach(&self, beside: &[(Family, f64)]) -> Option<f64> {
-        let held_out_error = |reach: f64| {
-            let fams: Vec<(Family, f64)> = beside.iter().copied().chain([(Family::SqueezeFilm, reach)]).collect();
-            let st = fams.iter().fold(self.now.structure.clone(), |s, &(f, sh)| f.apply(&s, sh));
-            fit::fit(&self.data, &st).cv_mse
-        };
-        let grid = Family::SqueezeFilm.grid(&self.scales, &self.now.structure);
-        let (reach, _) =
-            grid.into_iter().map(|reach| (reach, held_out_error(reach))).min_by(|a, b| a.1.total_cmp(&b.1))?;
-        self.scales.at_edge(Family::SqueezeFilm, reach).is_none().then_some(reach)
-    }
-
     /// A shape still at an end of its range after every polish is a bound, not a finding: the effect is
     /// dropped (the model refitted without it) and reported among `bounds`.
     pub(crate) fn drop_shapes_at_an_edge(&mut self) -> Result<(), DiscrepancyError> {
@@ -600,9 +523,13 @@ impl<'a> Analysis<'a> {
     /// Never worse than the model the user gave (or identify found): where the refitted and augmented
     /// model fits the record worse than that baseline as it was given, the baseline stands and nothing is
     /// named. Judged on every sample, in contact or not, so that neither model's surface decides which
-    /// count; `given_rms` is the given model's RMS so ([`whole_rms`] at its own surface).
+    /// count (`given_rms` is the given model's RMS so, [`whole_rms`] at its own surface), and on the
+    /// in-contact gap the report compares, each model at its own surface: a model that fits free space
+    /// better and the contact worse is not the better one.
     pub(crate) fn keep_the_baseline_if_better(&mut self, given_rms: f64) -> Result<(), DiscrepancyError> {
-        self.kept_baseline = whole_rms(self.series, &self.model, self.now.structure.shift)? > given_rms;
+        let worse_in_contact = self.now.gap.rms > self.gap_of(self.given, 0.0)?.rms;
+        self.kept_baseline =
+            worse_in_contact || whole_rms(self.series, &self.model, self.now.structure.shift)? > given_rms;
         if self.kept_baseline {
             self.now.named.clear();
             self.now.stages.clear();
@@ -780,15 +707,4 @@ fn not_identifiable(
         }
     }
     out
-}
-
-/// The damping [N·s/m] a model's medium drags with in contact: its drag and its squeeze films together, as
-/// [`ContactModel::plausible`] bounds them.
-fn drags_in_contact(model: &ContactModel) -> f64 {
-    let drag = |e: &softcontact_contact::Effect| match *e {
-        softcontact_contact::Effect::MediumDrag { damping, .. }
-        | softcontact_contact::Effect::SqueezeFilm { damping, .. } => damping,
-        _ => 0.0,
-    };
-    model.effects.iter().map(drag).sum()
 }
