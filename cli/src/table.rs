@@ -60,7 +60,7 @@ pub fn is_table(path: &Path) -> bool {
 }
 
 /// A length as a user writes it, a number in metres or with a unit of [`LENGTH_UNITS`] (`812.5nm`,
-/// `0.3 mm`); finite only.
+/// `0.3 mm`); finite, and at most 1 km either way as a table's depth is.
 pub fn parse_length(text: &str) -> Result<f64, String> {
     let text = text.trim();
     // The unit is the longest of LENGTH_UNITS the text ends with; a number's own exponent (`e-7`) is not one.
@@ -74,7 +74,12 @@ pub fn parse_length(text: &str) -> Result<f64, String> {
         format!("`{text}` is not a length: a number in metres, or with a unit ({})", known.join(", "))
     })?;
     let metres = value * scale;
-    if metres.is_finite() { Ok(metres) } else { Err(format!("`{text}` is not a finite length")) }
+    // As a table's depth: beyond what an instrument reads is a mistake.
+    if metres.is_finite() && metres.abs() <= 1e3 {
+        Ok(metres)
+    } else {
+        Err(format!("`{text}` is not a length an instrument reads (finite, |x| ≤ 1 km)"))
+    }
 }
 
 const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
@@ -603,7 +608,7 @@ mod tests {
         assert!((parse_length(" 0.3 mm").unwrap() - 3e-4).abs() < 1e-18);
         assert!((parse_length("79.4pm").unwrap() - 79.4e-12).abs() < 1e-24);
         assert!((parse_length("-2µm").unwrap() + 2e-6).abs() < 1e-18);
-        for bad in ["", "nm", "1 furlong", "NaN", "inf", "1e400", "1e300 cm", "1..2nm"] {
+        for bad in ["", "nm", "1 furlong", "NaN", "inf", "1e400", "1e300", "-1e300", "1e300 cm", "1001", "1..2nm"] {
             assert!(parse_length(bad).is_err(), "{bad}");
         }
     }
