@@ -141,13 +141,7 @@ fn design(samples: &[TimedSample], cols: &[Column], structure: &ContactModel, of
 /// What the structure's named drags add to the reading of sample `s` with the surface `offset` deeper than
 /// its zero, as [`ContactModel::sense`] adds them.
 fn named_drag(structure: &ContactModel, s: &Sample, offset: f64) -> f64 {
-    let gap = (offset - s.z).max(0.0);
-    let drag = |e: &Effect| match *e {
-        Effect::MediumDrag { damping, tare_speed } => damping * (s.zdot - tare_speed),
-        Effect::SqueezeFilm { damping, reach } => damping * reach / (gap + reach) * s.zdot,
-        _ => 0.0,
-    };
-    structure.effects.iter().map(drag).sum()
+    structure.effects.iter().map(|e| e.drag(s.zdot, (offset - s.z).max(0.0))).sum()
 }
 
 /// Least squares over the columns not fixed at zero; returns the amplitudes (zero where fixed) and the

@@ -147,6 +147,18 @@ pub fn gravity_change(now: &[[f64; 3]; 3], at_tare: &[[f64; 3]; 3], g: [f64; 3],
 }
 
 impl Effect {
+    /// What a drag of the medium adds to a reading at the deformation's rate `zdot` [m/s] and `gap` [m]
+    /// from the surface: damping·(ż − tare_speed) for [`Effect::MediumDrag`], damping·reach/(gap + reach)·ż
+    /// for [`Effect::SqueezeFilm`], 0 for any other effect.
+    #[inline]
+    pub fn drag(&self, zdot: f64, gap: f64) -> f64 {
+        match *self {
+            Effect::MediumDrag { damping, tare_speed } => damping * (zdot - tare_speed),
+            Effect::SqueezeFilm { damping, reach } => damping * reach / (gap + reach) * zdot,
+            _ => 0.0,
+        }
+    }
+
     pub fn id(&self) -> &'static str {
         match self {
             Effect::ViscoelasticRelaxation { .. } => "viscoelastic_relaxation",
@@ -384,12 +396,11 @@ pub struct EffectState {
     pub rate: f64,
 }
 
-/// The share of a [`Effect::SqueezeFilm`]'s damping that acts after the state's last step: reach / (gap +
-/// reach), the gap the distance of the last effective deformation beyond the surface (1 in contact).
+/// The distance to the surface after the state's last step \[m\]: of its effective deformation beyond the
+/// surface, 0 in contact and before the first step.
 #[inline]
-pub fn squeeze_share(reach: f64, state: &EffectState) -> f64 {
-    let gap = (-state.last_deformation.unwrap_or(0.0)).max(0.0);
-    reach / (gap + reach)
+pub fn gap_of(state: &EffectState) -> f64 {
+    (-state.last_deformation.unwrap_or(0.0)).max(0.0)
 }
 
 /// The most readings a delay line keeps (one second at 10 kHz); with finer steps the delay is cut short.
@@ -734,8 +745,7 @@ impl ContactModel {
             .map(|e| match *e {
                 Effect::SensorBias { offset } => offset,
                 Effect::SensorDrift { rate } => rate * state.since_tare,
-                Effect::MediumDrag { damping, tare_speed } => damping * (state.rate - tare_speed),
-                Effect::SqueezeFilm { damping, reach } => damping * squeeze_share(reach, state) * state.rate,
+                Effect::MediumDrag { .. } | Effect::SqueezeFilm { .. } => e.drag(state.rate, gap_of(state)),
                 _ => 0.0,
             })
             .sum()
@@ -762,8 +772,7 @@ impl ContactModel {
                     reading += (0..3).map(|i| coupling[i] * inputs.tangential_force[i]).sum::<f64>()
                 }
                 Effect::ToolGravity { mass } => reading += mass * gravity,
-                Effect::MediumDrag { damping, tare_speed } => reading += damping * (state.rate - tare_speed),
-                Effect::SqueezeFilm { damping, reach } => reading += damping * squeeze_share(reach, state) * state.rate,
+                Effect::MediumDrag { .. } | Effect::SqueezeFilm { .. } => reading += e.drag(state.rate, gap_of(state)),
                 Effect::TimeDelay { delay: d } => delay = Some(d),
                 _ => {}
             }
