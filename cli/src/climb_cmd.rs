@@ -19,10 +19,10 @@ pub struct ClimbArgs {
     /// Number of links N (≥ 6: two tripods of two links and a spine of at least two).
     #[arg(long, default_value_t = 6, value_parser = crate::ranges::count(6, 40))]
     links: usize,
-    /// How high to climb \[m\].
+    /// How high to climb (m).
     #[arg(long, default_value_t = 0.05, value_parser = crate::ranges::real(0.001, 2.0, " m"))]
     height: f64,
-    /// How far a tripod moves up per cycle \[m\].
+    /// How far a tripod moves up per cycle (m).
     #[arg(long, default_value_t = 0.008, value_parser = crate::ranges::real(0.0005, 0.05, " m"))]
     step: f64,
     /// The feet's tangential law.

@@ -13,10 +13,10 @@ use softcontact_nodes::runtime::ros;
 
 #[derive(Debug, clap::Args)]
 pub struct ForceArgs {
-    /// The normal force to reach \[N\] (a negative one is refused with a reason, not taken for an option).
+    /// The normal force to reach (N) (a negative one is refused with a reason, not taken for an option).
     #[arg(allow_hyphen_values = true, value_parser = crate::ranges::real(-1e6, 1e6, " N"))]
     pub force: f64,
-    /// Duration of the quintic move \[s\].
+    /// Duration of the quintic move (s).
     #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = crate::ranges::real(-1e6, 1e6, " s"))]
     pub duration: f64,
     /// Exit with an error if the force at the end of the move is off by more than this fraction.

@@ -37,11 +37,11 @@ pub struct IdentifyArgs {
     /// Contact direction in the world, the way the hand moves to compress the surface.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, default_value = "0,0,-1", value_parser = crate::ranges::real(-1.0, 1.0, ""))]
     pub normal: Vec<f64>,
-    /// Onset threshold of the normal force \[N\]; default: 1 N for a recording (the force-control paper), from a table's own
+    /// Onset threshold of the normal force (N); default: 1 N for a recording (the force-control paper), from a table's own
     /// free part for a table (10 noise σ above its free level, at least 2 % of its force range).
     #[arg(long, value_parser = crate::ranges::real(1e-15, 1e5, " N"))]
     pub onset: Option<f64>,
-    /// Time between the samples fitted \[s\]; default: 10 ms for a recording (the force-control paper), every sample of a
+    /// Time between the samples fitted (s); default: 10 ms for a recording (the force-control paper), every sample of a
     /// table.
     #[arg(long, value_parser = crate::ranges::real(1e-7, 10.0, " s"))]
     pub sample_period: Option<f64>,
@@ -312,6 +312,19 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
             second.kind.label(),
             best.fitness_mean,
             second.fitness_mean
+        );
+    }
+    if let Some(best) = ranked.first()
+        && best.kind != id.selected()
+        && let Some(chosen) = surface.iter().find(|f| f.kind == id.selected())
+    {
+        println!(
+            "\nnote: the selection follows the fitness at the force onset (the force-control paper's rule); at the \
+             estimated surface {} fits better than {} ({:.3} vs {:.3})",
+            best.kind.label(),
+            chosen.kind.label(),
+            best.fitness_mean,
+            chosen.fitness_mean
         );
     }
     let m = &id.model.model;

@@ -33,13 +33,13 @@ pub struct LoadingPathsArgs {
     /// The specimen's tangential law.
     #[arg(long, value_enum, default_value_t = LawArg::MindlinDeresiewicz)]
     law: LawArg,
-    /// Standard deviation of the creep of the zero over one experiment \[µm\].
+    /// Standard deviation of the creep of the zero over one experiment (µm).
     #[arg(long, default_value_t = 5.0, value_parser = crate::ranges::real(0.0, 1000.0, " µm"))]
     creep_um: f64,
     /// Sensor axes turned from the pushing axes in the loading plane [°].
     #[arg(long, default_value_t = 0.5, allow_hyphen_values = true, value_parser = crate::ranges::real(-45.0, 45.0, "°"))]
     misalignment_deg: f64,
-    /// White noise of each force channel \[N\].
+    /// White noise of each force channel (N).
     #[arg(long, default_value_t = 0.005, value_parser = crate::ranges::real(0.0, 10.0, " N"))]
     noise: f64,
     /// Write figures like the paper's Figs. 4–8 (paths, fits, convergence points) into this folder.

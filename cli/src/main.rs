@@ -151,3 +151,25 @@ fn main() -> ExitCode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every command's and subcommand's help, as `--help` prints it.
+    fn helps(cmd: &mut clap::Command, out: &mut Vec<(String, String)>) {
+        out.push((cmd.get_name().to_string(), cmd.render_long_help().to_string()));
+        for sub in cmd.get_subcommands_mut() {
+            helps(sub, out);
+        }
+    }
+
+    #[test]
+    fn no_help_text_shows_the_escapes_rustdoc_needs() {
+        let mut all = vec![];
+        helps(&mut super::Cli::command(), &mut all);
+        assert!(all.len() > 10, "{} commands", all.len());
+        let escaped: Vec<&String> = all.iter().filter(|(_, h)| h.contains("\\[")).map(|(n, _)| n).collect();
+        assert!(escaped.is_empty(), "`\\[` in the help of {escaped:?}: write units as (N) in an argument's doc");
+    }
+}

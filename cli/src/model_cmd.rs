@@ -14,7 +14,7 @@ pub struct ModelArgs {
     /// URDF of the robot (default: the built-in KUKA LWR IV, urdf/lwr4.urdf).
     #[arg(long)]
     urdf: Option<PathBuf>,
-    /// Joint positions \[rad\], comma-separated (default: zeros).
+    /// Joint positions (rad), comma-separated (default: zeros).
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::ranges::real(-10.0, 10.0, " rad"))]
     q: Option<Vec<f64>>,
     /// Joint velocities [rad/s], comma-separated (default: zeros).

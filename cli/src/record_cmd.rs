@@ -40,7 +40,7 @@ pub struct ReplayArgs {
     /// Replay only these topics (default: all whose type the project knows, but the actuator topics).
     #[arg(long, value_delimiter = ',')]
     pub topics: Vec<String>,
-    /// Longest wait for subscribers before the first message \[s\], 0 to 3600: the replay starts once every
+    /// Longest wait for subscribers before the first message (s), 0 to 3600: the replay starts once every
     /// replayed topic has one, or once some have and none gained one for a second (a secure graph's
     /// handshakes take seconds).
     #[arg(long, default_value_t = 10.0, value_parser = wait)]

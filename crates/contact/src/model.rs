@@ -159,6 +159,16 @@ impl Effect {
         }
     }
 
+    /// The damping [N·s/m] with which a drag of the medium acts in contact (a squeeze film's whole
+    /// damping there), 0 for any other effect: [`Effect::drag`]'s slope in ż at gap 0.
+    #[inline]
+    pub fn drag_in_contact(&self) -> f64 {
+        match *self {
+            Effect::MediumDrag { damping, .. } | Effect::SqueezeFilm { damping, .. } => damping,
+            _ => 0.0,
+        }
+    }
+
     pub fn id(&self) -> &'static str {
         match self {
             Effect::ViscoelasticRelaxation { .. } => "viscoelastic_relaxation",
@@ -454,6 +464,12 @@ impl ContactModel {
         self.effects.iter().try_for_each(Effect::validate)
     }
 
+    /// The medium's drag in contact [N·s/m], summed over its effects ([`Effect::drag_in_contact`]): what
+    /// [`MAX_MEDIUM_DRAG`] bounds.
+    pub fn medium_drag_in_contact(&self) -> f64 {
+        self.effects.iter().map(Effect::drag_in_contact).sum()
+    }
+
     /// Checks what a soft surface next to a robot can be, beyond [`ContactModel::validate`]'s physics: at
     /// most [`MAX_EFFECTS`] effects, relaxation time constants in [`TIME_CONSTANT_RANGE`], and — summed over
     /// repeated effects — a contact stiffness (the law's slope at [`PLAUSIBLE_DEPTH`] plus every relaxation
@@ -471,7 +487,7 @@ impl ContactModel {
         let a = self.exponents.a;
         let mut stiffness = self.stiffness * a * pow(PLAUSIBLE_DEPTH, a - 1.0);
         let (mut hysteresis, mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
-        let (mut adhesion, mut drag) = (0.0_f64, 0.0_f64);
+        let mut adhesion = 0.0_f64;
         for e in &self.effects {
             match *e {
                 Effect::ViscoelasticRelaxation { time_constant, .. }
@@ -513,14 +529,13 @@ impl ContactModel {
                         "a squeeze film reaching {reach} m from the surface, farther than {MAX_SQUEEZE_REACH} m"
                     ));
                 }
-                // In contact a squeeze film drags with the whole of its damping.
-                Effect::MediumDrag { damping, .. } | Effect::SqueezeFilm { damping, .. } => drag += damping,
                 _ => {}
             }
         }
         if adhesion > MAX_ADHESION {
             return bad(format!("an adhesion pulling {adhesion:.4e} N in all, more than {MAX_ADHESION} N"));
         }
+        let drag = self.medium_drag_in_contact();
         if drag > MAX_MEDIUM_DRAG {
             return bad(format!("a medium dragging {drag:.4e} N·s/m in all, more than {MAX_MEDIUM_DRAG} N·s/m"));
         }

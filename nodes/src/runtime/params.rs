@@ -304,6 +304,8 @@ pub enum ParamError {
     Format { path: PathBuf, reason: String },
     #[error("parameter override `{0}`: expected name:=value")]
     Override(String),
+    #[error("parameter override `{name}`: its value is not YAML: {reason}")]
+    OverrideValue { name: String, reason: String },
     #[error("parameters of {node}: {reason}")]
     Invalid { node: String, reason: String },
     #[error("{0}")]
@@ -402,8 +404,10 @@ pub fn load<P: NodeParams>(node: &str, args: &ParamArgs) -> Result<(P, Declared)
     }
     for o in &args.overrides {
         let (name, value) = o.split_once(":=").ok_or_else(|| ParamError::Override(o.clone()))?;
-        check_nesting(value).map_err(|_| ParamError::Override(o.chars().take(80).collect()))?;
-        let value: Value = serde_yaml_ng::from_str(value).map_err(|_| ParamError::Override(o.clone()))?;
+        let bad_value =
+            |reason: String| ParamError::OverrideValue { name: name.trim().chars().take(80).collect(), reason };
+        check_nesting(value).map_err(bad_value)?;
+        let value: Value = serde_yaml_ng::from_str(value).map_err(|e| bad_value(e.to_string()))?;
         set_path(&mut merged, name.trim(), value);
     }
     let (params, declared) = from_mapping(node, merged)?;
@@ -566,7 +570,10 @@ mod tests {
         }
         let override_ = format!("x:={}{}", "[".repeat(deep), "]".repeat(deep));
         let args = ParamArgs { overrides: vec![override_], ..Default::default() };
-        assert!(matches!(load::<crate::lwr_driver::Params>("lwr_driver", &args), Err(ParamError::Override(_))));
+        assert!(matches!(
+            load::<crate::lwr_driver::Params>("lwr_driver", &args),
+            Err(ParamError::OverrideValue { .. })
+        ));
         // Quotes, apostrophes and comments do not count.
         let fine =
             "a: \"[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[\"\nb: it's [1, 2] # {{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{{\n";
@@ -764,6 +771,9 @@ mod tests {
         let e = load::<Demo>("demo", &args(&[], &["rate:=fast"])).unwrap_err().to_string();
         assert!(e.contains("rate"), "{e}");
         assert!(matches!(load::<Demo>("demo", &args(&[], &["rate=1"])), Err(ParamError::Override(_))));
+        // A value that is not YAML is named as such, with the parser's reason, not as a missing `:=`.
+        let e = load::<Demo>("demo", &args(&[], &["gains:={kp: 1, kp: 2}"])).unwrap_err().to_string();
+        assert!(e.contains("`gains`") && e.contains("not YAML") && e.contains("duplicate"), "{e}");
         let flat = file("rate: 5.0\n");
         assert!(matches!(load::<Demo>("demo", &args(&[&flat], &[])), Err(ParamError::Format { .. })));
         let broken = file("demo: [unclosed\n");

@@ -71,7 +71,7 @@ impl Analysis<'_> {
         let named: Vec<(Family, f64)> = self.now.named.iter().copied().chain(fams.iter().copied()).collect();
         let model = self.model_of(&structure, &fit, &named);
         model.validate()?;
-        if drags_in_contact(&model) > softcontact_contact::MAX_MEDIUM_DRAG {
+        if model.medium_drag_in_contact() > softcontact_contact::MAX_MEDIUM_DRAG {
             return Ok(None);
         }
         let rms = whole_rms(self.series, &model, structure.shift)?;
@@ -97,15 +97,4 @@ impl Analysis<'_> {
             grid.into_iter().map(|reach| (reach, held_out_error(reach))).min_by(|a, b| a.1.total_cmp(&b.1))?;
         self.scales.at_edge(Family::SqueezeFilm, reach).is_none().then_some(reach)
     }
-}
-
-/// The damping [N·s/m] a model's medium drags with in contact: its drag and its squeeze films together, as
-/// [`ContactModel::plausible`] bounds them.
-fn drags_in_contact(model: &ContactModel) -> f64 {
-    let drag = |e: &softcontact_contact::Effect| match *e {
-        softcontact_contact::Effect::MediumDrag { damping, .. }
-        | softcontact_contact::Effect::SqueezeFilm { damping, .. } => damping,
-        _ => 0.0,
-    };
-    model.effects.iter().map(drag).sum()
 }
