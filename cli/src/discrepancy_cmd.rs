@@ -163,7 +163,7 @@ fn print_refit_and_effects(report: &Report, name: &str) {
         );
     }
     println!(
-        "noise floor {} (from {}; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
+        "noise floor {} (from {} at the refitted surface; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
          {:.4e}, {:.4e}, {} ± {} → RMS {}",
         n(report.noise_floor),
         match report.noise_source {
@@ -268,6 +268,18 @@ fn print_verdict(report: &Report) {
         );
     }
     println!("\nfinal RMS {}; remaining: {remaining}", si(report.final_rms, "N"));
+    let m = &report.model;
+    println!(
+        "its law: {}, k = {:.4e}, λ = {:.4e}, exponents a = {:.2}, b = {:.2}, c = {:.2} (SI: N, m, s), with {} effect{}",
+        m.kind.id(),
+        m.stiffness,
+        m.damping,
+        m.exponents.a,
+        m.exponents.b,
+        m.exponents.c,
+        m.effects.len(),
+        if m.effects.len() == 1 { "" } else { "s" }
+    );
     if let Some(left) = what_is_left(report) {
         println!("what is left is mostly in {left}");
     }

@@ -186,7 +186,7 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: 
     };
     if onset.free_samples > 0 {
         println!(
-            "force zeroed at its free level {} (the first {} samples; noise σ {}); onset threshold {threshold}",
+            "force zeroed at its free level {} (the first {} samples; their noise σ {}, which sets the onset); onset threshold {threshold}",
             table.force(onset.free_level),
             onset.free_samples,
             table.force(onset.noise),

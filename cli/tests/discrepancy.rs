@@ -812,6 +812,12 @@ fn a_tables_augmented_model_given_back_at_its_surface_starts_from_its_own_fit() 
     // given stands, never worse in contact than it was.
     let last = second["final_rms"].as_f64().unwrap();
     assert!(last <= before, "ended at {last}, worse than the {before} given");
+    // The final law is printed as the file holds it.
+    let written = std::fs::read_to_string(again.join("map_indentation.augmented.yaml")).unwrap();
+    let written = ContactModel::from_yaml(&written).unwrap();
+    let law = text(&run).lines().find_map(|l| l.strip_prefix("its law: ").map(str::to_string)).expect("its law");
+    let k: f64 = law.split("k = ").nth(1).and_then(|r| r.split(',').next()).unwrap().parse().unwrap();
+    assert!(law.starts_with(written.kind.id()) && (k / written.stiffness - 1.0).abs() < 1e-4, "{law}: {written:?}");
     let bad = discrepancy(&[data.as_ref(), "--surface".as_ref(), "3 furlongs".as_ref()]);
     assert!(!bad.status.success() && text(&bad).contains("nm"), "{}", text(&bad));
 }

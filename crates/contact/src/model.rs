@@ -147,7 +147,7 @@ pub fn gravity_change(now: &[[f64; 3]; 3], at_tare: &[[f64; 3]; 3], g: [f64; 3],
 }
 
 impl Effect {
-    /// What a drag of the medium adds to a reading at the deformation's rate `zdot` [m/s] and `gap` [m]
+    /// What a drag of the medium adds to a reading at the deformation's rate `zdot` \[m/s\] and `gap` \[m\]
     /// from the surface: damping·(ż − tare_speed) for [`Effect::MediumDrag`], damping·reach/(gap + reach)·ż
     /// for [`Effect::SqueezeFilm`], 0 for any other effect.
     #[inline]
@@ -159,7 +159,7 @@ impl Effect {
         }
     }
 
-    /// The damping [N·s/m] with which a drag of the medium acts in contact (a squeeze film's whole
+    /// The damping \[N·s/m\] with which a drag of the medium acts in contact (a squeeze film's whole
     /// damping there), 0 for any other effect: [`Effect::drag`]'s slope in ż at gap 0.
     #[inline]
     pub fn drag_in_contact(&self) -> f64 {
@@ -464,7 +464,7 @@ impl ContactModel {
         self.effects.iter().try_for_each(Effect::validate)
     }
 
-    /// The medium's drag in contact [N·s/m], summed over its effects ([`Effect::drag_in_contact`]): what
+    /// The medium's drag in contact \[N·s/m\], summed over its effects ([`Effect::drag_in_contact`]): what
     /// [`MAX_MEDIUM_DRAG`] bounds.
     pub fn medium_drag_in_contact(&self) -> f64 {
         self.effects.iter().map(Effect::drag_in_contact).sum()
