@@ -186,7 +186,11 @@ fn print_refit_and_effects(report: &Report, name: &str) {
     if report.effects.is_empty() {
         println!("no effect named");
     } else {
-        println!("\n{:<26}{:<48}{:>12}{:>12}", "effect", "parameters (± 95 %)", "RMS before", "RMS after");
+        // The stages' gap is the in-contact one; free space's shows in the phases' table.
+        println!(
+            "\n{:<26}{:<48}{:>12}{:>12}  (in contact)",
+            "effect", "parameters (± 95 %)", "RMS before", "RMS after"
+        );
         for e in &report.effects {
             let parameters: Vec<String> = e
                 .parameters
