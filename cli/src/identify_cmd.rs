@@ -212,6 +212,46 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: 
     }
 }
 
+/// Whether a kind fits at all, which kinds the recording cannot tell apart, and whether the kind selected at
+/// the onset is the best at the surface.
+fn print_verdicts(id: &Identification, file: &Path) {
+    let surface = &id.at_surface;
+    let mut ranked: Vec<_> = surface.iter().filter(|f| f.fitness_mean.is_finite()).collect();
+    ranked.sort_by(|a, b| b.fitness_mean.total_cmp(&a.fitness_mean));
+    if !fits(id) {
+        println!(
+            "\nno contact model kind fits this recording (best cross-validated fitness {:.3}): the force is not \
+             a function of deformation and rate alone; run `softcontact discrepancy {}` to find what is missing",
+            best_fitness(id),
+            file.display()
+        );
+    } else if let [best, second, ..] = ranked[..]
+        && best.fitness_mean - second.fitness_mean < best.fitness_std.min(second.fitness_std)
+    {
+        println!(
+            "\nnote: {} and {} fit equally well here (fitness {:.4} vs {:.4}, closer than either's std over \
+             folds): the recording does not tell them apart (more, faster pushes would)",
+            best.kind.label(),
+            second.kind.label(),
+            best.fitness_mean,
+            second.fitness_mean
+        );
+    }
+    if let Some(best) = ranked.first()
+        && best.kind != id.selected()
+        && let Some(chosen) = surface.iter().find(|f| f.kind == id.selected())
+    {
+        println!(
+            "\nnote: the selection follows the fitness at the force onset (the force-control paper's rule); at the \
+             estimated surface {} fits better than {} ({:.3} vs {:.3})",
+            best.kind.label(),
+            chosen.kind.label(),
+            best.fitness_mean,
+            chosen.fitness_mean
+        );
+    }
+}
+
 /// Below this best cross-validated fitness (at the surface) no kind explains the force: the model's
 /// predictions are little better than the recording's mean force.
 const FITS_AT_LEAST: f64 = 0.5;
@@ -293,40 +333,7 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
         crate::table::si(id.model.offset.abs(), "m")
     );
     print_parameters(onset);
-    let mut ranked: Vec<_> = surface.iter().filter(|f| f.fitness_mean.is_finite()).collect();
-    ranked.sort_by(|a, b| b.fitness_mean.total_cmp(&a.fitness_mean));
-    if !fits(id) {
-        println!(
-            "\nno contact model kind fits this recording (best cross-validated fitness {:.3}): the force is not \
-             a function of deformation and rate alone; run `softcontact discrepancy {}` to find what is missing",
-            best_fitness(id),
-            file.display()
-        );
-    } else if let [best, second, ..] = ranked[..]
-        && best.fitness_mean - second.fitness_mean < best.fitness_std.min(second.fitness_std)
-    {
-        println!(
-            "\nnote: {} and {} fit equally well here (fitness {:.4} vs {:.4}, closer than either's std over \
-             folds): the recording does not tell them apart (more, faster pushes would)",
-            best.kind.label(),
-            second.kind.label(),
-            best.fitness_mean,
-            second.fitness_mean
-        );
-    }
-    if let Some(best) = ranked.first()
-        && best.kind != id.selected()
-        && let Some(chosen) = surface.iter().find(|f| f.kind == id.selected())
-    {
-        println!(
-            "\nnote: the selection follows the fitness at the force onset (the force-control paper's rule); at the \
-             estimated surface {} fits better than {} ({:.3} vs {:.3})",
-            best.kind.label(),
-            chosen.kind.label(),
-            best.fitness_mean,
-            chosen.fitness_mean
-        );
-    }
+    print_verdicts(id, file);
     let m = &id.model.model;
     if from_table {
         println!(

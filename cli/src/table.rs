@@ -483,7 +483,7 @@ impl Table {
         out
     }
 
-    /// The depth's white noise σ_x [m] (the median absolute second difference, which a smooth motion hardly
+    /// The depth's white noise σ_x \[m\] (the median absolute second difference, which a smooth motion hardly
     /// moves, over 0.6745·√6), the noise it gives the rate by central differences, σ_x/(√2·dt) [m/s], and
     /// the 95th percentile of the speed where the force is clearly in contact (more than a tenth of its
     /// range above `free_level`). None where there is no such contact or no noise.

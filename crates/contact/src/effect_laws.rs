@@ -1,7 +1,35 @@
 //! The laws of the effects with memory, step by step: a Maxwell branch's update and an adhesion's share
 //! of its pull-off force ([`crate::Effect::ViscoelasticRelaxation`], [`crate::Effect::QuasiLinearRelaxation`],
 //! [`crate::Effect::Adhesion`]); [`crate::ContactModel::step_surface`] and the discrepancy workflow's
-//! columns both call them, so that a fit and a simulation step alike.
+//! columns both call them, so that a fit and a simulation step alike. And the medium's drag on a reading
+//! ([`crate::Effect::MediumDrag`], [`crate::Effect::SqueezeFilm`]), which the model's reading, its sensor
+//! offset and the estimator's window refit all take from one place.
+
+use crate::Effect;
+
+impl Effect {
+    /// What a drag of the medium adds to a reading at the deformation's rate `zdot` \[m/s\] and `gap` \[m\]
+    /// from the surface: damping·(ż − tare_speed) for [`Effect::MediumDrag`], damping·reach/(gap + reach)·ż
+    /// for [`Effect::SqueezeFilm`], 0 for any other effect.
+    #[inline]
+    pub fn drag(&self, zdot: f64, gap: f64) -> f64 {
+        match *self {
+            Effect::MediumDrag { damping, tare_speed } => damping * (zdot - tare_speed),
+            Effect::SqueezeFilm { damping, reach } => damping * reach / (gap + reach) * zdot,
+            _ => 0.0,
+        }
+    }
+
+    /// The damping \[N·s/m\] with which a drag of the medium acts in contact (a squeeze film's whole
+    /// damping there), 0 for any other effect: [`Effect::drag`]'s slope in ż at gap 0.
+    #[inline]
+    pub fn drag_in_contact(&self) -> f64 {
+        match *self {
+            Effect::MediumDrag { damping, .. } | Effect::SqueezeFilm { damping, .. } => damping,
+            _ => 0.0,
+        }
+    }
+}
 
 /// The share of an [`crate::Effect::Adhesion`]'s pull-off force at deformation z \[m\] after the contact's deepest
 /// deformation `peak`: min(1, (peak − z)/(peak + range)), 0 while pressing deeper.

@@ -147,28 +147,6 @@ pub fn gravity_change(now: &[[f64; 3]; 3], at_tare: &[[f64; 3]; 3], g: [f64; 3],
 }
 
 impl Effect {
-    /// What a drag of the medium adds to a reading at the deformation's rate `zdot` \[m/s\] and `gap` \[m\]
-    /// from the surface: damping·(ż − tare_speed) for [`Effect::MediumDrag`], damping·reach/(gap + reach)·ż
-    /// for [`Effect::SqueezeFilm`], 0 for any other effect.
-    #[inline]
-    pub fn drag(&self, zdot: f64, gap: f64) -> f64 {
-        match *self {
-            Effect::MediumDrag { damping, tare_speed } => damping * (zdot - tare_speed),
-            Effect::SqueezeFilm { damping, reach } => damping * reach / (gap + reach) * zdot,
-            _ => 0.0,
-        }
-    }
-
-    /// The damping \[N·s/m\] with which a drag of the medium acts in contact (a squeeze film's whole
-    /// damping there), 0 for any other effect: [`Effect::drag`]'s slope in ż at gap 0.
-    #[inline]
-    pub fn drag_in_contact(&self) -> f64 {
-        match *self {
-            Effect::MediumDrag { damping, .. } | Effect::SqueezeFilm { damping, .. } => damping,
-            _ => 0.0,
-        }
-    }
-
     pub fn id(&self) -> &'static str {
         match self {
             Effect::ViscoelasticRelaxation { .. } => "viscoelastic_relaxation",
