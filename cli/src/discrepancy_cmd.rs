@@ -187,10 +187,8 @@ fn print_refit_and_effects(report: &Report, name: &str) {
         println!("no effect named");
     } else {
         // The stages' gap is the in-contact one; free space's shows in the phases' table.
-        println!(
-            "\n{:<26}{:<48}{:>12}{:>12}  (in contact)",
-            "effect", "parameters (± 95 %)", "RMS before", "RMS after"
-        );
+        println!("\neffects named, in order (RMS before and after each: in contact)");
+        println!("{:<26}{:<48}{:>12}{:>12}", "effect", "parameters (± 95 %)", "RMS before", "RMS after");
         for e in &report.effects {
             let parameters: Vec<String> = e
                 .parameters
@@ -274,7 +272,7 @@ fn print_verdict(report: &Report) {
     println!("\nfinal RMS {}; remaining: {remaining}", si(report.final_rms, "N"));
     let m = &report.model;
     println!(
-        "its law: {}, k = {:.4e}, λ = {:.4e}, exponents a = {:.2}, b = {:.2}, c = {:.2} (SI: N, m, s), with {} effect{}",
+        "its law: {}, k = {:.4e}, λ = {:.4e}, exponents a = {:.2}, b = {:.2}, c = {:.2} (SI: N, m, s), with {} effect{}{}",
         m.kind.id(),
         m.stiffness,
         m.damping,
@@ -282,7 +280,12 @@ fn print_verdict(report: &Report) {
         m.exponents.b,
         m.exponents.c,
         m.effects.len(),
-        if m.effects.len() == 1 { "" } else { "s" }
+        if m.effects.len() == 1 { "" } else { "s" },
+        if report.effects.iter().any(|e| e.id == "stiffness_exponent") {
+            " (the named stiffness_exponent is the law's a, its k in N/mᵃ)"
+        } else {
+            ""
+        }
     );
     if let Some(left) = what_is_left(report) {
         println!("what is left is mostly in {left}");
@@ -339,7 +342,7 @@ pub fn analyse_file(args: &DiscrepancyArgs, progress: bool) -> anyhow::Result<An
     if let Some(given) = baseline.as_ref().filter(|m| progress && !m.effects.is_empty()) {
         let ids: Vec<&str> = given.effects.iter().map(|e| e.id()).collect();
         println!(
-            "the given model's effects ({}) are in its baseline residual; the refit starts from its law alone and names effects anew",
+            "the given model's effects ({}) are in its baseline residual; the refit starts from its law alone and names effects anew, and the given model stands where that refit does not fit better",
             ids.join(", ")
         );
     }

@@ -337,7 +337,7 @@ pub fn print_table(id: &Identification, file: &Path, from_table: bool) {
     let m = &id.model.model;
     if from_table {
         println!(
-            "\nselected: {} (* above): k = {:.4e}, λ = {:.4e} (SI: N, m, s)",
+            "\nselected: {} (* above), its fit at the estimated surface: k = {:.4e}, λ = {:.4e} (SI: N, m, s)",
             id.selected().label(),
             m.stiffness,
             m.damping
