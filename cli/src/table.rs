@@ -422,9 +422,7 @@ fn data_rows(path: &Path, rdr: &mut csv::Reader<Box<dyn std::io::Read>>) -> anyh
 impl Table {
     /// The median time between samples \[s\].
     pub fn sample_period(&self) -> f64 {
-        let mut dt: Vec<f64> = self.t.windows(2).map(|w| w[1] - w[0]).collect();
-        dt.sort_by(f64::total_cmp);
-        dt[dt.len() / 2]
+        median(&mut self.t.windows(2).map(|w| w[1] - w[0]).collect::<Vec<f64>>())
     }
 
     /// The rate of the depth [m/s]: the table's column, else central differences.
@@ -488,17 +486,13 @@ impl Table {
     /// the 95th percentile of the speed where the force is clearly in contact (more than a tenth of its
     /// range above `free_level`). None where there is no such contact or no noise.
     pub fn rate_noise(&self, free_level: f64) -> Option<(f64, f64, f64)> {
-        let median = |mut v: Vec<f64>| -> Option<f64> {
-            if v.is_empty() {
-                return None;
-            }
-            let mid = v.len() / 2;
-            Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
-        };
         let x = &self.depth;
-        let second: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
-        let depth_noise = median(second)? / (0.6745 * 6f64.sqrt());
-        let dt = median(self.t.windows(2).map(|w| w[1] - w[0]).collect())?;
+        if x.len() < 3 {
+            return None;
+        }
+        let mut second: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
+        let depth_noise = median(&mut second) / (0.6745 * 6f64.sqrt());
+        let dt = self.sample_period();
         let top = self.f.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
         let rate = central_differences(&self.t, x);
         let mut speeds: Vec<f64> = (0..x.len())

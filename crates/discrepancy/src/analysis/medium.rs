@@ -90,7 +90,7 @@ impl Analysis<'_> {
         let held_out_error = |reach: f64| {
             let fams: Vec<(Family, f64)> = beside.iter().copied().chain([(Family::SqueezeFilm, reach)]).collect();
             let st = fams.iter().fold(self.now.structure.clone(), |s, &(f, sh)| f.apply(&s, sh));
-            fit::fit(&self.data, &st).cv_mse
+            fit::held_out_mse(&self.data, &st)
         };
         let grid = Family::SqueezeFilm.grid(&self.scales, &self.now.structure);
         let (reach, _) =
