@@ -162,8 +162,14 @@ fn print_refit_and_effects(report: &Report, name: &str) {
             c.to.id()
         );
     }
+    // The tare's level σ only where it differs from the floor's (noise slower than the window keeps σ).
+    let level = if n(report.level_noise) == n(report.noise_floor) {
+        String::new()
+    } else {
+        format!("; a level read over a tare's window: ± {}", n(report.level_noise))
+    };
     println!(
-        "noise floor {} (from {} at the refitted surface; a level read over a tare's window: ± {}); k, λ and the surface refitted: \
+        "noise floor {} (from {} at the refitted surface{level}); k, λ and the surface refitted: \
          {:.4e}, {:.4e}, {} ± {} → RMS {}",
         n(report.noise_floor),
         match report.noise_source {
@@ -172,7 +178,6 @@ fn print_refit_and_effects(report: &Report, name: &str) {
             softcontact_discrepancy::NoiseSource::HoldingDifferences => "holds' consecutive differences",
             softcontact_discrepancy::NoiseSource::AllDifferences => "all consecutive differences",
         },
-        n(report.level_noise),
         report.refit.stiffness,
         report.refit.damping,
         si(report.refit.contact_shift, "m"),

@@ -675,6 +675,12 @@ fn a_table_runs_through_identify_and_discrepancy_with_no_flags() {
     // Scale-free: the noise floor of a 1 µN contact is a fraction of a nN, not the robot's floors.
     let sigma = v["noise_floor"].as_f64().unwrap();
     assert!(sigma > 1e-11 && sigma < 1e-8, "{sigma}");
+    // The floor's line gives a tare's level σ only where it differs from the floor.
+    let line = shown.lines().find(|l| l.starts_with("noise floor ")).unwrap_or_else(|| panic!("{shown}"));
+    let floor = &line["noise floor ".len()..line.find(" (").unwrap()];
+    assert_eq!(line.matches(floor).count(), 1, "{line}");
+    let level = v["level_noise"].as_f64().unwrap();
+    assert_eq!(line.contains("tare's window"), (level / sigma - 1.0).abs() > 0.01, "{line} ({level} vs {sigma})");
     assert!(v.get("overlay_file").is_none(), "a table's model is not the arm's: {v}");
     // A malformed cell is named by line and column.
     let bad = dir.path().join("bad.csv");
