@@ -210,6 +210,23 @@ fn print_refit_and_effects(report: &Report, name: &str) {
             println!("{:<26}{:<48}{:>12}{:>12}", e.id, parameters.join(", "), n(e.rms_before), n(e.rms_after));
         }
     }
+    for b in &report.bounds {
+        // The shape each family is screened over: a time constant or delay, a speed, a length, or a' itself.
+        let shape = |v: f64| match b.id.as_str() {
+            "viscoelastic_relaxation" | "quasi_linear_relaxation" | "time_delay" => si(v, "s"),
+            "hysteresis" => si(v, "m/s"),
+            "adhesion" | "squeeze_film" => si(v, "m"),
+            _ => format!("{v:.2}"),
+        };
+        println!(
+            "not named: {} at {}, an end of the range {} – {} it was screened on (a bound, not a finding); the \
+             model is refitted without it",
+            b.id,
+            shape(b.shape),
+            shape(b.range.0),
+            shape(b.range.1)
+        );
+    }
     for a in &report.ambiguous {
         match &a.named {
             Some(named) => println!(
@@ -441,12 +458,7 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
     } else {
         let [x, y, z] = id_args.normal[..] else { anyhow::bail!("--normal takes three numbers") };
         let surface = analysis_surface + report.contact_shift * Vector3::new(x, y, z).normalize();
-        let overlay = write_overlay(&args.out, name, &report.model, &surface)?;
-        println!(
-            "the graph's parameters for it (launch-scripts/sim.sh or robot.sh --params-file): {}",
-            overlay.display()
-        );
-        Some(overlay)
+        overlay_for_the_graph(&args.out, name, &report.model, &surface)?
     };
     let at_surface = series.shifted(report.contact_shift);
     let figures = discrepancy_figures::Figures {
@@ -493,6 +505,23 @@ fn write_model_file(
     }
     std::fs::write(&model_file, text).with_context(|| format!("writing {}", model_file.display()))?;
     Ok(model_file)
+}
+
+/// [`write_overlay`], said; where the controller would refuse the model ([`ContactModel::plausible`]), that
+/// is said instead and nothing else is lost (the report, the model file and the figures are written).
+fn overlay_for_the_graph(
+    dir: &std::path::Path,
+    name: &str,
+    model: &ContactModel,
+    surface: &Vector3<f64>,
+) -> anyhow::Result<Option<PathBuf>> {
+    if let Err(e) = model.plausible() {
+        println!("no parameters for the graph: the augmented model is not one the controller takes ({e})");
+        return Ok(None);
+    }
+    let overlay = write_overlay(dir, name, model, surface)?;
+    println!("the graph's parameters for it (launch-scripts/sim.sh or robot.sh --params-file): {}", overlay.display());
+    Ok(Some(overlay))
 }
 
 /// `DIR/NAME.params.yaml`: the augmented model as a parameter overlay of the graph. The controller

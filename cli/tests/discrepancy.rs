@@ -827,3 +827,42 @@ fn a_tables_augmented_model_given_back_at_its_surface_starts_from_its_own_fit() 
     let bad = discrepancy(&[data.as_ref(), "--surface".as_ref(), "3 furlongs".as_ref()]);
     assert!(!bad.status.success() && text(&bad).contains("nm"), "{}", text(&bad));
 }
+
+/// A relaxation far slower than the recording ends at the top of the time constants screened: the text
+/// says it is a bound with the range's end, as the JSON's `bounds` has it, and names nothing of it.
+#[test]
+fn a_shape_at_the_end_of_its_range_is_said_to_be_a_bound_not_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut slow = ContactModel::new(Kind::AzadFeatherstone, 25_000.0, 1100.0).unwrap();
+    slow.effects.push(Effect::ViscoelasticRelaxation { stiffness: 3000.0, time_constant: 250.0 });
+    let (report, _, shown) = analyse(dir.path(), "slow", &slow);
+    let bounds = report["bounds"].as_array().unwrap();
+    assert!(!bounds.is_empty(), "no bound: {shown}");
+    for b in bounds {
+        let id = b["id"].as_str().unwrap();
+        assert!(shown.contains(&format!("not named: {id} at ")), "{id} not said: {shown}");
+        assert!(!ids(&report).iter().any(|n| n == id), "{id} named: {shown}");
+    }
+    assert!(shown.contains("(a bound, not a finding)"), "{shown}");
+}
+
+/// A surface stiffer than the controller takes: the command says it writes no parameters for the graph
+/// and still writes the report, the model file and the figures.
+#[test]
+fn a_model_the_controller_refuses_gets_no_overlay_and_loses_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let stiff = ContactModel::new(Kind::AzadFeatherstone, 3.0e6, 1100.0).unwrap();
+    assert!(stiff.plausible().is_err(), "the test needs a model the controller refuses");
+    let (report, augmented, shown) = analyse(dir.path(), "stiff", &stiff);
+    assert!(augmented.plausible().is_err(), "{shown}");
+    assert!(
+        shown.contains("no parameters for the graph: the augmented model is not one the controller takes"),
+        "{shown}"
+    );
+    assert!(report.get("overlay_file").is_none(), "{report}");
+    let out = dir.path().join("out");
+    for file in ["stiff.augmented.yaml", "stiff.residual.svg", "stiff.loops.svg", "stiff.residual.csv"] {
+        assert!(out.join(file).exists(), "{file} missing: {shown}");
+    }
+    assert!(!out.join("stiff.params.yaml").exists(), "{shown}");
+}

@@ -334,7 +334,8 @@ impl<'a> Analysis<'a> {
         for &(f, _) in &best.fams {
             let Some(mine) = singles.iter().find(|c| c.fams[0].0 == f) else { continue };
             let cm = contribution(mine);
-            for rival in singles.iter().filter(|c| best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
+            // A rival is an effect the record could be: one beyond what it can physically be is none.
+            for rival in singles.iter().filter(|c| c.physical && best.fams.iter().all(|x| x.0 != c.fams[0].0)) {
                 if corr(&cm, &contribution(rival)).abs() > o.collinear_corr
                     && rival.fit.stretch_mse <= o.rival_ratio * mine.fit.stretch_mse
                     && gain(rival) > 0.0
@@ -498,7 +499,8 @@ impl<'a> Analysis<'a> {
     }
 
     /// A shape still at an end of its range after every polish is a bound, not a finding: the effect is
-    /// dropped (the model refitted without it) and reported among `bounds`.
+    /// dropped (the model refitted without it) and reported among `bounds`. The rows of the effects left
+    /// keep what each did when it was named; the final gap is what the drop leaves.
     pub(crate) fn drop_shapes_at_an_edge(&mut self) -> Result<(), DiscrepancyError> {
         while let Some(i) = self.now.named.iter().position(|&(f, sh)| self.scales.at_edge(f, sh).is_some()) {
             let (f, shape) = self.now.named[i];
@@ -515,7 +517,7 @@ impl<'a> Analysis<'a> {
             self.now.fit = fit::fit(&self.data, &self.now.structure);
             self.model = self.model_of(&self.now.structure, &self.now.fit, &self.now.named);
             self.model.validate()?;
-            self.update_gap()?;
+            self.now.gap = self.gap_of(&self.model, self.now.structure.shift)?;
         }
         Ok(())
     }

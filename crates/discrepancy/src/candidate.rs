@@ -50,6 +50,10 @@ pub(crate) fn assess(d: &Data, cur: &Structure, fams: &[(Family, f64)], scales: 
                 // A small mixing of channels, a plausible tool: larger ones are something else.
                 Family::Crosstalk => physical &= b.abs() < 0.3,
                 Family::ToolGravity => physical &= b.abs() <= 100.0,
+                // A sensor offset beyond a plausible one (`MAX_SENSOR_BIAS`, `MAX_SENSOR_DRIFT`: a warming
+                // F/T sensor drifts mN/s) is something else that the record shows as a slow trend.
+                Family::SensorBias => physical &= b.abs() <= softcontact_contact::MAX_SENSOR_BIAS,
+                Family::SensorDrift => physical &= b.abs() <= softcontact_contact::MAX_SENSOR_DRIFT,
                 // Its letting go seen: the hand goes past the range after a contact at least once.
                 Family::Adhesion => physical &= b > 0.0 && let_go_steps(d, &st, j).next().is_some(),
                 // A medium resists the motion; a plausible one (`MAX_MEDIUM_DRAG`).

@@ -990,3 +990,17 @@ fn a_wrong_damping_form_is_re_chosen_not_patched() {
         assert!(r.law_rechosen.is_none() && ids(&r).is_empty(), "case {i} given its own kind: {:?}", r.law_rechosen);
     }
 }
+
+/// A relaxation far slower than the record (τ ten times its length) is fitted at the top of the time
+/// constants screened: a bound, reported among `bounds` with the range's end, not named.
+#[test]
+fn a_relaxation_slower_than_the_record_is_reported_as_a_bound_not_named() {
+    let truth = with(&kv(), &[Effect::ViscoelasticRelaxation { stiffness: 4000.0, time_constant: 250.0 }]);
+    let s = record(&truth, Exc::new(100.0), 0.02, 7, &|_, _, _| 0.0);
+    let r = analyse(&s, &kv(), &Options::default()).unwrap();
+    show("a relaxation slower than the record", &r);
+    assert!(!ids(&r).contains(&"viscoelastic_relaxation"), "named {:?}", ids(&r));
+    let bound = r.bounds.iter().find(|b| b.id == "viscoelastic_relaxation");
+    let bound = bound.unwrap_or_else(|| panic!("no bound among {:?}", r.bounds));
+    assert!(bound.shape >= bound.range.1 / crate::scales::EDGE, "{bound:?}");
+}
