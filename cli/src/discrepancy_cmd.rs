@@ -517,6 +517,12 @@ fn overlay_for_the_graph(
 ) -> anyhow::Result<Option<PathBuf>> {
     if let Err(e) = model.plausible() {
         println!("no parameters for the graph: the augmented model is not one the controller takes ({e})");
+        // An overlay of an earlier run here would start the graph from a model not of this recording.
+        let stale = dir.join(format!("{name}.params.yaml"));
+        if stale.exists() {
+            std::fs::remove_file(&stale).with_context(|| format!("removing {}", stale.display()))?;
+            println!("removed {}, an earlier run's parameters for the graph", stale.display());
+        }
         return Ok(None);
     }
     let overlay = write_overlay(dir, name, model, surface)?;

@@ -853,7 +853,12 @@ fn a_model_the_controller_refuses_gets_no_overlay_and_loses_nothing_else() {
     let dir = tempfile::tempdir().unwrap();
     let stiff = ContactModel::new(Kind::AzadFeatherstone, 3.0e6, 1100.0).unwrap();
     assert!(stiff.plausible().is_err(), "the test needs a model the controller refuses");
+    // An earlier run's overlay in the same folder goes: it is not of this recording.
+    let stale = dir.path().join("out").join("stiff.params.yaml");
+    std::fs::create_dir_all(stale.parent().unwrap()).unwrap();
+    std::fs::write(&stale, "deformation_controller: {}\n").unwrap();
     let (report, augmented, shown) = analyse(dir.path(), "stiff", &stiff);
+    assert!(shown.contains("an earlier run's parameters for the graph"), "{shown}");
     assert!(augmented.plausible().is_err(), "{shown}");
     assert!(
         shown.contains("no parameters for the graph: the augmented model is not one the controller takes"),

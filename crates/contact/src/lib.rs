@@ -71,9 +71,9 @@ pub use loading_paths::{
 pub use model::{
     ContactModel, DELAY_LINE, Effect, EffectState, Exponents, Kind, MAX_ADHESION, MAX_ADHESION_RANGE,
     MAX_CONTACT_STIFFNESS, MAX_DELAY, MAX_EFFECTS, MAX_HYSTERESIS, MAX_MEDIUM_DRAG, MAX_SENSOR_BIAS, MAX_SENSOR_DRIFT,
-    MAX_SQUEEZE_REACH, MAX_SURFACE_DRIFT, MAX_TARE_SPEED, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH, SensorInputs,
-    TIME_CONSTANT_RANGE, adhesion_share, finite, gap_of, gravity_change, maxwell_step, maxwell_step_with_decay,
-    next_adhesion_peak,
+    MAX_SQUEEZE_REACH, MAX_SURFACE_DRIFT, MAX_TARE_SPEED, MIN_HYSTERESIS_SCALE, PLAUSIBLE_DEPTH, PLAUSIBLE_EXPONENTS,
+    SensorInputs, TIME_CONSTANT_RANGE, adhesion_share, finite, gap_of, gravity_change, maxwell_step,
+    maxwell_step_with_decay, next_adhesion_peak,
 };
 pub use onset::{OnsetConfig, OnsetDetector, OnsetEvent};
 pub use stats::{Dispersion, FitStatistics, dispersion, fit_statistics};

@@ -9,6 +9,8 @@ pub const MAX_EFFECTS: usize = 8;
 pub const MAX_CONTACT_STIFFNESS: f64 = 1e6;
 /// The depth at which a plausible law's stiffness is taken \[m\].
 pub const PLAUSIBLE_DEPTH: f64 = 0.1;
+/// The exponents a, b, c of a plausible contact law (the papers' models use 1 to 2).
+pub const PLAUSIBLE_EXPONENTS: std::ops::RangeInclusive<f64> = 0.0..=4.0;
 /// The time constants of a plausible model's relaxation branches \[s\].
 pub const TIME_CONSTANT_RANGE: std::ops::RangeInclusive<f64> = 1e-3..=1e3;
 /// The largest hysteresis of a plausible model (a share of the elastic force).

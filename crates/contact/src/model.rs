@@ -453,16 +453,23 @@ impl ContactModel {
     /// repeated effects — a contact stiffness (the law's slope at [`PLAUSIBLE_DEPTH`] plus every relaxation
     /// branch) of at most [`MAX_CONTACT_STIFFNESS`], hysteresis of at most [`MAX_HYSTERESIS`], a surface
     /// drifting at most [`MAX_SURFACE_DRIFT`], a sensor drifting at most [`MAX_SENSOR_DRIFT`] and biased at
-    /// most [`MAX_SENSOR_BIAS`]. The controller and the simulator refuse a model beyond them: such numbers
-    /// are a mistake, not a surface (three branches of 1e7 N/m at 1 ms, each once accepted, made the
-    /// simulated contact push 2.7 kN).
+    /// most [`MAX_SENSOR_BIAS`], exponents in [`PLAUSIBLE_EXPONENTS`] and a tangential stiffness k_t·√z at
+    /// [`PLAUSIBLE_DEPTH`] of at most [`MAX_CONTACT_STIFFNESS`]. The controller and the simulator refuse a
+    /// model beyond them: such numbers are a mistake, not a surface.
     pub fn plausible(&self) -> Result<(), ContactError> {
         self.validate()?;
         let bad = |why: String| Err(ContactError::InvalidModel(format!("implausible: {why}")));
         if self.effects.len() > MAX_EFFECTS {
             return bad(format!("{} effects, more than {MAX_EFFECTS}", self.effects.len()));
         }
-        let a = self.exponents.a;
+        let Exponents { a, b, c } = self.exponents;
+        if ![a, b, c].iter().all(|x| PLAUSIBLE_EXPONENTS.contains(x)) {
+            return bad(format!("exponents {a}, {b}, {c} outside {PLAUSIBLE_EXPONENTS:?}"));
+        }
+        let tangential = self.tangential.map_or(0.0, |t| t.stiffness * PLAUSIBLE_DEPTH.sqrt());
+        if tangential > MAX_CONTACT_STIFFNESS {
+            return bad(format!("a tangential stiffness of {tangential:.3e} N/m at {PLAUSIBLE_DEPTH} m"));
+        }
         let mut stiffness = self.stiffness * a * pow(PLAUSIBLE_DEPTH, a - 1.0);
         let (mut hysteresis, mut surface_drift, mut sensor_drift, mut bias) = (0.0_f64, 0.0_f64, 0.0_f64, 0.0_f64);
         let mut adhesion = 0.0_f64;

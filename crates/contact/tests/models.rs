@@ -513,6 +513,24 @@ fn adhesion_beyond_what_a_surface_can_pull_is_implausible() {
     assert!(model.plausible().unwrap_err().to_string().contains("in all"));
 }
 
+/// A finite model file the controller must still refuse: an exponent of 5 (the simulator's and the
+/// controller's law takes 0 to 4) and a tangential law of 1e300 N/m^1.5 (finite, so `validate` passes).
+#[test]
+fn exponents_beyond_four_and_a_tangential_stiffness_of_1e300_are_implausible() {
+    let mut model = ContactModel::general(2.5e4, 1400.0, Exponents { a: 1.5, b: 0.5, c: 1.0 }).unwrap();
+    model.tangential = Some(Tangential::walton(1e5, 0.8));
+    model.plausible().unwrap();
+    for exponents in [Exponents { a: 5.0, b: 0.5, c: 1.0 }, Exponents { a: 1.5, b: 0.5, c: 10.0 }] {
+        let err = ContactModel { exponents, ..model.clone() }.plausible().unwrap_err().to_string();
+        assert!(err.contains("outside 0.0..=4.0"), "{exponents:?}: {err}");
+    }
+    for stiffness in [1e300, 1e12] {
+        let t = Some(Tangential::walton(stiffness, 50.0));
+        let err = ContactModel { tangential: t, ..model.clone() }.plausible().unwrap_err().to_string();
+        assert!(err.contains("tangential stiffness"), "{stiffness}: {err}");
+    }
+}
+
 #[test]
 fn quasi_linear_relaxation_is_fungs_reduced_relaxation_on_the_elastic_force() {
     // A step to z₀ then a hold: f(t) = k z₀ᵃ (1 + g e^{−t/τ}) (Fung's G(t) = 1 + g e^{−t/τ}).

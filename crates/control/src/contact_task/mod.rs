@@ -96,8 +96,8 @@ pub struct ControllerConfig {
     pub arm: ArmEffects,
 }
 
-/// Exponents a, b, c of a plausible contact law (the seeds' models use 1 to 2).
-pub const EXPONENT_RANGE: std::ops::RangeInclusive<f64> = 0.0..=4.0;
+/// Exponents a, b, c of a plausible contact law ([`softcontact_contact::PLAUSIBLE_EXPONENTS`]).
+pub const EXPONENT_RANGE: std::ops::RangeInclusive<f64> = softcontact_contact::PLAUSIBLE_EXPONENTS;
 
 impl ControllerConfig {
     /// The force-control paper's set-up on the LWR IV: surface below, 1 kHz.
