@@ -4,7 +4,7 @@
 
 use softcontact_contact::{ContactModel, Effect};
 
-use super::{ControlError, ControllerConfig, DeformationController, EXPONENT_RANGE};
+use super::{ControlError, ControllerConfig, DeformationController};
 
 /// The largest correction of a reading by a named sensor bias or drift, as a share of `max_force`: a
 /// tare zeroes the offset, so what is left is small, and a model claiming more is refused (a bias) or
@@ -81,16 +81,12 @@ pub(super) struct Trip {
 }
 
 /// What the controller takes as a contact model under `config`: a plausible one
-/// ([`ContactModel::plausible`]) with exponents in [`EXPONENT_RANGE`] and a named sensor bias within
+/// ([`ContactModel::plausible`], which holds the exponents to [`super::EXPONENT_RANGE`]) with a named sensor bias within
 /// [`MAX_SENSOR_CORRECTION`] of `max_force`.
 pub(super) fn plausible_for(model: &ContactModel, config: &ControllerConfig) -> Result<(), ControlError> {
     let implausible = |why: String| Err(ControlError::ImplausibleModel(why));
     if let Err(e) = model.plausible() {
         return implausible(e.to_string());
-    }
-    let e = model.exponents;
-    if ![e.a, e.b, e.c].iter().all(|x| EXPONENT_RANGE.contains(x)) {
-        return implausible(format!("exponents {}, {}, {} outside {EXPONENT_RANGE:?}", e.a, e.b, e.c));
     }
     // A surface the law cannot press measurably within max_deformation: its inverse asks for depths
     // the limits refuse, or for a deformation the hand cannot hold against the sensor's noise.
