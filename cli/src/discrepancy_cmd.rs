@@ -111,7 +111,8 @@ fn series(recording: &Recording, args: &IdentifyArgs, surface: &Vector3<f64>) ->
                 }) {
                     continue;
                 }
-                if let Some(p) = pairing.force(stamp, geometry::vector_of(&w.wrench.force)) {
+                // A reading left out as unreadable was said by `identify`, which read the same readings.
+                if let Ok(p) = pairing.force(stamp, geometry::vector_of(&w.wrench.force)) {
                     t.push(stamp);
                     let contact = &pairing.geometry;
                     zs.push(contact.deformation(&p.position, surface));
@@ -331,10 +332,10 @@ pub struct Analysis {
 fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: bool) -> anyhow::Result<Analysis> {
     let id_args = &args.recording;
     let table = table::read(&id_args.file)?;
-    let found = identify_cmd::identify_table(&table, id_args)?;
     if say {
-        identify_cmd::say_table(&id_args.file, &table, &found.onset, id_args.onset);
+        identify_cmd::say_table(&id_args.file, &table, &table::onset(&table.f, &table.depth), id_args.onset);
     }
+    let found = identify_cmd::identify_table(&table, id_args)?;
     let surface = args.surface.unwrap_or(found.surface);
     if say && args.surface.is_some() {
         println!("the surface at {} of the depth column (--surface)", si(surface, "m"));

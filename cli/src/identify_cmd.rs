@@ -10,7 +10,7 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use serde_json::json;
 use softcontact_bag::Recording;
-use softcontact_contact::{Fit, FitConfig, Kind};
+use softcontact_contact::{ContactError, Fit, FitConfig, Kind};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 use softcontact_nodes::contact_estimator::EstimatorConfig;
@@ -112,6 +112,9 @@ pub fn identify(recording: &Recording, args: &IdentifyArgs, progress: impl Fn(u6
             progress(i as u64);
         }
     }
+    if let Some(said) = identifier.unreadable.sentence() {
+        eprintln!("warning: {said}");
+    }
     Ok(identifier.finish()?)
 }
 
@@ -148,14 +151,7 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
     for (((&t, &depth), &f), &rate) in table.t.iter().zip(&table.depth).zip(&table.f).zip(&rate) {
         identifier.reading(t, &(depth * n), &(rate * n), f - onset.free_level)?;
     }
-    let id = identifier.finish().map_err(|e| {
-        anyhow::anyhow!(
-            "{e}: no force rose {} above the free level {} (the onset threshold{}); set another with --onset [N]",
-            table.force(threshold),
-            table.force(onset.free_level),
-            if args.onset.is_some() { " given" } else { ": 10 noise σ, at least 2 % of the force range" }
-        )
-    })?;
+    let id = identifier.finish().map_err(|e| no_contact(e, table, &onset, threshold, args.onset.is_some()))?;
     let surface = match table.depth_is {
         Depth::Position => id.contact_position().dot(&n),
         Depth::Deformation => 0.0,
@@ -399,9 +395,34 @@ pub fn say_warnings(recording: &Recording, said: usize) -> usize {
     warnings.len().max(said)
 }
 
+/// Why a table's identification found no contact, in the table's terms: the threshold and the free level,
+/// and how many samples in a row rose above it where some did.
+fn no_contact(e: ContactError, table: &Table, onset: &table::Onset, threshold: f64, given: bool) -> anyhow::Error {
+    let confirm = softcontact_contact::OnsetConfig::default().confirm;
+    let above = table.longest_above(onset.free_level, threshold);
+    let rose = if above == 0 {
+        format!("no force rose {} above the free level {}", table.force(threshold), table.force(onset.free_level))
+    } else {
+        format!(
+            "the force rose more than {} above the free level {} on at most {above} sample{} in a row; a contact needs {confirm}",
+            table.force(threshold),
+            table.force(onset.free_level),
+            if above == 1 { "" } else { "s" }
+        )
+    };
+    let why = if given { " given" } else { ": 10 noise σ, at least 2 % of the force range" };
+    anyhow::anyhow!("{e}: {rose} (the onset threshold{why}); set another with --onset [N]")
+}
+
 /// A table of deformations must reach z > 0 somewhere; one of positions has its surface found at the
 /// force onset, which [`identify_table`] reports when there is none.
 fn ensure_contact(table: &Table) -> anyhow::Result<()> {
+    let (least, most) = table.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    anyhow::ensure!(
+        most > least,
+        "the force is {} on every row: nothing touches, or the column holds no measurement",
+        table.force(most)
+    );
     anyhow::ensure!(
         table.depth_is == Depth::Position || table.depth.iter().any(|&z| z > 0.0),
         "no sample is in contact: the deformation column z never exceeds 0 (z > 0 compresses, the surface at \

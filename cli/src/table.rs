@@ -284,8 +284,12 @@ fn malformed(path: &Path, e: csv::Error) -> anyhow::Error {
 /// The largest magnitude each column (time, depth, force, rate) may hold, in SI, and how it is said: a
 /// thousand times beyond the product's range (10 cm, 10 kN) and a year of recording; a value past it is a
 /// corrupted cell or a wrong unit, and would make every fit non-finite.
-const READABLE: [(f64, &str); 4] =
-    [(3.2e7, "|t| ≤ 1 year"), (1e3, "|depth| ≤ 1 km"), (1e7, "|f| ≤ 10 MN"), (1e3, "|ż| ≤ 1 km/s")];
+const READABLE: [(f64, &str); 4] = [
+    (3.2e7, "|t| ≤ 1 year"),
+    (1e3, "|depth| ≤ 1 km"),
+    (softcontact_nodes::contact_estimator::MAX_READABLE_FORCE, "|f| ≤ 10 MN"),
+    (1e3, "|ż| ≤ 1 km/s"),
+];
 
 /// Reads a table (see the module's doc).
 pub fn read(path: &Path) -> anyhow::Result<Table> {
@@ -440,19 +444,33 @@ impl Table {
         si(newtons, "N")
     }
 
+    /// A force that goes more than twice as far below its free level as above it, said: f > 0 must push.
+    fn pulls(&self, free_level: f64) -> Option<String> {
+        let (lo, hi) = self.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        (free_level - lo > 2.0 * (hi - free_level)).then(|| {
+            format!(
+                "the force goes {} below its free level and only {} above it: f > 0 must push (negate the column if the instrument counts pulling as positive)",
+                si(free_level - lo, "N"),
+                si(hi - free_level, "N")
+            )
+        })
+    }
+
+    /// The most consecutive samples whose force is more than `threshold` above `free_level`.
+    pub fn longest_above(&self, free_level: f64, threshold: f64) -> usize {
+        let (mut run, mut most) = (0, 0);
+        for &f in &self.f {
+            run = if f - free_level > threshold { run + 1 } else { 0 };
+            most = most.max(run);
+        }
+        most
+    }
+
     /// What looks wrong in the table's conventions: a force that mostly pulls (f > 0 must push), a rate
     /// column that disagrees with the depth's own change; and without a rate column, a depth so noisy that
     /// its central differences carry the noise into every rate-dependent term ([`Table::rate_noise`]).
     pub fn doubts(&self, free_level: f64) -> Vec<String> {
-        let mut out = vec![];
-        let (lo, hi) = self.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        if free_level - lo > 2.0 * (hi - free_level) {
-            out.push(format!(
-                "the force goes {} below its free level and only {} above it: f > 0 must push (negate the column if the instrument counts pulling as positive)",
-                si(free_level - lo, "N"),
-                si(hi - free_level, "N")
-            ));
-        }
+        let mut out: Vec<String> = self.pulls(free_level).into_iter().collect();
         if let Some(rate) = &self.rate {
             let own = central_differences(&self.t, &self.depth);
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();

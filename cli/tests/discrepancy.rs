@@ -12,13 +12,16 @@ use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_nodes::contact_estimator::identify::synthetic_pushes;
 
 fn write(path: &Path, model: &ContactModel, seed: u64) {
-    let readings = synthetic_pushes(model, 0.3, 0.03, 20.0, 1000.0, 0.1, seed).unwrap();
+    write_readings(path, &synthetic_pushes(model, 0.3, 0.03, 20.0, 1000.0, 0.1, seed).unwrap());
+}
+
+fn write_readings(path: &Path, readings: &[softcontact_nodes::contact_estimator::identify::SyntheticReading]) {
     let mut w = BagWriter::create(path).unwrap();
     let pose = w.add_topic::<PoseStamped>("/lwr/ee_pose", Qos::SENSOR).unwrap();
     let twist = w.add_topic::<TwistStamped>("/lwr/ee_twist", Qos::SENSOR).unwrap();
     let wrench = w.add_topic::<WrenchStamped>("/ft_sensor/wrench", Qos::SENSOR).unwrap();
     let ns = |t: f64| (1.7e18 + t * 1e9) as u64;
-    for r in &readings {
+    for r in readings {
         w.write(pose, ns(r.t), &r.pose).unwrap();
         w.write(twist, ns(r.t), &r.twist).unwrap();
         w.write(wrench, ns(r.t), &r.wrench).unwrap();
@@ -121,7 +124,20 @@ fn bad_input_gets_a_clear_error_and_a_non_zero_exit() {
     std::fs::write(&garbage, "kind: kelvin_voigt\nstiffness: -5\n").unwrap();
     let missing = dir.path().join("missing.mcap");
     let curve = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/afm/brain_creep.csv");
+    // Tables whose force says why no contact is found: constant, pulling, a single sample above the onset.
+    let table = |name: &str, force: &dyn Fn(usize) -> f64| {
+        let rows: String = (0..300).map(|i| format!("{},{i},{}\n", i as f64 * 1e-3, force(i))).collect();
+        let path = dir.path().join(name);
+        std::fs::write(&path, format!("t [s],x [nm],f [nN]\n{rows}")).unwrap();
+        path
+    };
+    let constant = table("constant.csv", &|_| 2.0);
+    let pulling = table("pulling.csv", &|i| -0.01 * i as f64 - 0.001 * (i % 3) as f64);
+    let one_sample = table("one.csv", &|i| if i == 299 { 5.0 } else { 0.001 * (i % 3) as f64 });
     for (args, says) in [
+        (vec![constant.as_os_str()], "the force is 2.000 nN on every row: nothing touches"),
+        (vec![pulling.as_os_str()], "f > 0 must push (negate the column"),
+        (vec![one_sample.as_os_str()], "on at most 1 sample in a row; a contact needs 3"),
         (vec![curve.as_os_str(), "--normal".as_ref(), "1,0,0".as_ref()], "--normal is for recordings"),
         (vec![recording.as_os_str(), "--model".as_ref(), garbage.as_os_str()], "not a contact model"),
         (vec![missing.as_os_str()], "missing.mcap"),
@@ -131,6 +147,37 @@ fn bad_input_gets_a_clear_error_and_a_non_zero_exit() {
         let shown = text(&out);
         assert!(!out.status.success(), "{args:?} succeeded:\n{shown}");
         assert!(shown.contains(says) && !shown.contains("panicked"), "{args:?}: {shown}");
+    }
+}
+
+/// A force reading the sensor cannot have made (not finite, or beyond 10 MN) is left out and said, and the
+/// analysis is that of the recording without it: one reading of 1e9 N took the noise floor to 1 N.
+#[test]
+fn force_readings_of_nan_inf_1e9_and_1e300_are_left_out_said_and_change_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = ContactModel::new(Kind::KelvinVoigt, 9000.0, 250.0).unwrap();
+    let mut readings = synthetic_pushes(&model, 0.3, 0.03, 20.0, 1000.0, 0.1, 6).unwrap();
+    let run = |name: &str, readings: &[_]| {
+        let (path, json) = (dir.path().join(format!("{name}.mcap")), dir.path().join(format!("{name}.json")));
+        write_readings(&path, readings);
+        let out = dir.path().join(name);
+        let run =
+            discrepancy(&[path.as_os_str(), "--json".as_ref(), json.as_os_str(), "--out".as_ref(), out.as_os_str()]);
+        assert!(run.status.success(), "{}", text(&run));
+        (text(&run), serde_json::from_slice::<serde_json::Value>(&std::fs::read(&json).unwrap()).unwrap())
+    };
+    let (_, clean) = run("clean", &readings);
+    let n = readings.len();
+    for (k, bad) in [(n / 5, f64::NAN), (n / 3, 1e9), (n / 2, -1e300), (2 * n / 3, f64::INFINITY)] {
+        readings[k].wrench.wrench.force.z = bad;
+    }
+    let (shown, corrupted) = run("corrupted", &readings);
+    assert!(shown.contains("warning: 4 force readings left out: not finite or beyond 1e7 N"), "{shown}");
+    assert_eq!(ids(&corrupted), ids(&clean), "{shown}");
+    assert_eq!(corrupted["remaining"], clean["remaining"], "{shown}");
+    for key in ["noise_floor", "final_rms"] {
+        let (a, b) = (clean[key].as_f64().unwrap(), corrupted[key].as_f64().unwrap());
+        assert!((a - b).abs() <= 0.05 * a, "{key}: clean {a}, corrupted {b}\n{shown}");
     }
 }
 

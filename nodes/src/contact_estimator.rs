@@ -8,7 +8,7 @@ pub mod identify;
 mod pairing;
 mod params;
 
-pub use pairing::{ForcePairing, Paired};
+pub use pairing::{ForcePairing, MAX_READABLE_FORCE, Paired, Unpaired};
 pub use params::Params;
 
 use nalgebra::Vector3;

@@ -12,7 +12,7 @@ use softcontact_msgs::builtin_interfaces::Time;
 use softcontact_msgs::std_msgs::Header;
 use softcontact_msgs::topics;
 
-use super::{ContactEstimatorNode, ForcePairing, Paired, Params};
+use super::{ContactEstimatorNode, ForcePairing, MAX_READABLE_FORCE, Paired, Params, Unpaired};
 use crate::geometry;
 use crate::runtime::liveness::{StreamWatch, first_dead};
 use crate::runtime::params::Declared;
@@ -53,6 +53,7 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         was_in_contact: false,
         samples: 0,
         unpaired: 0,
+        unreadable: 0,
         refits: 0,
         refit_failures: 0,
     };
@@ -86,9 +87,16 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
                 continue;
             }
             wrench_watch.seen(start.elapsed().as_secs_f64());
-            let Some(paired) = pairing.force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force)) else {
-                estimation.unpaired += 1;
-                continue;
+            let paired = match pairing.force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force)) {
+                Ok(paired) => paired,
+                Err(Unpaired::NoFreshPose) => {
+                    estimation.unpaired += 1;
+                    continue;
+                }
+                Err(Unpaired::Unreadable) => {
+                    estimation.unreadable += 1;
+                    continue;
+                }
             };
             estimation.reading(&node, w.header.stamp, &paired, (&state_pub, &model_pub), &mut clock)?;
         }
@@ -100,9 +108,10 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
         }
     }
     eprintln!(
-        "contact_estimator: exit: {} readings, {} without a fresh pose, {} before free space was seen, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB{}",
+        "contact_estimator: exit: {} readings, {} without a fresh pose, {} unreadable (not finite or beyond {MAX_READABLE_FORCE:e} N), {} before free space was seen, {} models published, {} refits failed; samples refused from writers other than the pinned ones: {} poses, {} twists, {} wrenches; peak RSS {:.1} MB{}",
         estimation.samples,
         estimation.unpaired,
+        estimation.unreadable,
         estimation.joined_pressing,
         estimation.refits,
         estimation.refit_failures,
@@ -123,6 +132,8 @@ struct Estimation {
     was_in_contact: bool,
     samples: u64,
     unpaired: u64,
+    /// Readings not finite or beyond [`MAX_READABLE_FORCE`].
+    unreadable: u64,
     refits: u64,
     refit_failures: u64,
     onset_threshold: f64,

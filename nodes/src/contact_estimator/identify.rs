@@ -6,7 +6,9 @@ use softcontact_contact::{ContactError, Fit, FitConfig, Kind, Sample};
 use softcontact_msgs::geometry_msgs::{PoseStamped, TwistStamped, WrenchStamped};
 use softcontact_msgs::tf2_msgs::TFMessage;
 
-use crate::contact_estimator::{ContactEstimatorNode, EstimatorConfig, ForcePairing, ModelOut};
+use crate::contact_estimator::{
+    ContactEstimatorNode, EstimatorConfig, ForcePairing, MAX_READABLE_FORCE, ModelOut, Unpaired,
+};
 use crate::geometry;
 
 /// Where the sensor's rotation in the tool frame came from.
@@ -14,6 +16,35 @@ use crate::geometry;
 pub enum FramesFrom {
     TfStatic,
     Urdf,
+}
+
+/// The force readings of a recording that were left out as not measurements (not finite, or beyond
+/// [`MAX_READABLE_FORCE`]): how many, and the stamp of the first.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Unreadable {
+    pub count: u64,
+    pub first: Option<f64>,
+}
+
+impl Unreadable {
+    pub fn note(&mut self, t: f64) {
+        self.count += 1;
+        self.first.get_or_insert(t);
+    }
+
+    /// The sentence that says them, `None` where there are none.
+    pub fn sentence(&self) -> Option<String> {
+        let first = match self.first {
+            Some(t) if t.is_finite() => format!("the first stamped {t:.3} s"),
+            _ => "the first with a stamp that is not finite".to_string(),
+        };
+        (self.count > 0).then(|| {
+            format!(
+                "{} force readings left out: not finite or beyond {MAX_READABLE_FORCE:e} N, not measurements ({first})",
+                self.count
+            )
+        })
+    }
 }
 
 /// Feeds a recording's messages, in the order they were recorded, to the estimator.
@@ -24,6 +55,7 @@ pub struct Identifier {
     tool_frame: String,
     pub readings: u64,
     pub unpaired: u64,
+    pub unreadable: Unreadable,
     pub contact_time: Option<f64>,
     first_time: Option<f64>,
     /// How every kind is refitted at the estimated surface (the estimator's own fit settings).
@@ -59,6 +91,7 @@ impl Identifier {
             tool_frame: softcontact_dynamics::lwr4::TOOL_FRAME.into(),
             readings: 0,
             unpaired: 0,
+            unreadable: Unreadable::default(),
             contact_time: None,
             first_time: None,
             fit,
@@ -86,9 +119,16 @@ impl Identifier {
     pub fn wrench(&mut self, msg: &WrenchStamped) -> Result<(), ContactError> {
         let t = msg.header.stamp.as_secs_f64();
         self.first_time.get_or_insert(t);
-        let Some(p) = self.pairing.force(t, geometry::vector_of(&msg.wrench.force)) else {
-            self.unpaired += 1;
-            return Ok(());
+        let p = match self.pairing.force(t, geometry::vector_of(&msg.wrench.force)) {
+            Ok(p) => p,
+            Err(Unpaired::NoFreshPose) => {
+                self.unpaired += 1;
+                return Ok(());
+            }
+            Err(Unpaired::Unreadable) => {
+                self.unreadable.note(t);
+                return Ok(());
+            }
         };
         self.reading(t, &p.position, &p.velocity, p.normal_force)
     }

@@ -15,6 +15,11 @@ use crate::geometry::ContactGeometry;
 /// Poses and twists kept: half a second of 1 kHz streams.
 pub const HISTORY: usize = 512;
 
+/// The largest force a reading may carry \[N\]: a thousand times beyond the product's 10 kN. A reading
+/// past it, or not finite, is a corrupted datagram or a wrong unit, not a measurement; it is left out and
+/// counted, as a table refuses such a cell.
+pub const MAX_READABLE_FORCE: f64 = 1e7;
+
 /// One force reading made into what the estimator takes (docs/conventions.md): the sensor's force
 /// rotated into the world through the tool pose at the reading's stamp, its normal component
 /// f = −F·n ≥ 0, and the tool's position and velocity. The node and `softcontact identify` pair readings
@@ -28,6 +33,15 @@ pub struct ForcePairing {
     poses: VecDeque<(f64, Pose)>,
     /// Tool velocity by stamp, oldest first; without twists the velocity is the poses' difference.
     twists: VecDeque<(f64, Vector3<f64>)>,
+}
+
+/// Why a reading got no tool state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unpaired {
+    /// No pose within `stale_after` of the reading's stamp.
+    NoFreshPose,
+    /// A stamp or force that is not finite, or a force beyond [`MAX_READABLE_FORCE`].
+    Unreadable,
 }
 
 /// The tool's position and rotation in the world.
@@ -92,26 +106,18 @@ impl ForcePairing {
         push(&mut self.twists, t, linear);
     }
 
-    /// The reading stamped `t` of the force on the sensor in its frame; `None` without a pose within
-    /// `stale_after` of `t`, or for a non-finite force or stamp.
-    pub fn force(&self, t: f64, force_in_sensor: Vector3<f64>) -> Option<Paired> {
-        if !t.is_finite() || !force_in_sensor.iter().all(|v| v.is_finite()) {
-            return None;
+    /// The reading stamped `t` of the force on the sensor in its frame, or why it has no tool state.
+    pub fn force(&self, t: f64, force_in_sensor: Vector3<f64>) -> Result<Paired, Unpaired> {
+        if !t.is_finite() || !force_in_sensor.iter().all(|v| v.is_finite() && v.abs() <= MAX_READABLE_FORCE) {
+            return Err(Unpaired::Unreadable);
         }
-        let (position, rotation) = self.pose_at(t)?;
+        let (position, rotation) = self.pose_at(t).ok_or(Unpaired::NoFreshPose)?;
         let velocity = self.velocity_at(t);
         let geometry = &self.geometry;
         let sensor_rotation = geometry.sensor_rotation(&rotation);
         let force = geometry.world_force(&rotation, &force_in_sensor);
         let normal_reading = geometry.normal_reading(&force);
-        Some(Paired {
-            position,
-            velocity,
-            normal_force: normal_reading.max(0.0),
-            normal_reading,
-            force,
-            sensor_rotation,
-        })
+        Ok(Paired { position, velocity, normal_force: normal_reading.max(0.0), normal_reading, force, sensor_rotation })
     }
 
     /// The pose at `t`: interpolated between the two poses around it, else the nearest one if it is
@@ -198,8 +204,8 @@ mod tests {
         let mut p = pairing();
         p.pose(2.0, Vector3::new(0.0, 0.0, 0.25), UnitQuaternion::identity());
         assert_eq!(p.force(2.04, Vector3::zeros()).unwrap().position.z, 0.25);
-        assert!(p.force(2.06, Vector3::zeros()).is_none(), "no pose within 50 ms");
-        assert!(p.force(1.94, Vector3::zeros()).is_none(), "older than every pose by more than 50 ms");
+        assert_eq!(p.force(2.06, Vector3::zeros()).unwrap_err(), Unpaired::NoFreshPose, "no pose within 50 ms");
+        assert_eq!(p.force(1.94, Vector3::zeros()).unwrap_err(), Unpaired::NoFreshPose, "older by more than 50 ms");
     }
 
     #[test]
@@ -207,7 +213,11 @@ mod tests {
         let mut p = pairing();
         p.pose(1.0, Vector3::new(0.0, 0.0, 0.3), UnitQuaternion::identity());
         p.pose(2.0, Vector3::new(0.0, 0.0, 0.2), UnitQuaternion::identity());
-        assert!(p.force(1.5, Vector3::zeros()).is_none(), "half a second from either pose");
+        assert_eq!(
+            p.force(1.5, Vector3::zeros()).unwrap_err(),
+            Unpaired::NoFreshPose,
+            "half a second from either pose"
+        );
         assert_eq!(p.force(1.03, Vector3::zeros()).unwrap().position.z, 0.3);
     }
 
@@ -230,8 +240,18 @@ mod tests {
         p.pose(0.0, Vector3::new(0.0, 0.0, 0.1), UnitQuaternion::identity());
         assert_eq!(p.poses.len(), 1, "the replay started again");
         assert_eq!(p.force(0.01, Vector3::zeros()).unwrap().position.z, 0.1);
-        assert!(p.force(f64::INFINITY, Vector3::zeros()).is_none());
-        assert!(p.force(0.0, Vector3::new(f64::NAN, 0.0, 0.0)).is_none());
+        assert_eq!(p.force(f64::INFINITY, Vector3::zeros()).unwrap_err(), Unpaired::Unreadable);
+        assert_eq!(p.force(0.0, Vector3::new(f64::NAN, 0.0, 0.0)).unwrap_err(), Unpaired::Unreadable);
+    }
+
+    #[test]
+    fn a_force_beyond_ten_meganewtons_is_unreadable_and_ten_kilonewtons_is_a_reading() {
+        let mut p = pairing();
+        p.pose(0.0, Vector3::zeros(), UnitQuaternion::identity());
+        for bad in [1e9, -1e300, 1.0001e7, f64::NEG_INFINITY] {
+            assert_eq!(p.force(0.0, Vector3::new(0.0, bad, 0.0)).unwrap_err(), Unpaired::Unreadable, "{bad}");
+        }
+        assert_eq!(p.force(0.0, Vector3::new(0.0, 0.0, -1e4)).unwrap().normal_reading, 1e4);
     }
 
     #[test]
