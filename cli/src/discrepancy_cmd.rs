@@ -171,7 +171,7 @@ fn print_refit_and_effects(report: &Report, name: &str) {
     };
     println!(
         "noise floor {} (from {} at the refitted surface{level}); k, λ and the surface refitted: \
-         {:.4e}, {:.4e}, {} ± {} → RMS {}",
+         {:.4e}, {:.4e}, {} → RMS {}",
         n(report.noise_floor),
         match report.noise_source {
             softcontact_discrepancy::NoiseSource::FreeSpace => "free space",
@@ -181,11 +181,12 @@ fn print_refit_and_effects(report: &Report, name: &str) {
         },
         report.refit.stiffness,
         report.refit.damping,
-        si(report.refit.contact_shift, "m"),
-        if report.refit.contact_shift_ci.is_finite() {
-            si(report.refit.contact_shift_ci, "m")
-        } else {
-            "? (not identified)".to_string()
+        // No value where the record does not pin the surface down, as for an effect's parameter.
+        match (report.refit.contact_shift_identifiable, report.refit.contact_shift_ci) {
+            (true, ci) => format!("{} ± {}", si(report.refit.contact_shift, "m"), si(ci, "m")),
+            (false, ci) if ci.is_finite() =>
+                format!("not identifiable (± {}, wider than the depth's span)", si(ci, "m")),
+            (false, _) => "not identifiable".to_string(),
         },
         n(report.refit.rms)
     );
@@ -333,7 +334,7 @@ fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: b
     let id_args = &args.recording;
     let table = table::read(&id_args.file)?;
     if say {
-        identify_cmd::say_table(&id_args.file, &table, &table::onset(&table.f, &table.depth), id_args.onset);
+        identify_cmd::say_table(&id_args.file, &table, &table.onset(), id_args.onset);
     }
     let found = identify_cmd::identify_table(&table, id_args)?;
     let surface = args.surface.unwrap_or(found.surface);

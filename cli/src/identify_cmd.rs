@@ -134,7 +134,7 @@ pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<Tabl
         "--normal is for recordings: a table's depth column (x or z) is already along the contact normal"
     );
     ensure_contact(table)?;
-    let onset = table::onset(&table.f, &table.depth);
+    let onset = table.onset();
     let threshold = args.onset.unwrap_or(onset.threshold);
     let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
     let n = Vector3::z();
@@ -434,7 +434,7 @@ fn ensure_contact(table: &Table) -> anyhow::Result<()> {
 fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
     let table = table::read(&args.file)?;
     ensure_contact(&table)?;
-    let onset = table::onset(&table.f, &table.depth);
+    let onset = table.onset();
     say_table(&args.file, &table, &onset, args.onset);
     let found = identify_table(&table, args)?;
     println!(

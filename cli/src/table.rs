@@ -602,6 +602,42 @@ fn range(v: &[f64]) -> f64 {
     v.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - v.iter().fold(f64::INFINITY, |a, &b| a.min(b))
 }
 
+/// The noise σ of a force stretch from its first differences (robust: a median absolute deviation).
+fn noise_of(s: &[f64]) -> f64 {
+    let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let m = median(&mut d);
+    let mut dev: Vec<f64> = d.iter().map(|x| (x - m).abs()).collect();
+    1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
+}
+
+/// The least samples with z ≤ 0 before a deformation table's contact that give its free level.
+const MIN_FREE_DEFORMATION: usize = 5;
+
+impl Table {
+    /// Where the contact begins ([`Onset`]). A table of deformations says itself where nothing touches
+    /// (z ≤ 0): its samples before the first z > 0, where there are at least [`MIN_FREE_DEFORMATION`], are
+    /// its free part (a viscoelastic sample unloaded fast reads a force below that level later, which is
+    /// no reason to move its zero). A table of positions, or of deformations starting in contact: [`onset`].
+    pub fn onset(&self) -> Onset {
+        let first = self.depth.iter().position(|&z| z > 0.0).unwrap_or(self.depth.len());
+        if self.depth_is != Depth::Deformation || first < MIN_FREE_DEFORMATION {
+            return onset(&self.f, &self.depth);
+        }
+        let free = &self.f[..first];
+        let noise = noise_of(free);
+        Onset {
+            free_level: free.iter().sum::<f64>() / free.len() as f64,
+            noise: noise.max(f64::MIN_POSITIVE),
+            threshold: (ONSET_SIGMAS * noise).max(ONSET_SHARE * range(&self.f)),
+            free_samples: free.len(),
+            start: Start::Free,
+        }
+    }
+}
+
 /// The free level, the noise and the onset threshold of a force column and its depth (see [`Onset`]).
 /// The head of the table (its first 2 %, at least 20 samples and at most 500) gives a first level and
 /// noise. The table starts in contact where the head's force moves by more than the threshold, or where
@@ -612,15 +648,6 @@ fn range(v: &[f64]) -> f64 {
 pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
     let n = f.len();
     let head = ((n as f64 * HEAD_SHARE) as usize).clamp(20, HEAD_MAX).min(n);
-    let noise_of = |s: &[f64]| {
-        let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
-        if d.is_empty() {
-            return 0.0;
-        }
-        let m = median(&mut d);
-        let mut dev: Vec<f64> = d.iter().map(|x| (x - m).abs()).collect();
-        1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
-    };
     let level0 = median(&mut f[..head].to_vec());
     let noise0 = noise_of(&f[..head]);
     let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range(f));
@@ -903,5 +930,41 @@ mod tests {
         let free = onset(&f, &moving);
         assert_eq!(free.start, Start::Free, "{free:?}");
         assert!((free.free_level + 100.0).abs() < 0.01, "{free:?}");
+    }
+
+    /// A deformation table says itself where nothing touches: its samples at z ≤ 0 before the contact are
+    /// its free part, although the depth does not travel there and a fast unloading of a viscoelastic
+    /// sample later reads 0.3 N below that level (which moved the zero by 0.3 N when the table was read as
+    /// starting in contact). Without such a start, the force's own onset as before.
+    #[test]
+    fn a_deformation_table_is_zeroed_where_its_depth_says_nothing_touches() {
+        let (_d, p) = table(
+            &std::iter::once("t [s],z [mm],f [N]".to_string())
+                .chain((0..400).map(|i| {
+                    let z = if i < 50 {
+                        0.0
+                    } else if i < 150 {
+                        (i - 50) as f64 * 0.05
+                    } else {
+                        0.0
+                    };
+                    let f = if (50..150).contains(&i) {
+                        0.3 * z
+                    } else if i >= 150 {
+                        -0.3
+                    } else {
+                        0.02
+                    };
+                    format!("{},{z},{}", i as f64 * 0.02, f + 0.001 * ((i * 7919) % 7) as f64)
+                }))
+                .collect::<Vec<_>>()
+                .join("\n"),
+        );
+        let t = read(&p).unwrap();
+        let o = t.onset();
+        assert_eq!((o.start, o.free_samples), (Start::Free, 51), "{o:?}");
+        assert!((o.free_level - 0.023).abs() < 0.002, "{o:?}");
+        let in_contact = Table { depth: t.depth.iter().map(|z| z + 1e-4).collect(), ..t.clone() };
+        assert_eq!(in_contact.onset(), onset(&in_contact.f, &in_contact.depth));
     }
 }

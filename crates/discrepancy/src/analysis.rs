@@ -104,6 +104,7 @@ impl<'a> Analysis<'a> {
             damping: model.damping,
             contact_shift: structure.shift,
             contact_shift_ci: 1.96 * shift_se,
+            contact_shift_identifiable: crate::shift_identifiable(series, 1.96 * shift_se),
             rms: gap.rms,
         };
         Ok(Analysis {
@@ -280,9 +281,12 @@ impl<'a> Analysis<'a> {
         let no_worse = |idx: &[usize]| free_mse(idx, &c.fit.pred) <= 1.5 * free_mse(idx, &cur.pred).max(sigma * sigma);
         let free = &self.surface.free;
         let free_ok = free.is_empty() || (no_worse(free) && stretches.iter().all(|run| no_worse(run)));
+        // A further relaxation branch names nothing new: it refines an effect already named, which a
+        // relaxation spread over decades of time (a polymer's) needs, each branch taking less of the rest.
+        let refines = c.fams.iter().all(|(f, _)| *f == Family::Relaxation && self.now.named.iter().any(|x| x.0 == *f));
         let global = || {
             c.fit.cv_mse <= cur.cv_mse * (1.0 - o.min_gain)
-                && cur.cv_mse - c.fit.cv_mse >= o.min_share * (cur.cv_mse - sigma * sigma)
+                && (refines || cur.cv_mse - c.fit.cv_mse >= o.min_share * (cur.cv_mse - sigma * sigma))
                 && c.t.iter().all(|t| t.abs() >= o.min_t)
         };
         let local = || {
@@ -631,6 +635,7 @@ impl<'a> Analysis<'a> {
             locate: located,
             contact_shift: shift,
             contact_shift_ci: 1.96 * shift_se,
+            contact_shift_identifiable: crate::shift_identifiable(series, 1.96 * shift_se),
             remaining,
             model: self.model.clone(),
             velocity_threshold: self.velocity_threshold,

@@ -5,12 +5,15 @@
 
 use std::ops::Range;
 
-/// The cells of a record of deformations `z`: its free space before the first contact, its contact and its
-/// free space after, each in 2·`folds` contiguous parts; the contact's parts hold equal shares of the
-/// in-contact samples (a record whose contact is a tenth of it, an indentation between long stretches of
-/// free space, would otherwise have all of its contact in a part or two). A record with fewer in-contact
-/// samples than parts is one region, cut into equal parts of time, between two empty ones.
-pub(crate) fn cells(z: &[f64], folds: usize) -> Vec<Range<usize>> {
+/// The cells of a record of deformations `z` and their rates `zdot`: its free space before the first
+/// contact, its contact and its free space after, each in 2·`folds` contiguous parts. The contact's parts
+/// hold equal shares of the in-contact samples' weights ([`contact_weights`]): each sample counts once,
+/// but a hold longer than the contact's motion counts on a logarithmic scale of time (a record whose
+/// contact is a tenth of it, an indentation between long stretches of free space, would otherwise have all
+/// of its contact in a part or two; a ramp and a 30-minute hold, its ramp and the hold's first minutes
+/// where every relaxation shows in one part). A record with fewer in-contact samples than parts is one
+/// region, cut into equal parts of time, between two empty ones.
+pub(crate) fn cells(z: &[f64], zdot: &[f64], folds: usize) -> Vec<Range<usize>> {
     let n = z.len();
     let parts = 2 * folds;
     let contact: Vec<usize> = (0..n).filter(|&i| z[i] > 0.0).collect();
@@ -22,15 +25,66 @@ pub(crate) fn cells(z: &[f64], folds: usize) -> Vec<Range<usize>> {
         return [split(0..0), split(0..n), split(n..n)].concat();
     }
     let (first, end) = (contact[0], contact[contact.len() - 1] + 1);
+    // The in-contact sample at which each share of the weight is reached.
+    let weights = contact_weights(&contact, zdot, parts);
+    let total: f64 = weights.iter().sum();
+    let mut reached = Vec::with_capacity(parts);
+    let mut acc = 0.0;
+    for (k, w) in weights.iter().enumerate() {
+        acc += w;
+        while reached.len() < parts - 1 && acc >= total * (reached.len() + 1) as f64 / parts as f64 {
+            reached.push((k + 1).min(contact.len() - 1));
+        }
+    }
+    // Every part holds at least one in-contact sample.
+    for i in 0..reached.len() {
+        let least = if i == 0 { 1 } else { reached[i - 1] + 1 };
+        reached[i] = reached[i].max(least).min(contact.len() - (parts - 1 - i));
+    }
     let edge = |i: usize| match i {
         0 => first,
         i if i == parts => end,
-        i => contact[i * contact.len() / parts],
+        i => contact[reached[i - 1]],
     };
     let mut out = split(0..first);
     out.extend((0..parts).map(|i| edge(i)..edge(i + 1)));
     out.extend(split(end..n));
     out
+}
+
+/// The weight of each in-contact sample (indices `contact`) in cutting the contact into parts: 1, except in
+/// a hold (a run of samples whose speed is at most a twentieth of the contact's 99.9th percentile speed,
+/// where that is not zero: a ramp may be a thousandth of the contact)
+/// longer than the contact's moving samples (at least `parts`), L of them: its k-th sample weighs
+/// L / k past the first L, so that the hold counts as the logarithm of its duration. A relaxation
+/// spreads over decades of time: equal counts put a long hold's first decades, where its faster branches
+/// show, in one part.
+fn contact_weights(contact: &[usize], zdot: &[f64], parts: usize) -> Vec<f64> {
+    let mut speeds: Vec<f64> = contact.iter().map(|&i| zdot[i].abs()).collect();
+    speeds.sort_by(f64::total_cmp);
+    let floor = 0.05 * speeds[(speeds.len() * 999 / 1000).min(speeds.len() - 1)];
+    if floor <= 0.0 {
+        // No motion in contact to set a hold against (no rate known): counts alone.
+        return vec![1.0; contact.len()];
+    }
+    let still = |i: usize| zdot[i].abs() <= floor;
+    let moving = contact.iter().filter(|&&i| !still(i)).count().max(parts) as f64;
+    let mut run = 0usize;
+    let mut previous = None;
+    contact
+        .iter()
+        .map(|&i| {
+            run = if still(i) && previous == Some(i.wrapping_sub(1)) && run > 0 {
+                run + 1
+            } else if still(i) {
+                1
+            } else {
+                0
+            };
+            previous = Some(i);
+            if run as f64 > moving { moving / run as f64 } else { 1.0 }
+        })
+        .collect()
 }
 
 /// Fold f: parts f and f + `folds` of every region. Each fold's complement then holds both halves of the
@@ -69,7 +123,7 @@ mod fold_layout_tests {
 
     /// Cells tile the record in order, and each layout holds every cell exactly once.
     fn assert_tiles_and_partitions(z: &[f64], folds: usize) -> Vec<std::ops::Range<usize>> {
-        let c = cells(z, folds);
+        let c = cells(z, &vec![0.0; z.len()], folds);
         assert_eq!(c.len(), 3 * 2 * folds);
         assert_eq!(c[0].start, 0);
         assert_eq!(c.last().unwrap().end, z.len());
@@ -100,6 +154,34 @@ mod fold_layout_tests {
             let parts: Vec<usize> = fold.iter().filter(|&&k| (10..20).contains(&k)).copied().collect();
             assert_eq!(parts, vec![10 + 2 * f, 11 + 2 * f]);
         }
+    }
+
+    /// A ramp of 100 samples and a hold of 90 000: the hold counts as the logarithm of its duration, so
+    /// that its first decades (where a fast relaxation shows) are cut over several parts instead of lying
+    /// in the first part with the ramp; the parts stay in order, each holding samples.
+    #[test]
+    fn a_long_hold_after_a_short_ramp_is_cut_on_a_logarithmic_scale_of_its_time() {
+        let n = 50 + 100 + 90_000;
+        let z: Vec<f64> =
+            (0..n).map(|i| if i < 50 { 0.0 } else { 1e-3 * ((i - 49) as f64 / 100.0).min(1.0) }).collect();
+        let zdot: Vec<f64> = (0..n).map(|i| if (50..150).contains(&i) { 0.05 } else { 0.0 }).collect();
+        let c = cells(&z, &zdot, 5);
+        let contact = &c[10..20];
+        assert_eq!((contact[0].start, contact[9].end), (50, n), "{contact:?}");
+        assert!(contact.iter().all(|r| !r.is_empty()), "{contact:?}");
+        // Equal counts would start the second part 9 000 samples into the hold.
+        let early = contact.iter().filter(|r| r.start < 150 + 900).count();
+        assert!(early >= 3, "{contact:?}");
+        // Each part of the hold past its first 100 samples spans about the same ratio of times.
+        let ratios: Vec<f64> = contact[3..9].iter().map(|r| (r.end - 150) as f64 / (r.start - 150) as f64).collect();
+        assert!(ratios.iter().all(|q| (q / ratios[0] - 1.0).abs() < 0.05), "{ratios:?}");
+        // Without a rate, counts alone.
+        let counted = cells(&z, &vec![0.0; n], 5);
+        assert!(counted[10..20].iter().all(|r| r.len().abs_diff(contact_len(&z) / 10) <= 1), "{counted:?}");
+    }
+
+    fn contact_len(z: &[f64]) -> usize {
+        z.iter().filter(|&&z| z > 0.0).count()
     }
 
     #[test]

@@ -33,7 +33,16 @@ pub struct Refit {
     /// half-width of its 95 % interval.
     pub contact_shift: f64,
     pub contact_shift_ci: f64,
+    /// The interval is finite and within the record's own span of depth ([`shift_identifiable`]).
+    pub contact_shift_identifiable: bool,
     pub rms: f64,
+}
+
+/// A surface position the record pins down: its 95 % half-width `ci` is finite and no wider than the span
+/// of depth the record travels (a wider one places the surface anywhere the record could tell).
+pub fn shift_identifiable(series: &crate::Series, ci: f64) -> bool {
+    let (lo, hi) = series.z.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &z| (a.min(z), b.max(z)));
+    ci.is_finite() && ci <= hi - lo
 }
 
 /// A named effect with its SI parameters.
@@ -246,6 +255,8 @@ pub struct Report {
     /// the recording with `series.shifted(contact_shift)`.
     pub contact_shift: f64,
     pub contact_shift_ci: f64,
+    /// As [`Refit::contact_shift_identifiable`].
+    pub contact_shift_identifiable: bool,
     pub remaining: Remaining,
     /// The augmented model (the baseline refitted when nothing was named).
     #[serde(skip)]

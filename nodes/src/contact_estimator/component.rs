@@ -89,12 +89,8 @@ pub fn run(p: Params, declared: Declared, stop: Arc<AtomicBool>) -> anyhow::Resu
             wrench_watch.seen(start.elapsed().as_secs_f64());
             let paired = match pairing.force(w.header.stamp.as_secs_f64(), geometry::vector_of(&w.wrench.force)) {
                 Ok(paired) => paired,
-                Err(Unpaired::NoFreshPose) => {
-                    estimation.unpaired += 1;
-                    continue;
-                }
-                Err(Unpaired::Unreadable) => {
-                    estimation.unreadable += 1;
+                Err(why) => {
+                    estimation.unpaired(why);
                     continue;
                 }
             };
@@ -148,6 +144,14 @@ type StatePublisher = ros2_client::Publisher<softcontact_msgs::softcontact_msgs:
 type ModelPublisher = ros2_client::Publisher<softcontact_msgs::softcontact_msgs::ContactModel>;
 
 impl Estimation {
+    /// Counts a reading left without a tool state, by why.
+    fn unpaired(&mut self, why: Unpaired) {
+        match why {
+            Unpaired::NoFreshPose => self.unpaired += 1,
+            Unpaired::Unreadable => self.unreadable += 1,
+        }
+    }
+
     /// One paired reading stamped `stamp`: the estimator updated, the state published at `state_rate`
     /// and a model each time a refit is due; contact and release logged.
     fn reading(
