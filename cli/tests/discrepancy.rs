@@ -660,6 +660,25 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
 }
 
 /// `softcontact discrepancy PATH`'s JSON report, its files written to `dir`.
+/// Scale-free: a measured AFM curve read at a robot's scale (its nN as N, its nm as µm: ×10⁹ in force,
+/// ×10³ in depth, as the sphere indentation was given) names the same effects and closes the same
+/// share of its gap, with no flag.
+#[test]
+fn a_real_curve_read_at_a_robots_scale_names_the_same_and_shrinks_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/afm/map_indentation.csv");
+    let text = std::fs::read_to_string(data).unwrap();
+    assert!(text.contains("t [s],x [nm],f [nN]"));
+    let robot = dir.path().join("map_robot.csv");
+    std::fs::write(&robot, text.replace("t [s],x [nm],f [nN]", "t [s],x [µm],f [N]")).unwrap();
+    let (afm, at_robot) = (report_of(dir.path(), data), report_of(dir.path(), robot.to_str().unwrap()));
+    assert_eq!(ids(&afm), ids(&at_robot));
+    assert!(!ids(&afm).is_empty());
+    let closed = |v: &serde_json::Value| v["final_rms"].as_f64().unwrap() / v["baseline"]["rms"].as_f64().unwrap();
+    assert!((closed(&afm) - closed(&at_robot)).abs() < 0.02, "{} against {}", closed(&afm), closed(&at_robot));
+    assert!((at_robot["final_rms"].as_f64().unwrap() / afm["final_rms"].as_f64().unwrap() / 1e9 - 1.0).abs() < 0.02);
+}
+
 fn report_of(dir: &Path, path: &str) -> serde_json::Value {
     let json = dir.join("report.json");
     let run = discrepancy(&[path.as_ref(), "--out".as_ref(), dir.as_os_str(), "--json".as_ref(), json.as_os_str()]);
