@@ -583,8 +583,11 @@ pub enum Start {
 
 /// The share of the table read as its free start before the onset is known...
 const HEAD_SHARE: f64 = 0.02;
-/// ...at most this many samples (a long record of many pushes may touch within its first 2 %).
+/// ...at most this many samples (a long record of many pushes may touch within its first 2 %)...
 const HEAD_MAX: usize = 500;
+/// ...and at least this many, or the flat start before the force first moves by the threshold where that
+/// is shorter than the head and longer than this.
+const HEAD_MIN: usize = 20;
 /// The onset threshold: this many noise σ above the free level...
 const ONSET_SIGMAS: f64 = 10.0;
 /// ...and at least this share of the table's force range.
@@ -639,26 +642,35 @@ impl Table {
 }
 
 /// The free level, the noise and the onset threshold of a force column and its depth (see [`Onset`]).
-/// The head of the table (its first 2 %, at least 20 samples and at most 500) gives a first level and
-/// noise. The table starts in contact where the head's force moves by more than the threshold, or where
+/// The head of the table (its first 2 %, at least 20 samples and at most 500, cut to its flat start where
+/// the force moves within it) gives a first level and noise. The table starts in contact where the head's force moves by more than the threshold, or where
 /// the depth travels less than [`FREE_TRAVEL_SHARE`] of its range before the onset. Starting in contact,
-/// the force keeps the instrument's zero, unless the table goes below it: a contact only pushes, so the
-/// least force of the table is then its zero (the highest free level consistent with a record that never
+/// the force keeps the instrument's zero, unless the table goes below it by more than the threshold: a
+/// contact only pushes, so the least force of the table is then its zero (the highest free level consistent with a record that never
 /// pulls), where the table is not mostly below the zero (a force counted positive when pulling).
 pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
     let n = f.len();
-    let head = ((n as f64 * HEAD_SHARE) as usize).clamp(20, HEAD_MAX).min(n);
-    let level0 = median(&mut f[..head].to_vec());
+    let mut head = ((n as f64 * HEAD_SHARE) as usize).clamp(HEAD_MIN, HEAD_MAX).min(n);
+    let mut level0 = median(&mut f[..head].to_vec());
     let noise0 = noise_of(&f[..head]);
     let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range(f));
     let in_contact = |start: Start| {
         let (least, most) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        // Mostly below the zero is a force counted positive when pulling ([`Table::doubts`] says so).
-        let free_level = if least < 0.0 && -least <= 2.0 * most { least } else { 0.0 };
+        // Below the zero by more than the noise reaches (the onset threshold), and not mostly below it:
+        // mostly is a force counted positive when pulling ([`Table::doubts`] says so).
+        let free_level = if least < -threshold && -least <= 2.0 * most { least } else { 0.0 };
         Onset { free_level, noise: noise0, threshold, free_samples: 0, start }
     };
     if f[..head].iter().any(|v| (v - level0).abs() > threshold) {
-        return in_contact(Start::InContact);
+        // A head longer than a short flat start (a long record whose ramp begins within its first 2 %):
+        // the flat start alone is the head.
+        let short = HEAD_MIN.min(n);
+        let level = median(&mut f[..short].to_vec());
+        let flat = f.iter().position(|v| (v - level).abs() > threshold).unwrap_or(n);
+        if flat < short {
+            return in_contact(Start::InContact);
+        }
+        (head, level0) = (flat, median(&mut f[..flat].to_vec()));
     }
     let first = f.iter().position(|v| v - level0 > threshold).unwrap_or(n);
     if range(&depth[..first.max(1).min(depth.len())]) < FREE_TRAVEL_SHARE * range(depth) {
@@ -966,5 +978,29 @@ mod tests {
         assert!((o.free_level - 0.023).abs() < 0.002, "{o:?}");
         let in_contact = Table { depth: t.depth.iter().map(|z| z + 1e-4).collect(), ..t.clone() };
         assert_eq!(in_contact.onset(), onset(&in_contact.f, &in_contact.depth));
+    }
+
+    /// A long record whose ramp begins within its first 2 % (a second at rest, then a ramp and a hold of
+    /// many minutes): the head is cut to the flat start, which is not taken for a contact; and a force
+    /// that goes below the instrument's zero by less than the threshold (the noise's extreme) keeps it.
+    #[test]
+    fn a_ramp_within_the_head_leaves_the_flat_start_as_the_head_and_a_noise_dip_keeps_the_zero() {
+        let n = 20_000;
+        let depth: Vec<f64> =
+            (0..n).map(|i| if i < 50 { 0.0 } else { 1e-3 * ((i - 50) as f64 / 100.0).min(1.0) }).collect();
+        let f: Vec<f64> = (0..n)
+            .map(|i| {
+                let pressed = 100.0 * depth[i] * (1.0 + (-(i as f64) / 5000.0).exp());
+                if i == n - 10 { -0.003 } else { pressed + 1e-4 * ((i * 7919) % 11) as f64 }
+            })
+            .collect();
+        let o = onset(&f, &depth);
+        assert_eq!(o.start, Start::Paused, "{o:?}");
+        assert_eq!(o.free_level, 0.0, "{o:?}");
+        let moving: Vec<f64> =
+            depth.iter().enumerate().map(|(i, d)| d - 1e-4 * (50usize.saturating_sub(i)) as f64).collect();
+        let free = onset(&f, &moving);
+        assert_eq!(free.start, Start::Free, "{free:?}");
+        assert!(free.free_samples >= 20 && free.free_samples <= 60, "{free:?}");
     }
 }

@@ -756,6 +756,68 @@ fn a_table_runs_through_identify_and_discrepancy_with_no_flags() {
     assert!(text(&id).contains("line 3, column 3 (`f [nN]`): `oops` is not a number"), "{}", text(&id));
 }
 
+/// A testing machine's load–unload cycle at 50 Hz, written here (a Prony series of nine branches from
+/// 0.1 to 1000 s, the specimen slack below zero force, AR(1) noise): a second at rest, 2 s stretched to
+/// 5 mm, 2 s back, 6 s at rest. As exported with its crosshead's position (x, in mm; time in ms, force
+/// in mN) the rest at the start is a pause whose zero is the instrument's (zeroed at the least force,
+/// a noise extreme 8 mN down, a `sensor_bias` was named beside the relaxation); as a deformation (z) the
+/// start at z ≤ 0 is its free level. Either way the relaxation alone is named, and the gap closes.
+#[test]
+fn a_testing_machines_load_unload_cycle_names_the_relaxation_alone_from_x_or_z() {
+    let dir = tempfile::tempdir().unwrap();
+    let (dt, taus) = (0.02, [0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0]);
+    let weights = [1.0, 1.0, 1.0, 1.2, 1.0, 0.8, 0.6, 0.5, 0.4];
+    let (mut branches, mut before, mut coloured, mut seed) = ([0.0f64; 9], 0.0, 0.0, 11u64);
+    let mut uniform = || {
+        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let rows: Vec<(f64, f64, f64)> = (0..650)
+        .map(|k| {
+            let t = k as f64 * dt - 1.0;
+            let x = if t < 0.0 {
+                0.0
+            } else if t < 2.0 {
+                2.5 * t
+            } else if t < 4.0 {
+                2.5 * (4.0 - t)
+            } else {
+                0.0
+            };
+            for ((s, tau), w) in branches.iter_mut().zip(taus).zip(weights) {
+                let decay: f64 = (-dt / tau).exp();
+                *s = *s * decay + w * (x - before) / dt * tau * (1.0 - decay);
+            }
+            before = x;
+            coloured = 0.9 * coloured + 0.0052 * uniform();
+            let force: f64 = 1.47 / 7.0 * (0.9 * x + branches.iter().sum::<f64>()) * 0.25;
+            (t + 1.0, x, force.max(0.0) + coloured)
+        })
+        .collect();
+    for (header, says) in [
+        ("t [ms],x [mm],f [mN]", "its zero is the instrument's"),
+        ("t [ms],z [mm],f [mN]", "force zeroed at its free level"),
+    ] {
+        let path = dir.path().join("cycle.csv");
+        let body: String = rows.iter().map(|(t, x, f)| format!("{},{x},{}\n", t * 1e3, f * 1e3)).collect();
+        std::fs::write(&path, format!("{header}\n{body}")).unwrap();
+        let json = dir.path().join("cycle.json");
+        let run = discrepancy(&[
+            path.as_os_str(),
+            "--out".as_ref(),
+            dir.path().as_os_str(),
+            "--json".as_ref(),
+            json.as_os_str(),
+        ]);
+        let shown = text(&run);
+        assert!(run.status.success() && shown.contains(says), "{header}: {shown}");
+        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        assert_eq!(ids(&v), vec!["viscoelastic_relaxation"], "{header}: {shown}");
+        let (before, after) = (v["baseline"]["rms"].as_f64().unwrap(), v["final_rms"].as_f64().unwrap());
+        assert!(after < 0.2 * before, "{header}: {before} → {after} N");
+    }
+}
+
 /// Peak resident memory [bytes] of a finished child, from wait4's rusage (Linux reports KiB).
 #[allow(clippy::zombie_processes, reason = "the child is reaped by wait4, which also gives its rusage")]
 fn run_measuring_peak_memory(command: &mut Command) -> (std::process::ExitStatus, u64) {
