@@ -29,7 +29,6 @@ use softcontact_sim::{FtSensorConfig, SimConfig, SurfaceConfig};
 use softcontact_simcell::cell::Cell;
 
 use crate::discrepancy_cmd::{Analysis, DiscrepancyArgs};
-use crate::identify_cmd;
 
 const FORCE_COMMAND: &str = topics::FORCE_COMMAND.name;
 const JOINT_STATES: &str = topics::JOINT_STATES.name;
@@ -70,7 +69,7 @@ pub struct ClosedLoop {
     pub figure: PathBuf,
 }
 
-pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<()> {
+pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<ClosedLoop> {
     let recording = Recording::open(&args.recording.file)?;
     let [x, y, z] = args.recording.normal[..] else { anyhow::bail!("--normal takes three numbers") };
     let normal = Vector3::new(x, y, z).normalize();
@@ -107,13 +106,7 @@ pub fn run(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<()> {
     let figure = args.out.join(format!("{}.closed_loop.svg", analysis.name));
     plot(&figure, &recorded, &before, &after).map_err(|e| anyhow::anyhow!("figure: {e}"))?;
     println!("figure: {}", figure.display());
-    if let Some(path) = &args.recording.json {
-        let result = ClosedLoop { commands: commands.len(), seconds: t1 - t0, rms_before, rms_after, figure };
-        let mut value = serde_json::to_value(report)?;
-        value["closed_loop"] = serde_json::to_value(result)?;
-        identify_cmd::write_json(path, &value)?;
-    }
-    Ok(())
+    Ok(ClosedLoop { commands: commands.len(), seconds: t1 - t0, rms_before, rms_after, figure })
 }
 
 /// What the replay needs of the recording, read in one pass: every force command (time \[s\], force \[N\],

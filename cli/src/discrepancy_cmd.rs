@@ -443,13 +443,30 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         );
     }
     let analysis = analyse_file(args, true)?;
-    if args.closed_loop {
-        return crate::closed_loop::run(args, &analysis);
+    let mut value = write_results(args, &analysis)?;
+    // The replay comes after everything else is written: where it fails, the rest is not lost.
+    let replayed = if args.closed_loop { Some(crate::closed_loop::run(args, &analysis)) } else { None };
+    if let Some(Ok(result)) = &replayed {
+        value["closed_loop"] = serde_json::to_value(result)?;
     }
+    if let Some(path) = &args.recording.json {
+        identify_cmd::write_json(path, &value)?;
+    }
+    match replayed {
+        Some(Err(e)) => {
+            Err(e.context("the closed-loop replay failed (the report, model file and figures above are written)"))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Prints the report and writes the model file, the graph's overlay (for a recording) and the figures;
+/// the JSON value of the report, naming the files.
+fn write_results(args: &DiscrepancyArgs, analysis: &Analysis) -> anyhow::Result<serde_json::Value> {
     let Analysis { name, baseline, series, report, surface: analysis_surface, from_table } = analysis;
-    let name = name.as_str();
+    let (name, analysis_surface, from_table) = (name.as_str(), *analysis_surface, *from_table);
     let id_args = &args.recording;
-    print_report(&report, name);
+    print_report(report, name);
 
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let table_surface = from_table.then(|| analysis_surface.z + report.contact_shift);
@@ -467,7 +484,7 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         name,
         series: &at_surface,
         phases: &phases(&at_surface, report.velocity_threshold),
-        before: &simulate(&baseline, &series)?,
+        before: &simulate(baseline, series)?,
         after: &simulate(&report.model, &at_surface)?,
         noise_floor: report.noise_floor,
     };
@@ -475,15 +492,12 @@ pub fn run(args: &DiscrepancyArgs) -> anyhow::Result<()> {
         let what = if path.extension().is_some_and(|e| e == "csv") { "samples" } else { "figure" };
         println!("{what}: {}", path.display());
     }
-    if let Some(path) = &id_args.json {
-        let mut value = serde_json::to_value(&report)?;
-        value["model_file"] = serde_json::Value::from(model_file.display().to_string());
-        if let Some(overlay) = overlay {
-            value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
-        }
-        identify_cmd::write_json(path, &value)?;
+    let mut value = serde_json::to_value(report)?;
+    value["model_file"] = serde_json::Value::from(model_file.display().to_string());
+    if let Some(overlay) = overlay {
+        value["overlay_file"] = serde_json::Value::from(overlay.display().to_string());
     }
-    Ok(())
+    Ok(value)
 }
 
 /// `DIR/NAME.augmented.yaml`: the augmented model; a table's begins with a comment naming the surface

@@ -582,11 +582,31 @@ fn the_closed_loop_replay_matches_the_recording_after_the_effects_are_added() {
     }
     let svg = std::fs::read_to_string(c["figure"].as_str().unwrap()).unwrap();
     assert!(svg.starts_with("<svg") && svg.matches("<polyline").count() >= 9, "three panels of three curves");
-    // Without force commands there is nothing to replay: a clear error.
-    let arm = dir.path().join("arm.mcap");
-    write_arm_run(&arm, false);
-    let run = discrepancy(&[arm.as_os_str(), "--closed-loop".as_ref()]);
-    assert!(!run.status.success());
+    // Without force commands there is nothing to replay: a clear error, after the report, the model file,
+    // the figures and the JSON are written (they were not, and the analysis was lost).
+    let pushes = dir.path().join("pushes.mcap");
+    write(&pushes, &ContactModel::new(Kind::KelvinVoigt, 9000.0, 250.0).unwrap(), 8);
+    let (out, json) = (dir.path().join("no_commands"), dir.path().join("no_commands.json"));
+    let run = discrepancy(&[
+        pushes.as_os_str(),
+        "--closed-loop".as_ref(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--json".as_ref(),
+        json.as_os_str(),
+    ]);
+    let shown = text(&run);
+    assert!(!run.status.success(), "{shown}");
+    assert!(
+        shown.contains("the closed-loop replay failed") && shown.contains("effects named")
+            || shown.contains("no effect named"),
+        "{shown}"
+    );
+    for written in ["pushes.augmented.yaml", "pushes.residual.svg", "pushes.loops.svg", "pushes.residual.csv"] {
+        assert!(out.join(written).is_file(), "{written} not written:\n{shown}");
+    }
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert!(v["model_file"].is_string() && v.get("closed_loop").is_none(), "{v}");
 }
 
 /// The measured AFM curves of data/afm (the table in docs/discrepancy-real.md), each against what a
