@@ -121,7 +121,7 @@ impl<'a> Data<'a> {
                 since
             })
             .collect();
-        let cells = cells(&s.z, &s.zdot, folds);
+        let cells = cells(&s.t, &s.z, &s.zdot, folds);
         let force_squares = cells.iter().map(|r| dot(&s.f[r.clone()], &s.f[r.clone()])).collect();
         let (stretch_folds, folds) = (contiguous_folds(folds), interleaved_folds(folds));
         let clamped =

@@ -13,7 +13,7 @@ use std::ops::Range;
 /// of its contact in a part or two; a ramp and a 30-minute hold, its ramp and the hold's first minutes
 /// where every relaxation shows in one part). A record with fewer in-contact samples than parts is one
 /// region, cut into equal parts of time, between two empty ones.
-pub(crate) fn cells(z: &[f64], zdot: &[f64], folds: usize) -> Vec<Range<usize>> {
+pub(crate) fn cells(t: &[f64], z: &[f64], zdot: &[f64], folds: usize) -> Vec<Range<usize>> {
     let n = z.len();
     let parts = 2 * folds;
     let contact: Vec<usize> = (0..n).filter(|&i| z[i] > 0.0).collect();
@@ -26,7 +26,7 @@ pub(crate) fn cells(z: &[f64], zdot: &[f64], folds: usize) -> Vec<Range<usize>> 
     }
     let (first, end) = (contact[0], contact[contact.len() - 1] + 1);
     // The in-contact sample at which each share of the weight is reached.
-    let weights = contact_weights(&contact, zdot, parts);
+    let weights = contact_weights(t, &contact, zdot, parts);
     let total: f64 = weights.iter().sum();
     let mut reached = Vec::with_capacity(parts);
     let mut acc = 0.0;
@@ -52,14 +52,15 @@ pub(crate) fn cells(z: &[f64], zdot: &[f64], folds: usize) -> Vec<Range<usize>> 
     out
 }
 
-/// The weight of each in-contact sample (indices `contact`) in cutting the contact into parts: 1, except in
-/// a hold (a run of samples whose speed is at most a twentieth of the contact's 99.9th percentile speed,
-/// where that is not zero: a ramp may be a thousandth of the contact)
-/// longer than the contact's moving samples (at least `parts`), L of them: its k-th sample weighs
-/// L / k past the first L, so that the hold counts as the logarithm of its duration. A relaxation
-/// spreads over decades of time: equal counts put a long hold's first decades, where its faster branches
-/// show, in one part.
-fn contact_weights(contact: &[usize], zdot: &[f64], parts: usize) -> Vec<f64> {
+/// The weight of each in-contact sample (indices `contact`, times `t`) in cutting the contact into parts:
+/// 1, except in a hold (a run of samples whose speed is at most a twentieth of the contact's 99.9th
+/// percentile speed, where that is not zero: a ramp may be a thousandth of the contact) once it has lasted
+/// as long as all the contact's motion, of L samples (at least `parts`): a sample of step Δt at the time h
+/// into the hold then weighs L·Δt/h, so that the hold counts as the logarithm of its duration however
+/// the instrument logged it (at a constant rate, the k-th sample past the first L weighs L/k). A
+/// relaxation spreads over decades of time: equal counts put a long hold's first decades, where its
+/// faster branches show, in one part.
+fn contact_weights(t: &[f64], contact: &[usize], zdot: &[f64], parts: usize) -> Vec<f64> {
     let mut speeds: Vec<f64> = contact.iter().map(|&i| zdot[i].abs()).collect();
     speeds.sort_by(f64::total_cmp);
     let floor = 0.05 * speeds[(speeds.len() * 999 / 1000).min(speeds.len() - 1)];
@@ -68,21 +69,24 @@ fn contact_weights(contact: &[usize], zdot: &[f64], parts: usize) -> Vec<f64> {
         return vec![1.0; contact.len()];
     }
     let still = |i: usize| zdot[i].abs() <= floor;
-    let moving = contact.iter().filter(|&&i| !still(i)).count().max(parts) as f64;
-    let mut run = 0usize;
+    let step = |i: usize| if i > 0 { t[i] - t[i - 1] } else { 0.0 };
+    let moving: Vec<usize> = contact.iter().copied().filter(|&i| !still(i)).collect();
+    let count = moving.len().max(parts) as f64;
+    // How long the contact moves: a hold counts on the logarithm of its time once it has lasted as long.
+    let reach = moving.iter().map(|&i| step(i)).sum::<f64>().max(f64::MIN_POSITIVE);
+    let mut held: Option<f64> = None;
     let mut previous = None;
     contact
         .iter()
         .map(|&i| {
-            run = if still(i) && previous == Some(i.wrapping_sub(1)) && run > 0 {
-                run + 1
-            } else if still(i) {
-                1
-            } else {
-                0
+            held = match (still(i), held) {
+                (true, Some(h)) if previous == Some(i.wrapping_sub(1)) => Some(h + step(i)),
+                (true, _) => Some(step(i)),
+                (false, _) => None,
             };
             previous = Some(i);
-            if run as f64 > moving { moving / run as f64 } else { 1.0 }
+            // Weighed by time: a logger that slows down in a hold writes fewer, longer samples.
+            held.map_or(1.0, |h| if h > reach { count * step(i) / h } else { 1.0 })
         })
         .collect()
 }
@@ -123,7 +127,7 @@ mod fold_layout_tests {
 
     /// Cells tile the record in order, and each layout holds every cell exactly once.
     fn assert_tiles_and_partitions(z: &[f64], folds: usize) -> Vec<std::ops::Range<usize>> {
-        let c = cells(z, &vec![0.0; z.len()], folds);
+        let c = cells(&time(z.len()), z, &vec![0.0; z.len()], folds);
         assert_eq!(c.len(), 3 * 2 * folds);
         assert_eq!(c[0].start, 0);
         assert_eq!(c.last().unwrap().end, z.len());
@@ -165,7 +169,7 @@ mod fold_layout_tests {
         let z: Vec<f64> =
             (0..n).map(|i| if i < 50 { 0.0 } else { 1e-3 * ((i - 49) as f64 / 100.0).min(1.0) }).collect();
         let zdot: Vec<f64> = (0..n).map(|i| if (50..150).contains(&i) { 0.05 } else { 0.0 }).collect();
-        let c = cells(&z, &zdot, 5);
+        let c = cells(&time(n), &z, &zdot, 5);
         let contact = &c[10..20];
         assert_eq!((contact[0].start, contact[9].end), (50, n), "{contact:?}");
         assert!(contact.iter().all(|r| !r.is_empty()), "{contact:?}");
@@ -176,8 +180,39 @@ mod fold_layout_tests {
         let ratios: Vec<f64> = contact[3..9].iter().map(|r| (r.end - 150) as f64 / (r.start - 150) as f64).collect();
         assert!(ratios.iter().all(|q| (q / ratios[0] - 1.0).abs() < 0.05), "{ratios:?}");
         // Without a rate, counts alone.
-        let counted = cells(&z, &vec![0.0; n], 5);
+        let counted = cells(&time(n), &z, &vec![0.0; n], 5);
         assert!(counted[10..20].iter().all(|r| r.len().abs_diff(contact_len(&z) / 10) <= 1), "{counted:?}");
+    }
+
+    /// The same hold logged ever more sparsely (50 Hz for a minute, 5 Hz to ten minutes, 1 Hz after, as
+    /// testing machines log a relaxation): its parts still span equal ratios of time into the hold, not
+    /// equal counts of samples.
+    #[test]
+    fn a_hold_logged_ever_more_sparsely_is_cut_on_the_logarithm_of_its_time_not_its_samples() {
+        let mut t: Vec<f64> = vec![];
+        let mut now: f64 = 0.0;
+        while now < 1800.0 {
+            t.push(now);
+            now += if now < 63.0 {
+                0.02
+            } else if now < 603.0 {
+                0.2
+            } else {
+                1.0
+            };
+        }
+        let n = t.len();
+        let z: Vec<f64> = t.iter().map(|&t| if t < 1.0 { 0.0 } else { 1e-3 * ((t - 1.0) / 2.0).min(1.0) }).collect();
+        let zdot: Vec<f64> = t.iter().map(|&t| if (1.0..3.0).contains(&t) { 5e-4 } else { 0.0 }).collect();
+        let hold = t.iter().position(|&t| t >= 3.0).unwrap();
+        let c = cells(&t, &z, &zdot, 5);
+        let into = |i: usize| t[i.min(n - 1)] - t[hold];
+        let ratios: Vec<f64> = c[13..19].iter().map(|r| into(r.end) / into(r.start)).collect();
+        assert!(ratios.iter().all(|q| (q / ratios[0] - 1.0).abs() < 0.15), "{ratios:?} {:?}", &c[10..20]);
+    }
+
+    fn time(n: usize) -> Vec<f64> {
+        (0..n).map(|i| i as f64 * 0.02).collect()
     }
 
     fn contact_len(z: &[f64]) -> usize {
