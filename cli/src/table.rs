@@ -158,7 +158,8 @@ fn separator(path: &Path) -> anyhow::Result<Separator> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     for line in std::io::BufReader::new(file).lines() {
         let line = line.with_context(|| format!("{} is not a text table", path.display()))?;
-        let line = line.trim();
+        // A byte-order mark before the first line, a comment or the header.
+        let line = line.trim_start_matches('\u{feff}').trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
@@ -403,7 +404,8 @@ fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<Hea
     for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
         ensure!(
             at[slot].is_some(),
-            "{}: the header has no {what} column (it has: {})",
+            "{}: the header has no {what} column (it has: {}); columns are named t, x or z, f and zdot, each \
+             with its unit in brackets, e.g. `t [ms],x [mm],f [N]`, and any other column is left unread",
             path.display(),
             header.iter().collect::<Vec<_>>().join(" | ")
         );
@@ -471,6 +473,14 @@ impl Table {
     /// its central differences carry the noise into every rate-dependent term ([`Table::rate_noise`]).
     pub fn doubts(&self, free_level: f64) -> Vec<String> {
         let mut out: Vec<String> = self.pulls(free_level).into_iter().collect();
+        // A force that grows as the position falls, where the force itself pushes: the position's sign.
+        if out.is_empty() && self.depth_is == Depth::Position && pearson(&self.depth, &self.f) < -0.3 {
+            out.push(
+                "the force grows as x falls: x must grow as the probe presses in (negate the column if the \
+                 instrument counts its position away from the sample)"
+                    .to_string(),
+            );
+        }
         if let Some(rate) = &self.rate {
             let own = central_differences(&self.t, &self.depth);
             let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
@@ -603,6 +613,19 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn range(v: &[f64]) -> f64 {
     v.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - v.iter().fold(f64::INFINITY, |a, &b| a.min(b))
+}
+
+/// The correlation coefficient of two columns (0 where either is constant).
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len()) as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        ab += (x - ma) * (y - mb);
+        aa += (x - ma) * (x - ma);
+        bb += (y - mb) * (y - mb);
+    }
+    if aa > 0.0 && bb > 0.0 { ab / (aa * bb).sqrt() } else { 0.0 }
 }
 
 /// The noise σ of a force stretch from its first differences (robust: a median absolute deviation).
@@ -846,10 +869,14 @@ mod tests {
         assert!((t.t[199] - 1.99).abs() < 1e-9);
         let doubts = t.doubts(onset(&t.f, &t.depth).free_level);
         assert!(doubts.iter().any(|d| d.contains("f > 0 must push")), "{doubts:?}");
+        assert!(!doubts.iter().any(|d| d.contains("x must grow")), "{doubts:?}");
         assert!(doubts.iter().any(|d| d.contains("zdot column disagrees")), "{doubts:?}");
         // As it should be: no doubt.
         let good = Table { f: t.f.iter().map(|f| -f).collect(), rate: None, ..t };
         assert!(good.doubts(0.0).is_empty(), "{:?}", good.doubts(0.0));
+        // The position counted away from the sample: the force grows as x falls.
+        let away = Table { depth: good.depth.iter().map(|x| -x).collect(), ..good };
+        assert!(away.doubts(0.0).iter().any(|d| d.contains("x must grow")), "{:?}", away.doubts(0.0));
     }
 
     /// A push in and out at 5 µm/s sampled every 0.5 ms (an AFM curve at the instrument's rate): with the
@@ -1002,5 +1029,18 @@ mod tests {
         let free = onset(&f, &moving);
         assert_eq!(free.start, Start::Free, "{free:?}");
         assert!(free.free_samples >= 20 && free.free_samples <= 60, "{free:?}");
+    }
+
+    /// A byte-order mark before a comment line: the separator is read from the header after it (it was
+    /// read from the marked comment, and the header's commas were taken for part of a unit).
+    #[test]
+    fn a_byte_order_mark_before_a_comment_leaves_the_separator_to_the_header() {
+        for sep in [",", ";", "\t"] {
+            let (_d, p) =
+                table(&format!("\u{feff}# exported\nt [s]{sep}x [um]{sep}f [mN]\n0{sep}1{sep}2\n1{sep}3{sep}4\n"));
+            let t = read(&p).unwrap_or_else(|e| panic!("{sep:?}: {e:#}"));
+            assert_eq!(t.t, vec![0.0, 1.0], "{sep:?}");
+            assert!((t.f[1] - 4e-3).abs() < 1e-15, "{sep:?}");
+        }
     }
 }
