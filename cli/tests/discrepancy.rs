@@ -854,44 +854,37 @@ fn a_testing_machines_stress_relaxation_of_a_power_law_is_named_as_relaxation_al
         };
         (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos()
     };
-    let power = |u: f64| 0.1 + 0.9 * (1.0 + u / 0.3).powf(-0.38);
-    let cases: [(&str, &dyn Fn(f64) -> f64, f64); 1] = [("power", &power, 1800.0)];
-    for (name, relaxation, hold) in cases {
-        let fs = 50.0;
-        let n = ((3.0 + hold) * fs) as usize + 1;
-        let x = |t: f64| 2.0 * ((t - 1.0) / 2.0).clamp(0.0, 1.0);
-        // The ramp as steps at mid-sample; the force at the end of the ramp scaled to 1.47 N.
-        let steps: Vec<(f64, f64)> = (1..n)
-            .map(|i| ((i as f64 - 0.5) / fs, x(i as f64 / fs) - x((i - 1) as f64 / fs)))
-            .filter(|s| s.1 != 0.0)
-            .collect();
-        let force = |t: f64| steps.iter().filter(|s| t >= s.0).map(|s| relaxation(t - s.0) * s.1).sum::<f64>();
-        let scale = 1.47 / force(3.0);
-        let (mut red, mut body) = (0.0, String::new());
-        for i in 0..n {
-            let t = i as f64 / fs;
-            red = 0.98 * red + 0.003 * (1.0f64 - 0.98 * 0.98).sqrt() * gauss();
-            let f = scale * force(t) + red + 0.002 * gauss();
-            body.push_str(&format!("{t:.2},{:.5},{f:.5}\n", x(t) + 0.0005 * gauss()));
-        }
-        let path = dir.path().join(format!("{name}.csv"));
-        std::fs::write(&path, format!("t [s],x [mm],f [N]\n{body}")).unwrap();
-        let json = dir.path().join(format!("{name}.json"));
-        let run = discrepancy(&[
-            path.as_os_str(),
-            "--out".as_ref(),
-            dir.path().as_os_str(),
-            "--json".as_ref(),
-            json.as_os_str(),
-        ]);
-        let shown = text(&run);
-        assert!(run.status.success(), "{name}: {shown}");
-        let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-        let named = ids(&v);
-        assert!(named.iter().all(|id| id == "viscoelastic_relaxation"), "{name}: {named:?}\n{shown}");
-        let (before, after) = (v["baseline"]["rms"].as_f64().unwrap(), v["final_rms"].as_f64().unwrap());
-        assert!(!named.is_empty() && after < 0.7 * before, "{name}: {before} → {after} N\n{shown}");
+    let relaxation = |u: f64| 0.1 + 0.9 * (1.0 + u / 0.3).powf(-0.38);
+    let (name, hold) = ("power", 1800.0);
+    let fs = 50.0;
+    let n = ((3.0 + hold) * fs) as usize + 1;
+    let x = |t: f64| 2.0 * ((t - 1.0) / 2.0).clamp(0.0, 1.0);
+    // The ramp as steps at mid-sample; the force at the end of the ramp scaled to 1.47 N.
+    let steps: Vec<(f64, f64)> = (1..n)
+        .map(|i| ((i as f64 - 0.5) / fs, x(i as f64 / fs) - x((i - 1) as f64 / fs)))
+        .filter(|s| s.1 != 0.0)
+        .collect();
+    let force = |t: f64| steps.iter().filter(|s| t >= s.0).map(|s| relaxation(t - s.0) * s.1).sum::<f64>();
+    let scale = 1.47 / force(3.0);
+    let (mut red, mut body) = (0.0, String::new());
+    for i in 0..n {
+        let t = i as f64 / fs;
+        red = 0.98 * red + 0.003 * (1.0f64 - 0.98 * 0.98).sqrt() * gauss();
+        let f = scale * force(t) + red + 0.002 * gauss();
+        body.push_str(&format!("{t:.2},{:.5},{f:.5}\n", x(t) + 0.0005 * gauss()));
     }
+    let path = dir.path().join(format!("{name}.csv"));
+    std::fs::write(&path, format!("t [s],x [mm],f [N]\n{body}")).unwrap();
+    let json = dir.path().join(format!("{name}.json"));
+    let run =
+        discrepancy(&[path.as_os_str(), "--out".as_ref(), dir.path().as_os_str(), "--json".as_ref(), json.as_os_str()]);
+    let shown = text(&run);
+    assert!(run.status.success(), "{name}: {shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let named = ids(&v);
+    assert!(named.iter().all(|id| id == "viscoelastic_relaxation"), "{name}: {named:?}\n{shown}");
+    let (before, after) = (v["baseline"]["rms"].as_f64().unwrap(), v["final_rms"].as_f64().unwrap());
+    assert!(!named.is_empty() && after < 0.7 * before, "{name}: {before} → {after} N\n{shown}");
 }
 
 /// Peak resident memory [bytes] of a finished child, from wait4's rusage (Linux reports KiB).
