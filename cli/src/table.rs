@@ -149,21 +149,26 @@ fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Separator {
     Byte(u8),
-    /// Runs of spaces (and tabs), read through [`Spaces`].
+    /// Runs of spaces (and tabs), read through [`runs_of_spaces`].
     Spaces,
 }
 
-/// The separator of the header line: a tab, else `;`, else `,`, else runs of spaces.
-fn separator(path: &Path) -> anyhow::Result<Separator> {
+/// The separator of the header line: a tab, else `;`, else `,`, else runs of spaces; and whether the
+/// file is Latin-1 rather than UTF-8 (its header is not UTF-8: an instrument's µ saved as byte 0xB5).
+fn separator(path: &Path) -> anyhow::Result<(Separator, bool)> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    for line in std::io::BufReader::new(file).lines() {
-        let line = line.with_context(|| format!("{} is not a text table", path.display()))?;
+    for line in std::io::BufReader::new(file).split(b'\n') {
+        let line = line.with_context(|| format!("reading {}", path.display()))?;
+        let (text, latin1) = match String::from_utf8(line) {
+            Ok(text) => (text, false),
+            Err(e) => (e.into_bytes().iter().map(|&b| char::from(b)).collect(), true),
+        };
         // A byte-order mark before the first line, a comment or the header.
-        let line = line.trim_start_matches('\u{feff}').trim();
+        let line = text.trim_start_matches('\u{feff}').trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        return Ok(if line.contains('\t') {
+        let separator = if line.contains('\t') {
             Separator::Byte(b'\t')
         } else if line.contains(';') {
             Separator::Byte(b';')
@@ -171,16 +176,19 @@ fn separator(path: &Path) -> anyhow::Result<Separator> {
             Separator::Byte(b',')
         } else {
             Separator::Spaces
-        });
+        };
+        return Ok((separator, latin1));
     }
     bail!("{} has no header line (e.g. `t [s],x [mm],f [N]`)", path.display())
 }
 
-fn reader(path: &Path, sep: Separator) -> anyhow::Result<csv::Reader<Box<dyn std::io::Read>>> {
+fn reader(path: &Path, (sep, latin1): (Separator, bool)) -> anyhow::Result<csv::Reader<Box<dyn std::io::Read>>> {
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let text: Box<dyn std::io::Read> =
+        if latin1 { Box::new(Transcode::new(std::io::BufReader::new(file), latin1_to_utf8)) } else { Box::new(file) };
     let (input, delimiter): (Box<dyn std::io::Read>, u8) = match sep {
-        Separator::Byte(b) => (Box::new(file), b),
-        Separator::Spaces => (Box::new(Spaces::new(std::io::BufReader::new(file))), b'\t'),
+        Separator::Byte(b) => (text, b),
+        Separator::Spaces => (Box::new(Transcode::new(std::io::BufReader::new(text), runs_of_spaces())), b'\t'),
     };
     Ok(csv::ReaderBuilder::new()
         .delimiter(delimiter)
@@ -190,25 +198,21 @@ fn reader(path: &Path, sep: Separator) -> anyhow::Result<csv::Reader<Box<dyn std
         .from_reader(input))
 }
 
-/// A table whose columns are separated by runs of spaces or tabs, read as tab-separated: each run
-/// becomes one tab, except at the start or end of a line and before `[` (a unit belongs to the name
-/// before it). Lines (and so the line numbers of errors) are kept.
-struct Spaces<R> {
+/// A reader that rewrites each byte of `inner` into zero or more bytes, keeping its lines.
+struct Transcode<R, F> {
     inner: R,
-    /// A run of blanks seen and not yet written (written as a comma once the next byte says so).
-    pending: bool,
-    at_line_start: bool,
+    rewrite: F,
     out: Vec<u8>,
     at: usize,
 }
 
-impl<R: BufRead> Spaces<R> {
-    fn new(inner: R) -> Self {
-        Spaces { inner, pending: false, at_line_start: true, out: Vec::new(), at: 0 }
+impl<R: BufRead, F: FnMut(u8, &mut Vec<u8>)> Transcode<R, F> {
+    fn new(inner: R, rewrite: F) -> Self {
+        Transcode { inner, rewrite, out: Vec::new(), at: 0 }
     }
 }
 
-impl<R: BufRead> std::io::Read for Spaces<R> {
+impl<R: BufRead, F: FnMut(u8, &mut Vec<u8>)> std::io::Read for Transcode<R, F> {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         while self.at == self.out.len() {
             self.out.clear();
@@ -218,22 +222,7 @@ impl<R: BufRead> std::io::Read for Spaces<R> {
                 return Ok(0);
             }
             for &b in chunk {
-                match b {
-                    b' ' | b'\t' => self.pending = !self.at_line_start,
-                    b'\n' | b'\r' => {
-                        self.pending = false;
-                        self.at_line_start = true;
-                        self.out.push(b);
-                    }
-                    _ => {
-                        if self.pending {
-                            self.out.push(if b == b'[' { b' ' } else { b'\t' });
-                        }
-                        self.pending = false;
-                        self.at_line_start = false;
-                        self.out.push(b);
-                    }
-                }
+                (self.rewrite)(b, &mut self.out);
             }
             let n = chunk.len();
             self.inner.consume(n);
@@ -242,6 +231,39 @@ impl<R: BufRead> std::io::Read for Spaces<R> {
         buf[..n].copy_from_slice(&self.out[self.at..self.at + n]);
         self.at += n;
         Ok(n)
+    }
+}
+
+/// Latin-1 to UTF-8: each byte is the code point of its value.
+fn latin1_to_utf8(b: u8, out: &mut Vec<u8>) {
+    if b < 0x80 {
+        out.push(b);
+    } else {
+        out.extend([0xC0 | (b >> 6), 0x80 | (b & 0x3F)]);
+    }
+}
+
+/// A table whose columns are separated by runs of spaces or tabs, read as tab-separated: each run
+/// becomes one tab, except at the start or end of a line and before `[` (a unit belongs to the name
+/// before it). Lines (and so the line numbers of errors) are kept.
+fn runs_of_spaces() -> impl FnMut(u8, &mut Vec<u8>) {
+    // A run of blanks seen and not yet written (written as a tab once the next byte says so).
+    let (mut pending, mut at_line_start) = (false, true);
+    move |b, out| match b {
+        b' ' | b'\t' => pending = !at_line_start,
+        b'\n' | b'\r' => {
+            pending = false;
+            at_line_start = true;
+            out.push(b);
+        }
+        _ => {
+            if pending {
+                out.push(if b == b'[' { b' ' } else { b'\t' });
+            }
+            pending = false;
+            at_line_start = false;
+            out.push(b);
+        }
     }
 }
 
@@ -321,7 +343,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
         let line = record.position().map_or(0, |p| p.line());
         for &(slot, i, scale, name) in &used {
             let cell = record.get(i).unwrap_or("");
-            let value = number(cell, sep).ok_or_else(|| {
+            let value = number(cell, sep.0).ok_or_else(|| {
                 anyhow::anyhow!(
                     "{}: line {line}, column {} (`{name}`): `{cell}` is not a number",
                     path.display(),
@@ -1041,6 +1063,29 @@ mod tests {
             let t = read(&p).unwrap_or_else(|e| panic!("{sep:?}: {e:#}"));
             assert_eq!(t.t, vec![0.0, 1.0], "{sep:?}");
             assert!((t.f[1] - 4e-3).abs() < 1e-15, "{sep:?}");
+        }
+    }
+
+    /// A table saved in Latin-1 (an instrument's µ as byte 0xB5) is read, in each separator's way (it
+    /// was refused as "not valid UTF-8", with no line).
+    #[test]
+    fn a_table_saved_in_latin_1_is_read_with_its_micro_sign() {
+        for sep in [b",".as_slice(), b"\t", b"   "] {
+            let mut bytes = b"# \xB5 in Latin-1\nt [s]".to_vec();
+            for cell in [b"x [\xB5m]".as_slice(), b"f [mN]"] {
+                bytes.extend_from_slice(sep);
+                bytes.extend_from_slice(cell);
+            }
+            bytes.extend_from_slice(b"\n");
+            for row in [[b"0".as_slice(), b"1", b"2"], [b"1", b"3", b"4"]] {
+                bytes.extend_from_slice(&row.join(sep));
+                bytes.push(b'\n');
+            }
+            let dir = tempfile::tempdir().unwrap();
+            let path = dir.path().join("latin1.csv");
+            std::fs::write(&path, &bytes).unwrap();
+            let t = read(&path).unwrap_or_else(|e| panic!("{sep:?}: {e:#}"));
+            assert!((t.depth[1] - 3e-6).abs() < 1e-18 && (t.f[1] - 4e-3).abs() < 1e-15, "{sep:?}: {t:?}");
         }
     }
 }
