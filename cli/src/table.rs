@@ -401,7 +401,10 @@ fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<Hea
     let (mut depth_is, mut ignored) = (Depth::Position, Vec::new());
     for (i, cell) in header.iter().enumerate() {
         let Some((role, unit, scale)) = column(cell, i + 1).with_context(|| path.display().to_string())? else {
-            ignored.push(cell.trim().to_string());
+            // An empty cell (a trailing separator) is no column.
+            if !cell.trim().is_empty() {
+                ignored.push(cell.trim().to_string());
+            }
             continue;
         };
         let slot = match role {
@@ -767,6 +770,9 @@ mod tests {
         assert!((t.f[1] - 4e-3).abs() < 1e-15);
         assert_eq!(t.depth_is, Depth::Position);
         assert_eq!(t.ignored, vec!["extra".to_string()]);
+        // A trailing separator is no column to list.
+        let (_d, p) = table("t [s],x [mm],f [N],\n0,1,2,\n1,3,4,\n");
+        assert!(read(&p).unwrap().ignored.is_empty());
     }
 
     #[test]
