@@ -333,10 +333,11 @@ pub struct Analysis {
 fn table_analysis(args: &DiscrepancyArgs, baseline: Option<ContactModel>, say: bool) -> anyhow::Result<Analysis> {
     let id_args = &args.recording;
     let table = table::read(&id_args.file)?;
+    let onset = table.onset();
     if say {
-        identify_cmd::say_table(&id_args.file, &table, &table.onset(), id_args.onset);
+        identify_cmd::say_table(&id_args.file, &table, &onset, id_args.onset);
     }
-    let found = identify_cmd::identify_table(&table, id_args)?;
+    let found = identify_cmd::identify_table(&table, onset, id_args)?;
     let surface = args.surface.unwrap_or(found.surface);
     if say && args.surface.is_some() {
         println!("the surface at {} of the depth column (--surface)", si(surface, "m"));

@@ -126,15 +126,14 @@ pub struct TableIdentification {
     pub surface: f64,
 }
 
-/// Identifies a table: its force zeroed at the free level, the onset threshold from its own noise (or
-/// `--onset`), every sample fitted (or one per `--sample-period`).
-pub fn identify_table(table: &Table, args: &IdentifyArgs) -> anyhow::Result<TableIdentification> {
+/// Identifies a table: its force zeroed at the free level of `onset` (`Table::onset`), the onset threshold
+/// from its own noise (or `--onset`), every sample fitted (or one per `--sample-period`).
+pub fn identify_table(table: &Table, onset: table::Onset, args: &IdentifyArgs) -> anyhow::Result<TableIdentification> {
     anyhow::ensure!(
         args.normal == [0.0, 0.0, -1.0],
         "--normal is for recordings: a table's depth column (x or z) is already along the contact normal"
     );
     ensure_contact(table)?;
-    let onset = table.onset();
     let threshold = args.onset.unwrap_or(onset.threshold);
     let sample_period = args.sample_period.unwrap_or(0.5 * table.sample_period());
     let n = Vector3::z();
@@ -417,7 +416,7 @@ fn no_contact(e: ContactError, table: &Table, onset: &table::Onset, threshold: f
 /// A table of deformations must reach z > 0 somewhere; one of positions has its surface found at the
 /// force onset, which [`identify_table`] reports when there is none.
 fn ensure_contact(table: &Table) -> anyhow::Result<()> {
-    let (least, most) = table.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    let (least, most) = table::extent(&table.f);
     anyhow::ensure!(
         most > least,
         "the force is {} on every row: nothing touches, or the column holds no measurement",
@@ -436,7 +435,7 @@ fn run_table(args: &IdentifyArgs) -> anyhow::Result<()> {
     ensure_contact(&table)?;
     let onset = table.onset();
     say_table(&args.file, &table, &onset, args.onset);
-    let found = identify_table(&table, args)?;
+    let found = identify_table(&table, onset, args)?;
     println!(
         "surface at {} {} along the table's depth\n",
         if table.depth_is == Depth::Position { "x =" } else { "z =" },

@@ -473,7 +473,7 @@ impl Table {
 
     /// A force that goes more than twice as far below its free level as above it, said: f > 0 must push.
     fn pulls(&self, free_level: f64) -> Option<String> {
-        let (lo, hi) = self.f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (lo, hi) = extent(&self.f);
         (free_level - lo > 2.0 * (hi - free_level)).then(|| {
             format!(
                 "the force goes {} below its free level and only {} above it: f > 0 must push (negate the column if the instrument counts pulling as positive)",
@@ -636,8 +636,14 @@ fn median(v: &mut [f64]) -> f64 {
     v[v.len() / 2]
 }
 
+/// The least and the largest value of a column.
+pub fn extent(v: &[f64]) -> (f64, f64) {
+    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)))
+}
+
 fn range(v: &[f64]) -> f64 {
-    v.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) - v.iter().fold(f64::INFINITY, |a, &b| a.min(b))
+    let (lo, hi) = extent(v);
+    hi - lo
 }
 
 /// The correlation coefficient of two columns (0 where either is constant).
@@ -703,7 +709,7 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
     let noise0 = noise_of(&f[..head]);
     let threshold = (ONSET_SIGMAS * noise0).max(ONSET_SHARE * range(f));
     let in_contact = |start: Start| {
-        let (least, most) = f.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        let (least, most) = extent(f);
         // Below the zero by more than the noise reaches (the onset threshold), and not mostly below it:
         // mostly is a force counted positive when pulling ([`Table::doubts`] says so).
         let free_level = if least < -threshold && -least <= 2.0 * most { least } else { 0.0 };
