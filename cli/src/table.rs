@@ -659,15 +659,11 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
     if aa > 0.0 && bb > 0.0 { ab / (aa * bb).sqrt() } else { 0.0 }
 }
 
-/// The noise σ of a force stretch from its first differences (robust: a median absolute deviation).
+/// The noise σ of a force stretch from its first differences (robust, and at least a quantised
+/// reading's rounding: [`softcontact_discrepancy::robust_noise_of_differences`]).
 fn noise_of(s: &[f64]) -> f64 {
     let mut d: Vec<f64> = s.windows(2).map(|w| w[1] - w[0]).collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    let m = median(&mut d);
-    let mut dev: Vec<f64> = d.iter().map(|x| (x - m).abs()).collect();
-    1.4826 * median(&mut dev) / std::f64::consts::SQRT_2
+    softcontact_discrepancy::robust_noise_of_differences(&mut d)
 }
 
 /// The least samples with z ≤ 0 before a deformation table's contact that give its free level.
@@ -726,13 +722,15 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
         }
         (head, level0) = (flat, median(&mut f[..flat].to_vec()));
     }
-    let first = f.iter().position(|v| v - level0 > threshold).unwrap_or(n);
+    let first = first_contact(f, depth, level0, threshold);
     if range(&depth[..first.max(1).min(depth.len())]) < FREE_TRAVEL_SHARE * range(depth) {
         return in_contact(Start::Paused);
     }
-    // The last tenth before the onset may already feel the surface (long-range forces).
+    // The last tenth before the onset may already feel the surface (long-range forces). A wave the free
+    // part carries beyond the threshold (before the contact, see [`first_contact`]) is no part of its level.
     let free = &f[..(first - first / 10).max(head.min(first))];
-    let free_level = free.iter().sum::<f64>() / free.len().max(1) as f64;
+    let flat = || free.iter().filter(|v| (*v - level0).abs() <= threshold);
+    let free_level = flat().sum::<f64>() / flat().count().max(1) as f64;
     Onset {
         free_level,
         noise: noise_of(free).max(f64::MIN_POSITIVE),
@@ -740,6 +738,32 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
         free_samples: free.len(),
         start: Start::Free,
     }
+}
+
+/// The first sample of the first excursion of the force beyond `threshold` above `level` that is a
+/// contact. An excursion lasts until the force is back within half the threshold of the level for as
+/// many samples as the contact detector's confirmation asks (noise about the threshold does not cut it),
+/// and is a contact only where it lasts that many samples. A force that falls back to the level while the depth presses on, after its
+/// peak, by more than a quarter of its travel to that peak was not pushed by a surface: such an excursion
+/// is felt in free space (an optical interference wave in an AFM's deflection, an arm's inertial
+/// transient), and the search goes on after it. A contact ends as the depth comes back, or relaxes where
+/// it is held. Where no excursion is a contact, the first sample above the threshold.
+fn first_contact(f: &[f64], depth: &[f64], level: f64, threshold: f64) -> usize {
+    let n = f.len().min(depth.len());
+    let confirm = softcontact_contact::OnsetConfig::default().confirm;
+    let above = |from: usize| (from..n).find(|&i| f[i] - level > threshold).unwrap_or(n);
+    let mut start = above(0);
+    while start < n {
+        let back = |i: usize| f[i] - level <= 0.5 * threshold;
+        let end = (start..n).find(|&i| (i..(i + confirm).min(n)).all(back)).unwrap_or(n);
+        let peak = (start..end).max_by(|&a, &b| f[a].total_cmp(&f[b])).unwrap_or(start);
+        let pressed_on = depth[end - 1] - depth[peak] > 0.25 * (depth[peak] - depth[start]);
+        if end == n || (end - start >= confirm && !pressed_on) {
+            return start;
+        }
+        start = above(end);
+    }
+    above(0).min(f.len())
 }
 
 #[cfg(test)]
@@ -963,6 +987,34 @@ mod tests {
         assert!(o.free_samples > 100, "{o:?}");
         assert!((o.free_level - 2.0).abs() < 0.01, "{o:?}");
         assert_eq!(o.start, Start::Free);
+    }
+
+    #[test]
+    fn a_wave_in_free_space_beyond_the_threshold_is_no_contact_and_no_part_of_the_free_level() {
+        // An approach at constant speed whose deflection carries an interference wave of 4 % of the peak
+        // (beyond the 2 % threshold) before a linear contact at x = 0.8 µm, pressed to 1 µm and withdrawn.
+        let n = 1200;
+        let depth: Vec<f64> = (0..n).map(|i| 1e-6 * (1.0 - ((i as f64 - 600.0) / 600.0).abs())).collect();
+        let f: Vec<f64> = depth
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| {
+                let wave = if (60..310).contains(&i) {
+                    4.0 * (std::f64::consts::TAU * (i - 60) as f64 / 250.0).sin()
+                } else {
+                    0.0
+                };
+                137.0 + wave + 5e8 * (x - 0.8e-6).max(0.0) + 0.02 * (((i * 7919) % 101) as f64 / 100.0 - 0.5)
+            })
+            .collect();
+        let o = onset(&f, &depth);
+        assert_eq!(o.start, Start::Free, "{o:?}");
+        let first = first_contact(&f, &depth, o.free_level, o.threshold);
+        assert!((depth[first] - 0.8e-6 - o.threshold / 5e8).abs() < 2e-9, "onset at {} m", depth[first]);
+        assert!((o.free_level - 137.0).abs() < 0.1, "{o:?}");
+        // The same wave with the depth held within it: a contact that relaxed, the first.
+        let held: Vec<f64> = (0..n).map(|i| if (60..310).contains(&i) { depth[60] } else { depth[i] }).collect();
+        assert!(first_contact(&f, &held, 137.0, o.threshold) < 310);
     }
 
     #[test]

@@ -176,11 +176,7 @@ pub fn noise_floor(series: &Series, phases: &[Phase], tare_window: f64) -> Noise
         let mut steps: Vec<f64> =
             free.windows(2).filter(|w| w[1] == w[0] + 1).map(|w| series.f[w[1]] - series.f[w[0]]).collect();
         if steps.len() >= MIN_NOISE_SAMPLES {
-            steps.sort_by(f64::total_cmp);
-            let mid = steps[steps.len() / 2];
-            let mut dev: Vec<f64> = steps.iter().map(|x| (x - mid).abs()).collect();
-            dev.sort_by(f64::total_cmp);
-            let robust = 1.4826 * dev[dev.len() / 2] / 2f64.sqrt();
+            let robust = robust_noise_of_differences(&mut steps);
             if sigma > STRUCTURED_FREE_SPACE * robust {
                 return NoiseFloor {
                     sigma: robust,
@@ -208,6 +204,23 @@ pub fn noise_floor(series: &Series, phases: &[Phase], tare_window: f64) -> Noise
     let all = diffs(&|_| true);
     let sigma = std(&all) / 2f64.sqrt();
     NoiseFloor { sigma, source: NoiseSource::AllDifferences, samples: all.len(), level_sigma: sigma }
+}
+
+/// The noise σ of a signal from its consecutive differences `d` (reordered): the median absolute
+/// deviation, which steps and slow structure barely move, over √2. A quantised signal whose differences
+/// are mostly zero has a deviation of zero, yet its reading is rounded to a step q: its σ is then at
+/// least the rounding's, q/√12, q the least non-zero difference.
+pub fn robust_noise_of_differences(d: &mut [f64]) -> f64 {
+    if d.is_empty() {
+        return 0.0;
+    }
+    d.sort_by(f64::total_cmp);
+    let mid = d[d.len() / 2];
+    let quantum = d.iter().map(|x| x.abs()).filter(|&x| x > 0.0).fold(f64::INFINITY, f64::min);
+    let mut dev: Vec<f64> = d.iter().map(|x| (x - mid).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let mad = 1.4826 * dev[dev.len() / 2] / 2f64.sqrt();
+    if mad > 0.0 || !quantum.is_finite() { mad } else { quantum / 12f64.sqrt() }
 }
 
 /// σ of the mean of `window` seconds of noise, from the autocovariance γ(k) of the free samples' residual
@@ -252,4 +265,33 @@ pub fn step_sizes(series: &Series) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::robust_noise_of_differences;
+
+    #[test]
+    fn a_quantised_signal_has_at_least_its_roundings_noise_and_a_gaussian_its_own() {
+        // A slow sine of amplitude 0.3 steps read through a converter of step 0.02: most consecutive
+        // readings are equal, so the median absolute deviation is zero; the rounding's σ is 0.02/√12.
+        let q = 0.02;
+        let read: Vec<f64> = (0..2000).map(|i| ((0.3 * (i as f64 / 400.0).sin()) / q).round() * q).collect();
+        let mut d: Vec<f64> = read.windows(2).map(|w| w[1] - w[0]).collect();
+        let sigma = robust_noise_of_differences(&mut d);
+        assert!((sigma / (q / 12f64.sqrt()) - 1.0).abs() < 1e-9, "{sigma}");
+        // Gaussian noise of σ 0.5 by Box–Muller from a linear congruential sequence: σ within 5 %.
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let noise: Vec<f64> = (0..20_000)
+            .map(|_| 0.5 * (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos())
+            .collect();
+        let mut d: Vec<f64> = noise.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!((robust_noise_of_differences(&mut d) / 0.5 - 1.0).abs() < 0.05);
+        assert_eq!(robust_noise_of_differences(&mut []), 0.0);
+        assert_eq!(robust_noise_of_differences(&mut [0.0; 10]), 0.0, "a constant signal has no noise to read");
+    }
 }
