@@ -172,6 +172,13 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: 
             Depth::Deformation => "deformation (z)",
         }
     );
+    if table.preamble > 0 {
+        println!(
+            "the header is line {}: the {} lines before it are read as the instrument's preamble",
+            table.preamble + 1,
+            table.preamble
+        );
+    }
     if !table.ignored.is_empty() {
         println!("columns not read: {}", table.ignored.join(", "));
     }

@@ -3,23 +3,26 @@
 //!
 //! | column | meaning | units |
 //! |---|---|---|
-//! | `t` | time | s, ms, µs |
-//! | `z` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm, pm |
+//! | `t`, `time` | time | s, ms, µs |
+//! | `z`, `indentation`, `deformation` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm, pm |
 //! | `x` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm, pm |
-//! | `f` | normal force, f > 0 pushes | kN, N, mN, µN, nN, pN |
+//! | `f`, `force`, `load` | normal force, f > 0 pushes | kN, N, mN, µN, nN, pN |
 //! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
 //!
-//! e.g. `t [s],x [nm],f [nN]`; names in any case, units as written. Other columns are ignored (and
-//! said). Columns separated by runs of spaces (an instrument's `.dat` or `.txt` export: `t [s]  x [nm]  f
+//! e.g. `t [s],x [nm],f [nN]` or `Time (s),Load (uN),Indentation (nm)`; names in any case, units as
+//! written (`u` for µ too). Other columns are ignored (and said), and so are the lines of an
+//! instrument's preamble before the header ([`layout()`]). Columns separated by runs of spaces (an instrument's `.dat` or `.txt` export: `t [s]  x [nm]  f
 //! [nN]`) are read too, a unit in brackets belonging to the name before it; in a table separated by tabs,
 //! `;` or spaces a decimal comma (`1,5`) reads as a decimal point. Time counts from the first row. Every malformed cell, and every row with more or fewer cells
 //! than the header, is an error naming its line (and column); rows of empty cells are skipped. A table of more than [`MAX_ROWS`] rows is read in blocks of rows averaged,
 //! so memory stays bounded whatever the file.
 
-use std::io::BufRead;
 use std::path::Path;
 
 use anyhow::{Context, bail, ensure};
+
+mod layout;
+use layout::{Separator, layout, reader};
 
 /// The most rows analysed; longer tables are averaged in blocks down to this.
 pub const MAX_ROWS: usize = 200_000;
@@ -48,6 +51,8 @@ pub struct Table {
     pub block: usize,
     /// Columns the header names that are not read.
     pub ignored: Vec<String>,
+    /// Lines of an instrument's preamble before the header, read as comments.
+    pub preamble: usize,
 }
 
 /// A file is read as a table when its extension says so.
@@ -98,12 +103,14 @@ enum Role {
 }
 
 impl Role {
+    /// The role of a column by its name: the short names, and the words instruments export (a
+    /// nanoindenter's `Time (s)`, `Load (uN)`, `Indentation (nm)`).
     fn of(name: &str) -> Option<Self> {
         Some(match name {
-            "t" => Role::Time,
-            "z" => Role::Depth(Depth::Deformation),
+            "t" | "time" => Role::Time,
+            "z" | "indentation" | "deformation" => Role::Depth(Depth::Deformation),
             "x" => Role::Depth(Depth::Position),
-            "f" => Role::Force,
+            "f" | "force" | "load" => Role::Force,
             "zdot" => Role::Rate,
             _ => return None,
         })
@@ -119,17 +126,19 @@ impl Role {
     }
 }
 
-/// One header cell, `name [unit]`: its role and the SI value of one unit.
+/// One header cell, `name [unit]` or `name (unit)`: its role and the SI value of one unit.
 fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64)>> {
     let cell = cell.trim();
-    let (name, unit) = match cell.split_once('[') {
-        Some((name, rest)) => {
+    let in_parentheses = || cell.strip_suffix(')').and_then(|c| c.rsplit_once('('));
+    let (name, unit) = match (cell.split_once('['), in_parentheses()) {
+        (Some((name, rest)), _) => {
             let Some(unit) = rest.strip_suffix(']') else {
                 bail!("header, column {number} (`{cell}`): the unit must close with `]`, e.g. `f [N]`")
             };
             (name.trim(), Some(unit.trim()))
         }
-        None => (cell, None),
+        (None, Some((name, unit))) => (name.trim(), Some(unit.trim())),
+        (None, None) => (cell, None),
     };
     let Some(role) = Role::of(&name.to_ascii_lowercase()) else { return Ok(None) };
     let units = role.units();
@@ -143,128 +152,6 @@ fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64
         bail!("header, column {number} (`{cell}`): unit `{unit}` is not one of {}", names())
     };
     Ok(Some((role, u.to_string(), scale)))
-}
-
-/// How the columns of a table are separated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Separator {
-    Byte(u8),
-    /// Runs of spaces (and tabs), read through [`runs_of_spaces`].
-    Spaces,
-}
-
-/// The separator of the header line: a tab, else `;`, else `,`, else runs of spaces; and whether the
-/// file is Latin-1 rather than UTF-8 (its header is not UTF-8: an instrument's µ saved as byte 0xB5).
-fn separator(path: &Path) -> anyhow::Result<(Separator, bool)> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    for line in std::io::BufReader::new(file).split(b'\n') {
-        let line = line.with_context(|| format!("reading {}", path.display()))?;
-        let (text, latin1) = match String::from_utf8(line) {
-            Ok(text) => (text, false),
-            Err(e) => (e.into_bytes().iter().map(|&b| char::from(b)).collect(), true),
-        };
-        // A byte-order mark before the first line, a comment or the header.
-        let line = text.trim_start_matches('\u{feff}').trim();
-        if line.is_empty() || line.starts_with('#') {
-            continue;
-        }
-        let separator = if line.contains('\t') {
-            Separator::Byte(b'\t')
-        } else if line.contains(';') {
-            Separator::Byte(b';')
-        } else if line.contains(',') {
-            Separator::Byte(b',')
-        } else {
-            Separator::Spaces
-        };
-        return Ok((separator, latin1));
-    }
-    bail!("{} has no header line (e.g. `t [s],x [mm],f [N]`)", path.display())
-}
-
-fn reader(path: &Path, (sep, latin1): (Separator, bool)) -> anyhow::Result<csv::Reader<Box<dyn std::io::Read>>> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let text: Box<dyn std::io::Read> =
-        if latin1 { Box::new(Transcode::new(std::io::BufReader::new(file), latin1_to_utf8)) } else { Box::new(file) };
-    let (input, delimiter): (Box<dyn std::io::Read>, u8) = match sep {
-        Separator::Byte(b) => (text, b),
-        Separator::Spaces => (Box::new(Transcode::new(std::io::BufReader::new(text), runs_of_spaces())), b'\t'),
-    };
-    Ok(csv::ReaderBuilder::new()
-        .delimiter(delimiter)
-        .comment(Some(b'#'))
-        .trim(csv::Trim::All)
-        .flexible(false)
-        .from_reader(input))
-}
-
-/// A reader that rewrites each byte of `inner` into zero or more bytes, keeping its lines.
-struct Transcode<R, F> {
-    inner: R,
-    rewrite: F,
-    out: Vec<u8>,
-    at: usize,
-}
-
-impl<R: BufRead, F: FnMut(u8, &mut Vec<u8>)> Transcode<R, F> {
-    fn new(inner: R, rewrite: F) -> Self {
-        Transcode { inner, rewrite, out: Vec::new(), at: 0 }
-    }
-}
-
-impl<R: BufRead, F: FnMut(u8, &mut Vec<u8>)> std::io::Read for Transcode<R, F> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        while self.at == self.out.len() {
-            self.out.clear();
-            self.at = 0;
-            let chunk = self.inner.fill_buf()?;
-            if chunk.is_empty() {
-                return Ok(0);
-            }
-            for &b in chunk {
-                (self.rewrite)(b, &mut self.out);
-            }
-            let n = chunk.len();
-            self.inner.consume(n);
-        }
-        let n = buf.len().min(self.out.len() - self.at);
-        buf[..n].copy_from_slice(&self.out[self.at..self.at + n]);
-        self.at += n;
-        Ok(n)
-    }
-}
-
-/// Latin-1 to UTF-8: each byte is the code point of its value.
-fn latin1_to_utf8(b: u8, out: &mut Vec<u8>) {
-    if b < 0x80 {
-        out.push(b);
-    } else {
-        out.extend([0xC0 | (b >> 6), 0x80 | (b & 0x3F)]);
-    }
-}
-
-/// A table whose columns are separated by runs of spaces or tabs, read as tab-separated: each run
-/// becomes one tab, except at the start or end of a line and before `[` (a unit belongs to the name
-/// before it). Lines (and so the line numbers of errors) are kept.
-fn runs_of_spaces() -> impl FnMut(u8, &mut Vec<u8>) {
-    // A run of blanks seen and not yet written (written as a tab once the next byte says so).
-    let (mut pending, mut at_line_start) = (false, true);
-    move |b, out| match b {
-        b' ' | b'\t' => pending = !at_line_start,
-        b'\n' | b'\r' => {
-            pending = false;
-            at_line_start = true;
-            out.push(b);
-        }
-        _ => {
-            if pending {
-                out.push(if b == b'[' { b' ' } else { b'\t' });
-            }
-            pending = false;
-            at_line_start = false;
-            out.push(b);
-        }
-    }
 }
 
 /// A cell's number; where commas do not separate the columns, a single decimal comma reads as a point.
@@ -316,8 +203,8 @@ const READABLE: [(f64, &str); 4] = [
 
 /// Reads a table (see the module's doc).
 pub fn read(path: &Path) -> anyhow::Result<Table> {
-    let sep = separator(path)?;
-    let mut rdr = reader(path, sep)?;
+    let layout = layout(path)?;
+    let mut rdr = reader(path, layout)?;
     let header = rdr.headers().with_context(|| format!("{}: reading the header", path.display()))?.clone();
     let (at, depth_is, ignored) = header_columns(path, &header)?;
     // First pass: the rows, so that a long table is averaged in blocks of equal length.
@@ -335,7 +222,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
         std::array::from_fn(|slot| if at[slot].is_some() { Vec::with_capacity(capacity) } else { Vec::new() });
     let mut sums = [0.0_f64; 4];
     let (mut in_block, mut last_t) = (0_usize, f64::NEG_INFINITY);
-    let mut rdr = reader(path, sep)?;
+    let mut rdr = reader(path, layout)?;
     while rdr.read_record(&mut record).map_err(|e| malformed(path, e))? {
         if record.iter().all(str::is_empty) {
             continue;
@@ -343,7 +230,7 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
         let line = record.position().map_or(0, |p| p.line());
         for &(slot, i, scale, name) in &used {
             let cell = record.get(i).unwrap_or("");
-            let value = number(cell, sep.0).ok_or_else(|| {
+            let value = number(cell, layout.sep).ok_or_else(|| {
                 anyhow::anyhow!(
                     "{}: line {line}, column {} (`{name}`): `{cell}` is not a number",
                     path.display(),
@@ -389,7 +276,8 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
         t.iter_mut().for_each(|x| *x -= first);
     }
     ensure!(t.len() >= 2, "{}: fewer than two samples after averaging blocks of {block} rows", path.display());
-    Ok(Table { t, depth, depth_is, f, rate: at[3].as_ref().map(|_| rate), rows, block, ignored })
+    let preamble = layout.preamble;
+    Ok(Table { t, depth, depth_is, f, rate: at[3].as_ref().map(|_| rate), rows, block, ignored, preamble })
 }
 
 /// Where the header puts time, depth, force and rate (each: column, unit, scale to SI), whether the depth
@@ -429,8 +317,9 @@ fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<Hea
     for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
         ensure!(
             at[slot].is_some(),
-            "{}: the header has no {what} column (it has: {}); columns are named t, x or z, f and zdot, each \
-             with its unit in brackets, e.g. `t [ms],x [mm],f [N]`, and any other column is left unread",
+            "{}: the header has no {what} column (it has: {}); columns are named t (or time), x, z (or \
+             indentation, deformation), f (or force, load) and zdot, each with its unit in brackets or \
+             parentheses, e.g. `t [ms],x [mm],f [N]`, and any other column is left unread",
             path.display(),
             header.iter().collect::<Vec<_>>().join(" | ")
         );
@@ -835,6 +724,34 @@ mod tests {
     }
 
     #[test]
+    fn an_instruments_export_with_a_preamble_and_units_in_parentheses_is_read_as_saved() {
+        // A nanoindenter's text export as saved: settings one per line (a Latin-1 µ among them, a `Time`
+        // that is a clock, a blank line), then the header in words with units in parentheses.
+        let mut bytes = b"Date\t12/05/2025\tTime\t11:20:38\tStatus\tOK\nk (N/m)\t0.019\n\nMax load (".to_vec();
+        bytes.push(0xB5);
+        bytes.extend(b"N)\t0.050\nComment: \n\nTime (s)\tLoad (uN)\tIndentation (nm)\tPiezo (nm)\n");
+        bytes.extend(b"0.000\t-0.0003\t0.0\t64.9\n0.001\t0.0021\t1.5\t66.0\n0.002\tx\t2.5\t67.1\n");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("Indentation_002.txt");
+        std::fs::write(&path, &bytes).unwrap();
+        let e = format!("{:#}", read(&path).unwrap_err());
+        assert!(e.contains("line 10, column 2 (`Load (uN)`): `x` is not a number"), "{e}");
+        bytes.truncate(bytes.len() - b"0.002\tx\t2.5\t67.1\n".len());
+        std::fs::write(&path, &bytes).unwrap();
+        let t = read(&path).unwrap();
+        assert_eq!(t.preamble, 6);
+        assert_eq!(t.depth_is, Depth::Deformation);
+        assert_eq!(t.ignored, vec!["Piezo (nm)".to_string()]);
+        assert_eq!(t.t, vec![0.0, 0.001]);
+        assert!((t.f[1] - 0.0021e-6).abs() < 1e-18 && (t.depth[1] - 1.5e-9).abs() < 1e-20, "{t:?}");
+        // The same with its columns separated by runs of spaces.
+        let spaced = String::from_utf8_lossy(&bytes).replace('\t', "   ");
+        std::fs::write(&path, spaced).unwrap();
+        let t = read(&path).unwrap();
+        assert_eq!((t.preamble, t.t.len()), (6, 2));
+    }
+
+    #[test]
     fn malformed_cells_are_named_by_line_and_column() {
         for (text, says) in [
             ("t [s],x [m],f [N]\n0,0,0\n1,0,abc\n", "line 3, column 3 (`f [N]`): `abc` is not a number"),
@@ -956,7 +873,17 @@ mod tests {
                 |t: f64| -> f64 { if t < 0.5 { speed * (t - 0.5) } else { speed * (0.25 - (t - 0.75).abs()) } };
             let depth: Vec<f64> = t.iter().map(|&t| true_depth(t) + noise()).collect();
             let f = t.iter().map(|&t| 1e3 * true_depth(t).max(0.0)).collect();
-            Table { t, depth, depth_is: Depth::Deformation, f, rate: None, rows: n as u64, block: 1, ignored: vec![] }
+            Table {
+                t,
+                depth,
+                depth_is: Depth::Deformation,
+                f,
+                rate: None,
+                rows: n as u64,
+                block: 1,
+                ignored: vec![],
+                preamble: 0,
+            }
         };
         let loud = noisy(2e-9);
         let (depth_noise, rate_noise, fastest) = loud.rate_noise(0.0).unwrap();
