@@ -147,10 +147,14 @@ pub fn identify_table(table: &Table, onset: table::Onset, args: &IdentifyArgs) -
     };
     let mut identifier = Identifier::new(config, f64::INFINITY)?;
     let rate = table.depth_rate();
-    for (((&t, &depth), &f), &rate) in table.t.iter().zip(&table.depth).zip(&table.f).zip(&rate) {
+    // The contact detector starts after a wave the table's free part carries beyond the threshold.
+    let readings = table.t.iter().zip(&table.depth).zip(&table.f).zip(&rate).skip(onset.passed_over);
+    for (((&t, &depth), &f), &rate) in readings {
         identifier.reading(t, &(depth * n), &(rate * n), f - onset.free_level)?;
     }
-    let id = identifier.finish().map_err(|e| no_contact(e, table, &onset, threshold, args.onset.is_some()))?;
+    let mut id = identifier.finish().map_err(|e| no_contact(e, table, &onset, threshold, args.onset.is_some()))?;
+    // The identifier counts time from its first reading: the table's, after what was passed over.
+    id.contact_time += table.t.get(onset.passed_over).copied().unwrap_or(0.0);
     let surface = match table.depth_is {
         Depth::Position => id.contact_position().dot(&n),
         Depth::Deformation => 0.0,
@@ -193,6 +197,12 @@ pub fn say_table(file: &Path, table: &Table, onset: &table::Onset, onset_given: 
             onset.free_samples,
             table.force(onset.noise),
         );
+        if onset.passed_over > 0 {
+            println!(
+                "a wave in free space passed over: the force rose beyond the threshold in the first {} samples and fell back while the depth pressed on (no surface pushes so); the contact is looked for after it",
+                onset.passed_over
+            );
+        }
     } else {
         let why = match onset.start {
             table::Start::Paused => "its force is flat only while the depth holds still: a pause, not free space",

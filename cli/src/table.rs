@@ -490,6 +490,9 @@ pub struct Onset {
     pub threshold: f64,
     /// Samples before the contact (the free part), 0 when the table starts in contact.
     pub free_samples: usize,
+    /// Samples at the start passed over as free space although the force rose beyond the threshold there
+    /// (a wave felt in free space, see [`first_contact`]): where the contact detector starts to look.
+    pub passed_over: usize,
     pub start: Start,
 }
 
@@ -575,6 +578,7 @@ impl Table {
             noise: noise.max(f64::MIN_POSITIVE),
             threshold: (ONSET_SIGMAS * noise).max(ONSET_SHARE * range(&self.f)),
             free_samples: free.len(),
+            passed_over: 0,
             start: Start::Free,
         }
     }
@@ -598,7 +602,7 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
         // Below the zero by more than the noise reaches (the onset threshold), and not mostly below it:
         // mostly is a force counted positive when pulling ([`Table::doubts`] says so).
         let free_level = if least < -threshold && -least <= 2.0 * most { least } else { 0.0 };
-        Onset { free_level, noise: noise0, threshold, free_samples: 0, start }
+        Onset { free_level, noise: noise0, threshold, free_samples: 0, passed_over: 0, start }
     };
     if f[..head].iter().any(|v| (v - level0).abs() > threshold) {
         // A head longer than a short flat start (a long record whose ramp begins within its first 2 %):
@@ -611,7 +615,7 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
         }
         (head, level0) = (flat, median(&mut f[..flat].to_vec()));
     }
-    let first = first_contact(f, depth, level0, threshold);
+    let (first, passed_over) = first_contact(f, depth, level0, threshold);
     if range(&depth[..first.max(1).min(depth.len())]) < FREE_TRAVEL_SHARE * range(depth) {
         return in_contact(Start::Paused);
     }
@@ -625,6 +629,7 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
         noise: noise_of(free).max(f64::MIN_POSITIVE),
         threshold,
         free_samples: free.len(),
+        passed_over,
         start: Start::Free,
     }
 }
@@ -636,23 +641,25 @@ pub fn onset(f: &[f64], depth: &[f64]) -> Onset {
 /// peak, by more than a quarter of its travel to that peak was not pushed by a surface: such an excursion
 /// is felt in free space (an optical interference wave in an AFM's deflection, an arm's inertial
 /// transient), and the search goes on after it. A contact ends as the depth comes back, or relaxes where
-/// it is held. Where no excursion is a contact, the first sample above the threshold.
-fn first_contact(f: &[f64], depth: &[f64], level: f64, threshold: f64) -> usize {
+/// it is held. Where no excursion is a contact, the first sample above the threshold. Also returns where
+/// the last excursion passed over ends (0 where none was).
+fn first_contact(f: &[f64], depth: &[f64], level: f64, threshold: f64) -> (usize, usize) {
     let n = f.len().min(depth.len());
     let confirm = softcontact_contact::OnsetConfig::default().confirm;
     let above = |from: usize| (from..n).find(|&i| f[i] - level > threshold).unwrap_or(n);
-    let mut start = above(0);
+    let (mut start, mut passed_over) = (above(0), 0);
     while start < n {
         let back = |i: usize| f[i] - level <= 0.5 * threshold;
         let end = (start..n).find(|&i| (i..(i + confirm).min(n)).all(back)).unwrap_or(n);
         let peak = (start..end).max_by(|&a, &b| f[a].total_cmp(&f[b])).unwrap_or(start);
         let pressed_on = depth[end - 1] - depth[peak] > 0.25 * (depth[peak] - depth[start]);
         if end == n || (end - start >= confirm && !pressed_on) {
-            return start;
+            return (start, passed_over);
         }
+        passed_over = end;
         start = above(end);
     }
-    above(0).min(f.len())
+    (above(0).min(f.len()), 0)
 }
 
 #[cfg(test)]
@@ -936,12 +943,14 @@ mod tests {
             .collect();
         let o = onset(&f, &depth);
         assert_eq!(o.start, Start::Free, "{o:?}");
-        let first = first_contact(&f, &depth, o.free_level, o.threshold);
+        let (first, passed_over) = first_contact(&f, &depth, o.free_level, o.threshold);
         assert!((depth[first] - 0.8e-6 - o.threshold / 5e8).abs() < 2e-9, "onset at {} m", depth[first]);
+        assert!(passed_over > 160 && passed_over < 310 && o.passed_over == passed_over, "{passed_over}: {o:?}");
         assert!((o.free_level - 137.0).abs() < 0.1, "{o:?}");
         // The same wave with the depth held within it: a contact that relaxed, the first.
         let held: Vec<f64> = (0..n).map(|i| if (60..310).contains(&i) { depth[60] } else { depth[i] }).collect();
-        assert!(first_contact(&f, &held, 137.0, o.threshold) < 310);
+        assert_eq!(first_contact(&f, &held, 137.0, o.threshold).1, 0);
+        assert!(first_contact(&f, &held, 137.0, o.threshold).0 < 310);
     }
 
     #[test]

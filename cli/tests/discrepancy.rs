@@ -640,7 +640,11 @@ fn real_curves_are_never_made_worse_nor_called_explained_when_they_are_not() {
     let as_expected = |c: &&serde_json::Value| {
         c["named_as_expected"] == true && c["outside_not_denied"] == true && c["not_worse"] == true
     };
-    assert!(curves.iter().filter(as_expected).count() >= 8, "{shown}");
+    assert!(curves.iter().filter(as_expected).count() >= 9, "{shown}");
+    // A wave in the free deflection, beyond the onset threshold, is free space: nothing is named.
+    let workshop = curves.iter().find(|c| c["file"] == "workshop_indentation.csv").unwrap();
+    assert_eq!(workshop["answer"]["Ok"].as_array().map(Vec::len), Some(0), "{workshop}");
+    assert_eq!(workshop["named_as_expected"], true, "{workshop}");
     // The holds a person sees relax (two force clamps, one height clamp) are named although the adhesion
     // on each retract dominates the residual (the phase-local rule), and so are the loops of four single
     // indentations, soft and stiff; every named parameter carries its interval.

@@ -46,7 +46,15 @@ CURVES = {
                              "quantitative imaging, stiff cantilever"),
     "qi_adhesion": ("fmt-jpk-fd_2020.02.07-16.29.05.036.jpk-qi-data", 0,
                     "quantitative imaging, attractive tip"),
+    "workshop_indentation": ("fmt-afm-workshop-fd_single_2018-08-01_13.06.09.csv", 0,
+                             "approach and retract, AFM Workshop"),
 }
+
+# An AFM Workshop file holds the piezo's height and the deflection in volts, with no calibration and no
+# time: afmformats' own tests read it with this calibration (a sensitivity of 10 nm/V, a 20 N/m
+# cantilever), and its samples are stamped 1 ms apart here. The force's scale and the time are assumed,
+# not the sample's.
+ASSUMED = {"fmt-afm-workshop-fd_single_2018-08-01_13.06.09.csv": {"spring constant": 20.0, "sensitivity": 0.01e-6}}
 
 
 def contact_span(force):
@@ -65,10 +73,10 @@ def blocks(values, length):
 
 
 def convert(src, name, file, index, what, out):
-    curve = afmformats.load_data(os.path.join(src, file))[index]
+    curve = afmformats.load_data(os.path.join(src, file), meta_override=ASSUMED.get(file))[index]
     meta = curve.metadata
     k = float(meta["spring constant"])
-    t = np.asarray(curve["time"], float)
+    t = np.asarray(curve["time"], float) if "time" in curve.columns else np.arange(len(curve)) * 1e-3
     force = np.asarray(curve["force"], float)
     height = np.asarray(curve["height (measured)"], float)
     x = -(height + force / k)
@@ -90,8 +98,11 @@ def convert(src, name, file, index, what, out):
         f.write(f"# {what}\n")
         f.write(f"# source: {SOURCE} tests/data/{file} (commit {COMMIT}"
                 + "), licence MIT, (c) 2019 Paul Müller\n")
-        f.write(f"# instrument: {meta.get('instrument')}, recorded {meta.get('date')},"
+        f.write(f"# instrument: {meta.get('instrument') or what.split(', ')[-1]}, recorded {meta.get('date')},"
                 f" cantilever {k:.6g} N/m, modality {curve.modality}\n")
+        if file in ASSUMED:
+            f.write("# the file has no calibration and no time: sensitivity 10 nm/V and 20 N/m as afmformats' tests"
+                    " assume them, 1 ms per sample; the force's scale and the time are not the sample's\n")
         f.write(f"# converted by data/afm/convert.py: x = -(height + F/k), {kept or f'blocks of {length} samples averaged'}\n")
         f.write("t [s],x [nm],f [nN]\n")
         for ti, xi, fi in zip(t, x, force):
