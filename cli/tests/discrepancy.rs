@@ -1072,3 +1072,29 @@ fn a_model_the_controller_refuses_gets_no_overlay_and_loses_nothing_else() {
     }
     assert!(!out.join("stiff.params.yaml").exists(), "{shown}");
 }
+
+/// A nanoindenter's text export as its software saved it (`data/exports`: 36 lines of settings with a
+/// Latin-1 µ, CRLF line endings, `Time (s)  Load (uN)  Indentation (nm) …`): read with no flags and no
+/// editing, and no final model worse than the one identified.
+#[test]
+fn a_nanoindenters_own_export_runs_as_saved() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("chiaro.json");
+    let file = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/exports/chiaro_indentation.txt");
+    let out = Command::new(env!("CARGO_BIN_EXE_softcontact"))
+        .args(["discrepancy", file, "--out"])
+        .arg(dir.path())
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    let shown = text(&out);
+    assert!(out.status.success(), "{shown}");
+    assert!(shown.contains("1383 rows") && shown.contains("depth as deformation (z)"), "{shown}");
+    assert!(shown.contains("the header is line 37: the 36 lines before it are read as the instrument's preamble"));
+    assert!(shown.contains("columns not read: Cantilever (nm), Piezo (nm), Auxiliary"), "{shown}");
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let (baseline, last) = (v["baseline"]["rms"].as_f64().unwrap(), v["final_rms"].as_f64().unwrap());
+    // The load peaks at 48 nN: its residual is in nN, read from µN.
+    assert!(last <= baseline && baseline > 1e-9 && baseline < 1e-8, "{baseline} → {last}");
+}
