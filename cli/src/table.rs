@@ -4,9 +4,9 @@
 //! | column | meaning | units |
 //! |---|---|---|
 //! | `t`, `time` | time | s, ms, µs |
-//! | `z`, `indentation`, `deformation` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm, pm |
-//! | `x` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm, pm |
-//! | `f`, `force`, `load` | normal force, f > 0 pushes | kN, N, mN, µN, nN, pN |
+//! | `z`, `indentation`, `deformation`, `depth` | deformation, z > 0 compresses (the surface at z = 0) | m, mm, µm, nm, pm |
+//! | `x`, `position`, `displacement`, `extension`, `travel`, `distance` | position along the pressing direction (the surface found from the force onset) | m, mm, µm, nm, pm |
+//! | `f`, `force`, `load`, `fz`, `fn` | normal force, f > 0 pushes | kN, N, mN, µN, nN, pN |
 //! | `zdot` | deformation rate (optional; else central differences of z or x) | m/s, mm/s, µm/s, nm/s |
 //!
 //! e.g. `t [s],x [nm],f [nN]` or `Time (s),Load (uN),Indentation (nm)`; names in any case, units as
@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, bail, ensure};
+use anyhow::{Context, ensure};
 
 mod layout;
 use layout::{Separator, layout, reader};
@@ -87,7 +87,7 @@ pub fn parse_length(text: &str) -> Result<f64, String> {
     }
 }
 
-const TIME_UNITS: [(&str, f64); 4] = [("s", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
+const TIME_UNITS: [(&str, f64); 5] = [("s", 1.0), ("sec", 1.0), ("ms", 1e-3), ("µs", 1e-6), ("us", 1e-6)];
 const LENGTH_UNITS: [(&str, f64); 7] =
     [("m", 1.0), ("mm", 1e-3), ("µm", 1e-6), ("um", 1e-6), ("nm", 1e-9), ("pm", 1e-12), ("cm", 1e-2)];
 const FORCE_UNITS: [(&str, f64); 7] =
@@ -104,13 +104,14 @@ enum Role {
 
 impl Role {
     /// The role of a column by its name: the short names, and the words instruments export (a
-    /// nanoindenter's `Time (s)`, `Load (uN)`, `Indentation (nm)`).
+    /// nanoindenter's `Time (s)`, `Load (uN)`, `Indentation (nm)` or `Depth (nm)`; a testing machine's
+    /// `Extension (mm)`; a force gauge's `Travel`; a robot's `Fz`).
     fn of(name: &str) -> Option<Self> {
         Some(match name {
             "t" | "time" => Role::Time,
-            "z" | "indentation" | "deformation" => Role::Depth(Depth::Deformation),
-            "x" => Role::Depth(Depth::Position),
-            "f" | "force" | "load" => Role::Force,
+            "z" | "indentation" | "deformation" | "depth" => Role::Depth(Depth::Deformation),
+            "x" | "position" | "displacement" | "extension" | "travel" | "distance" => Role::Depth(Depth::Position),
+            "f" | "force" | "load" | "fz" | "fn" => Role::Force,
             "zdot" => Role::Rate,
             _ => return None,
         })
@@ -126,32 +127,36 @@ impl Role {
     }
 }
 
-/// One header cell, `name [unit]` or `name (unit)`: its role and the SI value of one unit.
-fn column(cell: &str, number: usize) -> anyhow::Result<Option<(Role, String, f64)>> {
-    let cell = cell.trim();
+/// One header cell, `name [unit]` or `name (unit)`, quoted or not: its role, and the unit with the SI
+/// value of one unit or why the unit is not read.
+fn column(cell: &str, number: usize) -> Option<(Role, anyhow::Result<(String, f64)>)> {
+    let cell = cell.trim().trim_matches('"').trim();
     let in_parentheses = || cell.strip_suffix(')').and_then(|c| c.rsplit_once('('));
     let (name, unit) = match (cell.split_once('['), in_parentheses()) {
-        (Some((name, rest)), _) => {
-            let Some(unit) = rest.strip_suffix(']') else {
-                bail!("header, column {number} (`{cell}`): the unit must close with `]`, e.g. `f [N]`")
-            };
-            (name.trim(), Some(unit.trim()))
-        }
-        (None, Some((name, unit))) => (name.trim(), Some(unit.trim())),
+        (Some((name, rest)), _) => (name.trim(), Some(rest.strip_suffix(']').ok_or(rest))),
+        (None, Some((name, unit))) => (name.trim(), Some(Ok(unit))),
         (None, None) => (cell, None),
     };
-    let Some(role) = Role::of(&name.to_ascii_lowercase()) else { return Ok(None) };
+    let role = Role::of(&name.to_ascii_lowercase())?;
     let units = role.units();
     let names = || units.iter().map(|(u, _)| *u).collect::<Vec<_>>().join(", ");
-    let Some(unit) = unit else {
-        bail!("header, column {number} (`{cell}`): `{name}` needs its unit in brackets, one of {}", names())
+    let read = match unit {
+        None => Err(anyhow::anyhow!(
+            "header, column {number} (`{cell}`): `{name}` needs its unit in brackets, one of {}",
+            names()
+        )),
+        Some(Err(_)) => {
+            Err(anyhow::anyhow!("header, column {number} (`{cell}`): the unit must close with `]`, e.g. `f [N]`"))
+        }
+        Some(Ok(unit)) => {
+            // The micro sign and the Greek mu are both written for µ.
+            let unit = unit.trim().replace('μ', "µ");
+            units.iter().find(|(u, _)| *u == unit).map(|&(u, scale)| (u.to_string(), scale)).ok_or_else(|| {
+                anyhow::anyhow!("header, column {number} (`{cell}`): unit `{unit}` is not one of {}", names())
+            })
+        }
     };
-    // The micro sign and the Greek mu are both written for µ.
-    let unit = unit.replace('μ', "µ");
-    let Some(&(u, scale)) = units.iter().find(|(u, _)| *u == unit) else {
-        bail!("header, column {number} (`{cell}`): unit `{unit}` is not one of {}", names())
-    };
-    Ok(Some((role, u.to_string(), scale)))
+    Some((role, read))
 }
 
 /// A cell's number; where commas do not separate the columns, a single decimal comma reads as a point.
@@ -206,7 +211,17 @@ pub fn read(path: &Path) -> anyhow::Result<Table> {
     let layout = layout(path)?;
     let mut rdr = reader(path, layout)?;
     let header = rdr.headers().with_context(|| format!("{}: reading the header", path.display()))?.clone();
-    let (at, depth_is, ignored) = header_columns(path, &header)?;
+    let (at, depth_is, ignored) = header_columns(path, &header).map_err(|e| {
+        if layout.found {
+            e
+        } else {
+            e.context(format!(
+                "no line among the first {} names a time, a depth and a force column, so the first line that is \
+                 not a comment was read as the header",
+                layout::MAX_PREAMBLE
+            ))
+        }
+    })?;
     // First pass: the rows, so that a long table is averaged in blocks of equal length.
     let rows = data_rows(path, &mut rdr)?;
     let mut record = csv::StringRecord::new();
@@ -286,9 +301,9 @@ type HeaderColumns = ([Option<(usize, String, f64)>; 4], Depth, Vec<String>);
 
 fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<HeaderColumns> {
     let mut at: [Option<(usize, String, f64)>; 4] = Default::default();
-    let (mut depth_is, mut ignored) = (Depth::Position, Vec::new());
+    let (mut depth_is, mut ignored, mut unread) = (Depth::Position, Vec::new(), Vec::new());
     for (i, cell) in header.iter().enumerate() {
-        let Some((role, unit, scale)) = column(cell, i + 1).with_context(|| path.display().to_string())? else {
+        let Some((role, read)) = column(cell, i + 1) else {
             // An empty cell (a trailing separator) is no column.
             if !cell.trim().is_empty() {
                 ignored.push(cell.trim().to_string());
@@ -297,13 +312,14 @@ fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<Hea
         };
         let slot = match role {
             Role::Time => 0,
-            Role::Depth(d) => {
-                depth_is = d;
-                1
-            }
+            Role::Depth(_) => 1,
             Role::Force => 2,
             Role::Rate => 3,
         };
+        let Ok((unit, scale)) = read.map_err(|e| unread.push((slot, cell.trim().to_string(), e))) else { continue };
+        if let Role::Depth(d) = role {
+            depth_is = d;
+        }
         ensure!(
             at[slot].is_none(),
             "{}: header, column {}: `{}` is a second {} column",
@@ -314,12 +330,21 @@ fn header_columns(path: &Path, header: &csv::StringRecord) -> anyhow::Result<Hea
         );
         at[slot] = Some((i, unit, scale));
     }
+    // A column named for a role in a unit not of that role (a nanoindenter's `Load (V)` beside its
+    // `Load (µN)`) is left unread where another column has the role; else it is the error.
+    for (slot, cell, e) in unread {
+        if at[slot].is_none() {
+            return Err(e.context(path.display().to_string()));
+        }
+        ignored.push(cell);
+    }
     for (slot, what) in [(0, "`t [s]`"), (1, "`z [m]` (deformation) or `x [m]` (position)"), (2, "`f [N]`")] {
         ensure!(
             at[slot].is_some(),
-            "{}: the header has no {what} column (it has: {}); columns are named t (or time), x, z (or \
-             indentation, deformation), f (or force, load) and zdot, each with its unit in brackets or \
-             parentheses, e.g. `t [ms],x [mm],f [N]`, and any other column is left unread",
+            "{}: the header has no {what} column (it has: {}); columns are named t (or time), z (or \
+             indentation, deformation, depth), x (or position, displacement, extension, travel, distance), \
+             f (or force, load, fz, fn) and zdot, each with its unit in brackets or parentheses, e.g. \
+             `t [ms],x [mm],f [N]`, and any other column is left unread",
             path.display(),
             header.iter().collect::<Vec<_>>().join(" | ")
         );
@@ -756,6 +781,27 @@ mod tests {
         std::fs::write(&path, spaced).unwrap();
         let t = read(&path).unwrap();
         assert_eq!((t.preamble, t.t.len()), (6, 2));
+    }
+
+    #[test]
+    fn a_testing_machines_quoted_export_and_an_extra_column_in_another_unit_are_read() {
+        // Quoted cells, a quoted preamble, a testing machine's names; `Load (V)` (a raw channel) is left
+        // unread beside `Load (µN)`, and a role's unit it does not read is the error only where no other
+        // column has the role.
+        let (_d, p) = table(
+            "\"Specimen\",\"1\"\n\"\"\n\"Time (sec)\",\"Extension (mm)\",\"Load (N)\"\n\"0\",\"0\",\"0\"\n\"1\",\"1\",\"2\"\n",
+        );
+        let t = read(&p).unwrap();
+        assert_eq!((t.preamble, t.depth_is, t.t.clone()), (2, Depth::Position, vec![0.0, 1.0]));
+        assert!((t.depth[1] - 1e-3).abs() < 1e-15 && (t.f[1] - 2.0).abs() < 1e-12, "{t:?}");
+        let (_d, p) = table("Depth (nm)\tLoad (µN)\tTime (s)\tDepth (V)\tLoad (V)\n0\t0\t0\t0\t0\n1\t2\t1\t0.1\t0.2\n");
+        let t = read(&p).unwrap();
+        assert_eq!(t.depth_is, Depth::Deformation);
+        assert_eq!(t.ignored, vec!["Depth (V)".to_string(), "Load (V)".to_string()]);
+        assert!((t.f[1] - 2e-6).abs() < 1e-18, "{t:?}");
+        let (_d, p) = table("t [s],x [m],Fz [V]\n0,0,0\n1,1,1\n");
+        let e = format!("{:#}", read(&p).unwrap_err());
+        assert!(e.contains("column 3 (`Fz [V]`): unit `V` is not one of kN, N"), "{e}");
     }
 
     #[test]

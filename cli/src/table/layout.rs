@@ -27,10 +27,13 @@ pub(super) struct Layout {
     /// Lines before the header that are not `#` comments: an instrument's preamble (its settings, one
     /// per line), read as comments.
     pub(super) preamble: usize,
+    /// Whether a line names a time, a depth and a force (else the first line that is not a comment is
+    /// taken as the header, for its error to say what it lacks).
+    pub(super) found: bool,
 }
 
 /// Lines searched for a header that names time, depth and force: an instrument's preamble is shorter.
-const MAX_PREAMBLE: usize = 500;
+pub(super) const MAX_PREAMBLE: usize = 500;
 
 /// The separator of one line, see [`Layout`].
 fn separator_of(line: &str) -> Separator {
@@ -56,7 +59,8 @@ fn is_header(line: &str, sep: Separator) -> bool {
             String::from_utf8_lossy(&out).split('\t').map(str::to_string).collect()
         }
     };
-    let roles: Vec<Role> = cells.iter().filter_map(|c| column(c, 0).ok().flatten()).map(|(role, ..)| role).collect();
+    let roles: Vec<Role> =
+        cells.iter().filter_map(|c| column(c, 0)).filter(|(_, unit)| unit.is_ok()).map(|(role, _)| role).collect();
     roles.contains(&Role::Time) && roles.contains(&Role::Force) && roles.iter().any(|r| matches!(r, Role::Depth(_)))
 }
 
@@ -83,9 +87,9 @@ pub(super) fn layout(path: &Path) -> anyhow::Result<Layout> {
         let sep = separator_of(line);
         if is_header(line, sep) {
             let preamble = first.map_or(0, |_| number);
-            return Ok(Layout { sep, latin1, preamble });
+            return Ok(Layout { sep, latin1, preamble, found: true });
         }
-        first.get_or_insert(Layout { sep, latin1, preamble: 0 });
+        first.get_or_insert(Layout { sep, latin1, preamble: 0, found: false });
     }
     first
         .map(|l| Layout { latin1, ..l })
